@@ -1,0 +1,180 @@
+//! Frames, Euler angles and the kinematic matrices of `PHYSICS.md` §1–§2.
+//!
+//! Inside the twin everything is in the paper's frames: the inertial frame has **z up**, the body
+//! frame has thrust along +z_B, the span along y_B and x_B normal to the wing. Euler angles are
+//! η = (ψ, θ, φ) with R_B→I = Rz(ψ)·Ry(θ)·Rx(φ). MAVLink's NED frame appears only at the wire,
+//! through [`paper_to_ned`] and [`ned_to_paper`].
+
+use nalgebra::{Matrix3, Vector3};
+
+/// Euler angles in the paper's order η = (ψ, θ, φ), radians.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Euler {
+    /// Rotation about z_B (the thrust axis): yaw in the paper's hover names.
+    pub psi: f64,
+    /// Rotation about y_B (pitch, driven by the elevator).
+    pub theta: f64,
+    /// Rotation about x_B (roll, driven by the rotor thrust difference).
+    pub phi: f64,
+}
+
+impl Euler {
+    /// Builds angles from (ψ, θ, φ).
+    #[must_use]
+    pub const fn new(psi: f64, theta: f64, phi: f64) -> Self {
+        Self { psi, theta, phi }
+    }
+
+    /// The angles stacked as the paper stacks η: (ψ, θ, φ).
+    #[must_use]
+    pub fn as_vector(&self) -> Vector3<f64> {
+        Vector3::new(self.psi, self.theta, self.phi)
+    }
+
+    /// Inverse of [`Euler::as_vector`].
+    #[must_use]
+    pub fn from_vector(v: &Vector3<f64>) -> Self {
+        Self::new(v[0], v[1], v[2])
+    }
+
+    /// R_B→I = Rz(ψ)·Ry(θ)·Rx(φ), as printed in the paper.
+    #[must_use]
+    pub fn rotation_body_to_inertial(&self) -> Matrix3<f64> {
+        let (sps, cps) = self.psi.sin_cos();
+        let (sth, cth) = self.theta.sin_cos();
+        let (sph, cph) = self.phi.sin_cos();
+        Matrix3::new(
+            cth * cps,
+            sph * sth * cps - cph * sps,
+            cph * sth * cps + sph * sps,
+            cth * sps,
+            sph * sth * sps + cph * cps,
+            cph * sth * sps - sph * cps,
+            -sth,
+            sph * cth,
+            cph * cth,
+        )
+    }
+
+    /// W_n of (3): Ω = W_n η̇ with η̇ = (ψ̇, θ̇, φ̇).
+    #[must_use]
+    pub fn w_n(&self) -> Matrix3<f64> {
+        let (sth, cth) = self.theta.sin_cos();
+        let (sph, cph) = self.phi.sin_cos();
+        Matrix3::new(-sth, 0.0, 1.0, cth * sph, cph, 0.0, cth * cph, -sph, 0.0)
+    }
+
+    /// W_n⁻¹ in closed form: η̇ = W_n⁻¹ Ω. Singular at θ = ±π/2, which hover never reaches.
+    #[must_use]
+    pub fn w_n_inverse(&self) -> Matrix3<f64> {
+        let (sth, cth) = self.theta.sin_cos();
+        let (sph, cph) = self.phi.sin_cos();
+        let tth = sth / cth;
+        Matrix3::new(
+            0.0,
+            sph / cth,
+            cph / cth,
+            0.0,
+            cph,
+            -sph,
+            1.0,
+            sph * tth,
+            cph * tth,
+        )
+    }
+
+    /// Ẇ_n, the time derivative of W_n along the rates η̇ = (ψ̇, θ̇, φ̇).
+    #[must_use]
+    pub fn w_n_dot(&self, eta_dot: &Vector3<f64>) -> Matrix3<f64> {
+        let (sth, cth) = self.theta.sin_cos();
+        let (sph, cph) = self.phi.sin_cos();
+        let th_d = eta_dot[1];
+        let ph_d = eta_dot[2];
+        Matrix3::new(
+            -cth * th_d,
+            0.0,
+            0.0,
+            -sth * sph * th_d + cth * cph * ph_d,
+            -sph * ph_d,
+            0.0,
+            -sth * cph * th_d - cth * sph * ph_d,
+            -cph * ph_d,
+            0.0,
+        )
+    }
+
+    /// Euler rates η̇ = (ψ̇, θ̇, φ̇) from body rates Ω = (p, q, r).
+    #[must_use]
+    pub fn rates_from_body(&self, omega_body_rad_s: &Vector3<f64>) -> Vector3<f64> {
+        self.w_n_inverse() * omega_body_rad_s
+    }
+
+    /// Wraps ψ into (−π, π].
+    #[must_use]
+    pub fn wrapped(self) -> Self {
+        Self { psi: wrap_pi(self.psi), ..self }
+    }
+}
+
+/// Wraps an angle into (−π, π].
+#[must_use]
+pub fn wrap_pi(a: f64) -> f64 {
+    let w = a.rem_euclid(2.0 * std::f64::consts::PI);
+    if w > std::f64::consts::PI { w - 2.0 * std::f64::consts::PI } else { w }
+}
+
+/// Paper frame (x, y, z up) to MAVLink NED (x north, y east, z down). The paper's x and y are
+/// taken as north and east; only z flips, and the mirror is absorbed by flipping y too so the
+/// frame stays right-handed: (x, y, z) ↦ (x, −y, −z).
+#[must_use]
+pub fn paper_to_ned(v: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(v[0], -v[1], -v[2])
+}
+
+/// Inverse of [`paper_to_ned`] (the map is its own inverse).
+#[must_use]
+pub fn ned_to_paper(v: &Vector3<f64>) -> Vector3<f64> {
+    paper_to_ned(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn w_n_inverse_is_inverse() {
+        let e = Euler::new(0.7, -0.4, 0.3);
+        let prod = e.w_n() * e.w_n_inverse();
+        assert!((prod - Matrix3::identity()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn w_n_dot_matches_finite_difference() {
+        let e = Euler::new(0.2, 0.3, -0.5);
+        let rates = Vector3::new(0.4, -0.7, 1.1);
+        let h = 1e-6;
+        let e2 = Euler::from_vector(&(e.as_vector() + rates * h));
+        let fd = (e2.w_n() - e.w_n()) / h;
+        assert!((fd - e.w_n_dot(&rates)).norm() < 1e-5);
+    }
+
+    #[test]
+    fn rotation_is_orthonormal() {
+        let r = Euler::new(1.0, 0.2, -0.3).rotation_body_to_inertial();
+        assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
+        assert!((r.determinant() - 1.0).abs() < 1e-12);
+    }
+}
+
+/// MAVLink attitude (roll, pitch, yaw) in NED/FRD from the paper's angles: the body frame
+/// (x_B, y_B, z_B up) maps to FRD as (x, −y, −z), so roll = φ, pitch = −θ, yaw = −ψ.
+#[must_use]
+pub fn euler_to_ned_rpy(e: &Euler) -> [f64; 3] {
+    [e.phi, -e.theta, wrap_pi(-e.psi)]
+}
+
+/// Body rates (p, q, r) in the paper's body frame to FRD body rates.
+#[must_use]
+pub fn body_rates_to_frd(omega: &Vector3<f64>) -> [f64; 3] {
+    [omega[0], -omega[1], -omega[2]]
+}

@@ -1,0 +1,16 @@
+//! `firmware-sim`: the simulated twin of the two-rotor convertible VTOL of Escareño, Salazar and
+//! Lozano (CDC 2006) — the paper's nonlinear hover model, the prototype's embedded hardware, the
+//! attitude estimator and the nested-saturation controller — and the MAVLink vehicle that flies
+//! it.
+
+pub mod airframe;
+pub mod control;
+pub mod frames;
+pub mod mode;
+pub mod vehicle;
+
+pub use airframe::{Airframe, ModelMode};
+pub use control::{Controller, Gains};
+pub use frames::Euler;
+pub use mode::FlightMode;
+pub use vehicle::{Vehicle, VehicleConfig};
