@@ -1,1 +1,12 @@
-//! x
+//! `vtol-gcs`: a MAVLink ground station and bridge for the two-rotor convertible VTOL. One async
+//! daemon holds the vehicle link (the embedded twin, or a real vehicle over UDP, TCP or serial),
+//! routes raw frames to any number of clients (pymavlink scripts, MAVProxy, QGroundControl),
+//! logs every frame to a `.tlog`, and tracks the vehicle's state for the status line.
+
+pub mod config;
+pub mod daemon;
+pub mod gcs;
+pub mod router;
+pub mod status;
+pub mod tlog;
+pub mod vehicle;

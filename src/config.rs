@@ -1,0 +1,230 @@
+//! Daemon configuration: a TOML file (see `config/vtol-gcs.toml`) overridden by command-line
+//! flags. A broken file is a clear error naming the file and the problem, never a silent default.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+use vtol_link::{LinkOptions, LinkUrl};
+
+/// Default client endpoints: a TCP server for scripts and MAVProxy (clear of the twin's 5760 and
+/// SITL's 5760/5762/5763), and a UDP stream to a ground station listening on 14550 (QGC).
+pub const DEFAULT_SERVE: [&str; 2] = ["tcpin:127.0.0.1:5770", "udpout:127.0.0.1:14550"];
+
+/// Where the vehicle is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VehicleSource {
+    /// The twin, running inside the daemon on an in-memory byte link.
+    Embedded,
+    /// A real vehicle or a standalone twin at this URL.
+    Url(LinkUrl),
+}
+
+impl std::str::FromStr for VehicleSource {
+    type Err = vtol_link::UrlError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s == "embedded" { Ok(Self::Embedded) } else { s.parse().map(Self::Url) }
+    }
+}
+
+impl std::fmt::Display for VehicleSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Embedded => f.write_str("embedded twin"),
+            Self::Url(u) => write!(f, "{u}"),
+        }
+    }
+}
+
+/// The daemon's settings after merging file and flags.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The vehicle link.
+    pub vehicle: VehicleSource,
+    /// Client endpoints.
+    pub serve: Vec<LinkUrl>,
+    /// Where tlogs go; `None` disables logging.
+    pub log_dir: Option<PathBuf>,
+    /// Status lines instead of the terminal UI.
+    pub headless: bool,
+    /// The daemon's own system id (255: vehicles accept RC overrides and run the GCS failsafe).
+    pub system_id: u8,
+    /// The daemon's component id (190, MISSIONPLANNER).
+    pub component_id: u8,
+    /// Link tuning.
+    pub link: LinkOptions,
+    /// Seconds between status lines.
+    pub status_interval: Duration,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            vehicle: VehicleSource::Embedded,
+            serve: DEFAULT_SERVE.iter().map(|s| s.parse().expect("valid default URL")).collect(),
+            log_dir: Some(PathBuf::from("logs")),
+            headless: false,
+            system_id: 255,
+            component_id: 190,
+            link: LinkOptions::default(),
+            status_interval: Duration::from_secs(1),
+        }
+    }
+}
+
+/// The file's shape. Every key is optional; unknown keys are errors (typos must not pass).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FileConfig {
+    /// `"embedded"` or a link URL.
+    pub vehicle: Option<String>,
+    /// Client endpoint URLs.
+    pub serve: Option<Vec<String>>,
+    /// Log directory; `""` disables logging.
+    pub log_dir: Option<String>,
+    /// Status lines instead of the UI.
+    pub headless: Option<bool>,
+    /// Own system id.
+    pub system_id: Option<u8>,
+    /// Own component id.
+    pub component_id: Option<u8>,
+    /// Egress queue length per link, frames.
+    pub queue_len: Option<usize>,
+    /// Seconds of silence before a UDP client is dropped.
+    pub udp_peer_timeout_s: Option<f64>,
+    /// Seconds between status lines.
+    pub status_interval_s: Option<f64>,
+}
+
+/// A configuration problem.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config {path}: {source}")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML for this schema.
+    #[error("invalid config {path}: {message}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// What the parser said (with line and column).
+        message: String,
+    },
+    /// A value is out of its domain.
+    #[error("invalid config value {key}: {message}")]
+    Value {
+        /// Key.
+        key: &'static str,
+        /// Why.
+        message: String,
+    },
+}
+
+impl FileConfig {
+    /// Reads and parses a file.
+    ///
+    /// # Errors
+    /// [`ConfigError::Read`] or [`ConfigError::Parse`].
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
+        Self::parse(&text).map_err(|message| ConfigError::Parse { path: path.to_owned(), message })
+    }
+
+    /// Parses TOML text.
+    ///
+    /// # Errors
+    /// The parser's message.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        toml::from_str(text).map_err(|e| e.to_string())
+    }
+
+    /// Applies the file's values over `config`.
+    ///
+    /// # Errors
+    /// [`ConfigError::Value`] for a bad URL or number.
+    pub fn apply(self, config: &mut Config) -> Result<(), ConfigError> {
+        if let Some(v) = self.vehicle {
+            config.vehicle = v
+                .parse()
+                .map_err(|e| ConfigError::Value { key: "vehicle", message: format!("{e}") })?;
+        }
+        if let Some(serve) = self.serve {
+            config.serve = serve
+                .iter()
+                .map(|s| s.parse())
+                .collect::<Result<_, _>>()
+                .map_err(|e| ConfigError::Value { key: "serve", message: format!("{e}") })?;
+        }
+        if let Some(d) = self.log_dir {
+            config.log_dir = if d.is_empty() { None } else { Some(PathBuf::from(d)) };
+        }
+        if let Some(h) = self.headless {
+            config.headless = h;
+        }
+        if let Some(s) = self.system_id {
+            if s == 0 {
+                return Err(ConfigError::Value { key: "system_id", message: "0 is the broadcast id".into() });
+            }
+            config.system_id = s;
+        }
+        if let Some(c) = self.component_id {
+            config.component_id = c;
+        }
+        if let Some(q) = self.queue_len {
+            if q == 0 {
+                return Err(ConfigError::Value { key: "queue_len", message: "must be at least 1".into() });
+            }
+            config.link.queue_len = q;
+        }
+        if let Some(t) = self.udp_peer_timeout_s {
+            config.link.udp_peer_timeout = positive_secs("udp_peer_timeout_s", t)?;
+        }
+        if let Some(t) = self.status_interval_s {
+            config.status_interval = positive_secs("status_interval_s", t)?;
+        }
+        Ok(())
+    }
+}
+
+fn positive_secs(key: &'static str, v: f64) -> Result<Duration, ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(Duration::from_secs_f64(v))
+    } else {
+        Err(ConfigError::Value { key, message: format!("must be a positive number of seconds, got {v}") })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_default_config_parses_and_matches_the_defaults() {
+        let text = include_str!("../config/vtol-gcs.toml");
+        let mut c = Config::default();
+        FileConfig::parse(text).unwrap().apply(&mut c).unwrap();
+        let d = Config::default();
+        assert_eq!(c.serve, d.serve);
+        assert_eq!(c.vehicle, d.vehicle);
+        assert_eq!(c.system_id, 255);
+    }
+
+    #[test]
+    fn broken_files_are_clear_errors() {
+        let e = FileConfig::parse("serve = [\"tcpin:127.0.0.1:1\"\n").unwrap_err();
+        assert!(e.contains("line"), "{e}");
+        let e = FileConfig::parse("srve = []").unwrap_err();
+        assert!(e.contains("unknown field"), "{e}");
+        let mut c = Config::default();
+        let e = FileConfig::parse("serve = [\"bogus:1\"]").unwrap().apply(&mut c).unwrap_err();
+        assert!(e.to_string().contains("serve"), "{e}");
+        let e = FileConfig::parse("udp_peer_timeout_s = nan").unwrap().apply(&mut c).unwrap_err();
+        assert!(e.to_string().contains("udp_peer_timeout_s"), "{e}");
+    }
+}

@@ -1,0 +1,170 @@
+//! `vtol-gcs run`: wires the links, the router, the tlog writer, the vehicle tracker, the
+//! daemon's own heartbeat and the status line, and runs them until the cancellation token
+//! fires (Ctrl-C or SIGTERM in the binary). On the way out the tlog is flushed and closed.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
+use tokio_util::sync::CancellationToken;
+use vtol_link::{LinkUrl, spawn_endpoint, spawn_stream_link};
+
+use crate::config::{Config, VehicleSource};
+use crate::router::{Router, RouterHandle};
+use crate::tlog::TlogHandle;
+use crate::vehicle::VehicleState;
+use crate::{gcs, status, vehicle};
+
+/// Frames buffered between the links and the router.
+const EVENT_QUEUE: usize = 8192;
+/// Frames buffered for the tracker; it is fast, and a drop only loses a display update.
+const TAP_QUEUE: usize = 8192;
+/// Records buffered for the tlog writer thread.
+const TLOG_QUEUE: usize = 65_536;
+/// In-memory link buffer between the daemon and the embedded twin or its own heartbeat.
+const DUPLEX_BYTES: usize = 256 * 1024;
+
+/// Errors that stop the daemon from starting.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// A link could not be opened (address in use, bad host …).
+    #[error("cannot open {url}: {source}")]
+    Link {
+        /// The URL.
+        url: LinkUrl,
+        /// The cause.
+        source: vtol_link::LinkError,
+    },
+    /// The log could not be created.
+    #[error(transparent)]
+    Tlog(#[from] crate::tlog::TlogError),
+}
+
+/// What a running daemon exposes (to the status line, the UI and tests).
+#[derive(Debug, Clone)]
+pub struct Running {
+    /// Where each serve URL ended up (the real port when 0 was asked for).
+    pub serving: Vec<(LinkUrl, Option<SocketAddr>)>,
+    /// The tlog file, if logging.
+    pub tlog_path: Option<PathBuf>,
+    /// Latest vehicle and link state.
+    pub state: watch::Receiver<VehicleState>,
+    /// Router counters and live links.
+    pub router: RouterHandle,
+}
+
+/// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
+#[must_use]
+pub fn describe(url: &LinkUrl, addr: Option<SocketAddr>) -> String {
+    match (url, addr) {
+        (LinkUrl::TcpIn { .. }, Some(a)) => format!("tcpin:{}:{}", a.ip(), a.port()),
+        (LinkUrl::UdpIn { .. }, Some(a)) => format!("udpin:{}:{}", a.ip(), a.port()),
+        _ => url.to_string(),
+    }
+}
+
+/// Starts every part of the daemon. Returns once all endpoints are bound; the tasks run on in
+/// `tasks` until `cancel` fires.
+///
+/// # Errors
+/// A serve or vehicle endpoint that cannot be opened, or a log that cannot be created.
+pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut JoinSet<()>) -> Result<Running, DaemonError> {
+    let tlog = match &config.log_dir {
+        Some(dir) => Some(TlogHandle::start(dir, TLOG_QUEUE)?),
+        None => None,
+    };
+    let tlog_path = tlog.as_ref().map(|t| t.path.clone());
+    let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
+
+    let (vehicle_tx, vehicle_rx) = mpsc::channel(EVENT_QUEUE);
+    let (client_tx, client_rx) = mpsc::channel(EVENT_QUEUE);
+    let (tap_tx, tap_rx) = mpsc::channel(TAP_QUEUE);
+    let (state_tx, state_rx) = watch::channel(VehicleState::default());
+
+    let (router, router_handle) = Router::new(tlog, Some(tap_tx));
+    tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
+    tasks.spawn(vehicle::run(tap_rx, state_tx, cancel.clone()));
+
+    // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
+    let mut serving = Vec::new();
+    for url in &config.serve {
+        let h = spawn_endpoint(url, client_tx.clone(), config.link.clone(), cancel.clone())
+            .await
+            .map_err(|source| DaemonError::Link { url: url.clone(), source })?;
+        serving.push((url.clone(), h.local_addr()));
+        tasks.spawn(h.join());
+    }
+
+    let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
+    let (_, link_task) = spawn_stream_link(router_end, "vtol-gcs (own traffic)", client_tx, config.link.clone(), cancel.clone());
+    tasks.spawn(async move {
+        let _ = link_task.await;
+    });
+    tasks.spawn(gcs::run(gcs_end, config.system_id, config.component_id, cancel.clone()));
+
+    match &config.vehicle {
+        VehicleSource::Embedded => {
+            let (twin_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
+            let (_, link_task) =
+                spawn_stream_link(router_end, "embedded twin", vehicle_tx, config.link.clone(), cancel.clone());
+            tasks.spawn(async move {
+                let _ = link_task.await;
+            });
+            tasks.spawn(embedded_twin(twin_end, cancel.clone()));
+        }
+        VehicleSource::Url(url) => {
+            let h = spawn_endpoint(url, vehicle_tx, config.link.clone(), cancel.clone())
+                .await
+                .map_err(|source| DaemonError::Link { url: url.clone(), source })?;
+            tasks.spawn(h.join());
+        }
+    }
+
+    let running = Running { serving, tlog_path, state: state_rx, router: router_handle };
+    let interval = config.status_interval;
+    let status_running = running.clone();
+    let cancel_status = cancel.clone();
+    tasks.spawn(async move {
+        let mut tick = tokio::time::interval(interval);
+        tick.tick().await;
+        loop {
+            tokio::select! {
+                () = cancel_status.cancelled() => return,
+                _ = tick.tick() => {
+                    let state = status_running.state.borrow().clone();
+                    let links = status_running.router.links.borrow().clone();
+                    let records = tlog_stats.as_ref().map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
+                    println!("{}", status::line(&state, &links, records, std::time::Instant::now()));
+                }
+            }
+        }
+    });
+    Ok(running)
+}
+
+/// Runs the twin inside the daemon on one end of an in-memory byte link.
+async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToken) {
+    // EMBED-PENDING: attach firmware_sim's serve loop here.
+    let _ = stream;
+    cancel.cancelled().await;
+}
+
+/// Runs the daemon until `cancel` fires, then waits for every task (the tlog is flushed).
+///
+/// # Errors
+/// See [`start`].
+pub async fn run(config: Config, cancel: CancellationToken) -> Result<(), DaemonError> {
+    let mut tasks = JoinSet::new();
+    let running = start(&config, &cancel, &mut tasks).await?;
+    println!("vehicle {}", config.vehicle);
+    for (url, addr) in &running.serving {
+        println!("serving {}", describe(url, *addr));
+    }
+    if let Some(p) = &running.tlog_path {
+        println!("logging {}", p.display());
+    }
+    cancel.cancelled().await;
+    while tasks.join_next().await.is_some() {}
+    Ok(())
+}

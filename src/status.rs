@@ -1,0 +1,49 @@
+//! The one-line live status the daemon prints when it runs without the terminal UI:
+//! mode, armed state, attitude, altitude, PWM outputs, link health and log counters.
+
+use std::fmt::Write;
+use std::time::Instant;
+
+use crate::router::{LinkInfo, Side};
+use crate::vehicle::VehicleState;
+
+/// Formats the status line for the first vehicle (or says none is heard yet).
+#[must_use]
+pub fn line(state: &VehicleState, links: &[LinkInfo], tlog_records: Option<u64>, now: Instant) -> String {
+    let mut s = String::new();
+    match state.vehicles.values().next() {
+        None => s.push_str("no vehicle heard yet"),
+        Some(v) => {
+            let _ = write!(
+                s,
+                "sys {} {} {}",
+                v.system_id,
+                v.mode_name(),
+                if v.armed { "ARMED" } else { "disarmed" }
+            );
+            if let Some(a) = v.attitude {
+                let [r, p, y] = a.rpy_rad.map(|x| f64::from(x).to_degrees());
+                let _ = write!(s, " | roll {r:+6.1}° pitch {p:+6.1}° yaw {y:+6.1}°");
+            }
+            if let Some(p) = v.position {
+                let _ = write!(s, " | alt {:+5.2} m", -p.pos_ned_m[2]);
+            }
+            let _ = write!(
+                s,
+                " | pwm {} {} {} {} {}",
+                v.servo_us[0], v.servo_us[1], v.servo_us[2], v.servo_us[3], v.servo_us[4]
+            );
+        }
+    }
+    for (id, h) in state.links.iter().filter(|(_, h)| h.side == Side::Vehicle) {
+        let health = if h.is_lost(now) { "LOST" } else { "ok" };
+        let _ = write!(s, " | vehicle {id} {health} {:.0} Hz loss {:.1}%", h.rate_hz, h.loss_pct());
+    }
+    let clients = links.iter().filter(|l| l.side == Side::Client).count();
+    let dropped: u64 = links.iter().map(|l| l.stats.snapshot().tx_dropped_queue_full).sum();
+    let _ = write!(s, " | links {clients} client(s), {dropped} dropped");
+    if let Some(n) = tlog_records {
+        let _ = write!(s, " | tlog {n} rec");
+    }
+    s
+}

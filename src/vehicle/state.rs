@@ -1,0 +1,304 @@
+//! What the daemon knows about each vehicle and each link, built by applying frames one at a
+//! time. Pure: `apply` takes the frame and the time it arrived, so it tests without sockets.
+
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::time::{Duration, Instant};
+
+use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::{Frame, LinkId};
+
+use crate::router::Side;
+
+/// How many status texts a vehicle keeps.
+pub const STATUS_TEXTS_KEPT: usize = 32;
+/// A link with no traffic for this long is shown as lost (MAVProxy's default timeout).
+pub const LINK_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Attitude in NED, radians and rad/s.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Attitude {
+    /// Roll, pitch, yaw.
+    pub rpy_rad: [f32; 3],
+    /// Body rates.
+    pub rates_rad_s: [f32; 3],
+    /// Vehicle boot time of the sample.
+    pub time_boot_ms: u32,
+}
+
+/// Local position in NED, m and m/s.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LocalPosition {
+    /// x, y, z (z down).
+    pub pos_ned_m: [f32; 3],
+    /// vx, vy, vz.
+    pub vel_ned_m_s: [f32; 3],
+}
+
+/// One vehicle's latest state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleView {
+    /// System id.
+    pub system_id: u8,
+    /// Component id.
+    pub component_id: u8,
+    /// MAV_TYPE.
+    pub mav_type: MavType,
+    /// MAV_AUTOPILOT.
+    pub autopilot: MavAutopilot,
+    /// custom_mode.
+    pub custom_mode: u32,
+    /// Armed bit of the last heartbeat.
+    pub armed: bool,
+    /// system_status.
+    pub system_status: MavState,
+    /// Latest attitude.
+    pub attitude: Option<Attitude>,
+    /// Latest local position.
+    pub position: Option<LocalPosition>,
+    /// servo1..16 of SERVO_OUTPUT_RAW, µs (0 = unused).
+    pub servo_us: [u16; 16],
+    /// Last status texts, oldest first: (severity, text).
+    pub status_texts: VecDeque<(u8, String)>,
+    /// When the last heartbeat arrived.
+    pub last_heartbeat: Instant,
+}
+
+impl VehicleView {
+    /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
+    #[must_use]
+    pub fn mode_name(&self) -> String {
+        plane_mode_name(self.custom_mode).map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
+    }
+}
+
+/// Names of ArduPlane's mode numbers (what pymavlink's `mode_mapping_apm` holds).
+#[must_use]
+pub fn plane_mode_name(mode: u32) -> Option<&'static str> {
+    Some(match mode {
+        0 => "MANUAL",
+        1 => "CIRCLE",
+        2 => "STABILIZE",
+        3 => "TRAINING",
+        4 => "ACRO",
+        5 => "FBWA",
+        6 => "FBWB",
+        7 => "CRUISE",
+        8 => "AUTOTUNE",
+        10 => "AUTO",
+        11 => "RTL",
+        12 => "LOITER",
+        13 => "TAKEOFF",
+        15 => "GUIDED",
+        17 => "QSTABILIZE",
+        18 => "QHOVER",
+        19 => "QLOITER",
+        20 => "QLAND",
+        21 => "QRTL",
+        22 => "QAUTOTUNE",
+        23 => "QACRO",
+        24 => "THERMAL",
+        _ => return None,
+    })
+}
+
+/// Health of one link, from what arrived on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkHealth {
+    /// Vehicle or client side.
+    pub side: Side,
+    /// Frames received.
+    pub frames: u64,
+    /// Frames missing by sequence gaps.
+    pub lost: u64,
+    /// Frames per second over the last full second.
+    pub rate_hz: f64,
+    /// When the last frame arrived.
+    pub last_heard: Instant,
+    window_start: Instant,
+    window_count: u64,
+}
+
+impl LinkHealth {
+    /// Loss in percent, from sequence gaps.
+    #[must_use]
+    pub fn loss_pct(&self) -> f64 {
+        let total = self.frames + self.lost;
+        if total == 0 { 0.0 } else { 100.0 * self.lost as f64 / total as f64 }
+    }
+
+    /// Whether the link has been silent for [`LINK_TIMEOUT`].
+    #[must_use]
+    pub fn is_lost(&self, now: Instant) -> bool {
+        now.duration_since(self.last_heard) >= LINK_TIMEOUT
+    }
+}
+
+/// Everything the tracker knows; published as a snapshot.
+#[derive(Debug, Clone, Default)]
+pub struct VehicleState {
+    /// Vehicles by (system, component).
+    pub vehicles: BTreeMap<(u8, u8), VehicleView>,
+    /// Links by id.
+    pub links: BTreeMap<LinkId, LinkHealth>,
+    last_seq: HashMap<(LinkId, u8, u8), u8>,
+}
+
+/// Whether a heartbeat comes from a vehicle (pymavlink `probably_vehicle_heartbeat`).
+#[must_use]
+pub fn is_vehicle_heartbeat(mav_type: MavType, autopilot: MavAutopilot) -> bool {
+    autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+        && !matches!(
+            mav_type,
+            MavType::MAV_TYPE_GCS
+                | MavType::MAV_TYPE_GIMBAL
+                | MavType::MAV_TYPE_ADSB
+                | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+        )
+}
+
+impl VehicleState {
+    /// Applies one frame that arrived on `link` at `now`.
+    pub fn apply(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
+        self.account(link, side, frame, now);
+        let key = (frame.system_id(), frame.component_id());
+        let Ok(msg) = frame.decode() else { return };
+        if let MavMessage::HEARTBEAT(hb) = &msg {
+            if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
+                return;
+            }
+            let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
+                system_id: key.0,
+                component_id: key.1,
+                mav_type: hb.mavtype,
+                autopilot: hb.autopilot,
+                custom_mode: hb.custom_mode,
+                armed: false,
+                system_status: hb.system_status,
+                attitude: None,
+                position: None,
+                servo_us: [0; 16],
+                status_texts: VecDeque::new(),
+                last_heartbeat: now,
+            });
+            v.mav_type = hb.mavtype;
+            v.autopilot = hb.autopilot;
+            v.custom_mode = hb.custom_mode;
+            v.armed = hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            v.system_status = hb.system_status;
+            v.last_heartbeat = now;
+            return;
+        }
+        let Some(v) = self.vehicles.get_mut(&key) else { return };
+        match msg {
+            MavMessage::ATTITUDE(a) => {
+                v.attitude = Some(Attitude {
+                    rpy_rad: [a.roll, a.pitch, a.yaw],
+                    rates_rad_s: [a.rollspeed, a.pitchspeed, a.yawspeed],
+                    time_boot_ms: a.time_boot_ms,
+                });
+            }
+            MavMessage::LOCAL_POSITION_NED(p) => {
+                v.position = Some(LocalPosition {
+                    pos_ned_m: [p.x, p.y, p.z],
+                    vel_ned_m_s: [p.vx, p.vy, p.vz],
+                });
+            }
+            MavMessage::SERVO_OUTPUT_RAW(s) => {
+                v.servo_us = [
+                    s.servo1_raw, s.servo2_raw, s.servo3_raw, s.servo4_raw, s.servo5_raw,
+                    s.servo6_raw, s.servo7_raw, s.servo8_raw, s.servo9_raw, s.servo10_raw,
+                    s.servo11_raw, s.servo12_raw, s.servo13_raw, s.servo14_raw, s.servo15_raw,
+                    s.servo16_raw,
+                ];
+            }
+            MavMessage::STATUSTEXT(t) => {
+                if v.status_texts.len() == STATUS_TEXTS_KEPT {
+                    v.status_texts.pop_front();
+                }
+                let text = t.text.to_str().unwrap_or("<invalid utf-8>").to_owned();
+                v.status_texts.push_back((t.severity as u8, text));
+            }
+            _ => {}
+        }
+    }
+
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
+        let h = self.links.entry(link).or_insert(LinkHealth {
+            side,
+            frames: 0,
+            lost: 0,
+            rate_hz: 0.0,
+            last_heard: now,
+            window_start: now,
+            window_count: 0,
+        });
+        h.frames += 1;
+        h.last_heard = now;
+        h.window_count += 1;
+        let elapsed = now.duration_since(h.window_start);
+        if elapsed >= Duration::from_secs(1) {
+            h.rate_hz = h.window_count as f64 / elapsed.as_secs_f64();
+            h.window_start = now;
+            h.window_count = 0;
+        }
+        let seq = frame.seq();
+        if let Some(last) = self.last_seq.insert((link, frame.system_id(), frame.component_id()), seq) {
+            h.lost += u64::from(seq.wrapping_sub(last).wrapping_sub(1));
+        }
+    }
+
+    /// Forgets a link that went down.
+    pub fn forget_link(&mut self, link: LinkId) {
+        self.links.remove(&link);
+        self.last_seq.retain(|(l, _, _), _| *l != link);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vtol_link::dialect;
+
+    fn hb(mavtype: MavType, autopilot: MavAutopilot, armed: bool) -> MavMessage {
+        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+        if armed {
+            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+            custom_mode: 18,
+            mavtype,
+            autopilot,
+            base_mode,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
+    #[test]
+    fn vehicle_found_by_heartbeat_and_gcs_ignored() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let gcs = hb(MavType::MAV_TYPE_GCS, MavAutopilot::MAV_AUTOPILOT_INVALID, false);
+        s.apply(LinkId(1), Side::Client, &Frame::encode_v2(255, 190, 0, &gcs), now);
+        assert!(s.vehicles.is_empty());
+        let v = hb(MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR, MavAutopilot::MAV_AUTOPILOT_GENERIC, true);
+        s.apply(LinkId(2), Side::Vehicle, &Frame::encode_v2(1, 1, 0, &v), now);
+        let view = &s.vehicles[&(1, 1)];
+        assert!(view.armed);
+        assert_eq!(view.mode_name(), "QHOVER");
+    }
+
+    #[test]
+    fn sequence_gaps_count_as_loss() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR, MavAutopilot::MAV_AUTOPILOT_GENERIC, false);
+        for seq in [250u8, 251, 253, 254, 255, 0, 3] {
+            s.apply(LinkId(1), Side::Vehicle, &Frame::encode_v2(1, 1, seq, &v), now);
+        }
+        let h = &s.links[&LinkId(1)];
+        assert_eq!(h.frames, 7);
+        assert_eq!(h.lost, 3);
+        assert!((h.loss_pct() - 30.0).abs() < 1e-9);
+    }
+}
