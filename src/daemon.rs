@@ -5,6 +5,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+use firmware_sim::serve::{ServeConfig, Twin};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
@@ -145,9 +146,14 @@ pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut Join
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.
 async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToken) {
-    // EMBED-PENDING: attach firmware_sim's serve loop here.
-    let _ = stream;
-    cancel.cancelled().await;
+    let config = ServeConfig { listen: Vec::new(), ..ServeConfig::default() };
+    match Twin::start(config, cancel).await {
+        Ok(twin) => {
+            twin.attach_stream(stream, "vtol-gcs");
+            twin.join().await;
+        }
+        Err(e) => tracing::error!("embedded twin did not start: {e}"),
+    }
 }
 
 /// Runs the daemon until `cancel` fires, then waits for every task (the tlog is flushed).
