@@ -23,7 +23,11 @@ pub enum VehicleSource {
 impl std::str::FromStr for VehicleSource {
     type Err = vtol_link::UrlError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        if s == "embedded" { Ok(Self::Embedded) } else { s.parse().map(Self::Url) }
+        if s == "embedded" {
+            Ok(Self::Embedded)
+        } else {
+            s.parse().map(Self::Url)
+        }
     }
 }
 
@@ -61,7 +65,10 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             vehicle: VehicleSource::Embedded,
-            serve: DEFAULT_SERVE.iter().map(|s| s.parse().expect("valid default URL")).collect(),
+            serve: DEFAULT_SERVE
+                .iter()
+                .map(|s| s.parse().expect("valid default URL"))
+                .collect(),
             log_dir: Some(PathBuf::from("logs")),
             headless: false,
             system_id: 255,
@@ -131,9 +138,14 @@ impl FileConfig {
     /// # Errors
     /// [`ConfigError::Read`] or [`ConfigError::Parse`].
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
-        Self::parse(&text).map_err(|message| ConfigError::Parse { path: path.to_owned(), message })
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text).map_err(|message| ConfigError::Parse {
+            path: path.to_owned(),
+            message,
+        })
     }
 
     /// Parses TOML text.
@@ -150,26 +162,37 @@ impl FileConfig {
     /// [`ConfigError::Value`] for a bad URL or number.
     pub fn apply(self, config: &mut Config) -> Result<(), ConfigError> {
         if let Some(v) = self.vehicle {
-            config.vehicle = v
-                .parse()
-                .map_err(|e| ConfigError::Value { key: "vehicle", message: format!("{e}") })?;
+            config.vehicle = v.parse().map_err(|e| ConfigError::Value {
+                key: "vehicle",
+                message: format!("{e}"),
+            })?;
         }
         if let Some(serve) = self.serve {
             config.serve = serve
                 .iter()
                 .map(|s| s.parse())
                 .collect::<Result<_, _>>()
-                .map_err(|e| ConfigError::Value { key: "serve", message: format!("{e}") })?;
+                .map_err(|e| ConfigError::Value {
+                    key: "serve",
+                    message: format!("{e}"),
+                })?;
         }
         if let Some(d) = self.log_dir {
-            config.log_dir = if d.is_empty() { None } else { Some(PathBuf::from(d)) };
+            config.log_dir = if d.is_empty() {
+                None
+            } else {
+                Some(PathBuf::from(d))
+            };
         }
         if let Some(h) = self.headless {
             config.headless = h;
         }
         if let Some(s) = self.system_id {
             if s == 0 {
-                return Err(ConfigError::Value { key: "system_id", message: "0 is the broadcast id".into() });
+                return Err(ConfigError::Value {
+                    key: "system_id",
+                    message: "0 is the broadcast id".into(),
+                });
             }
             config.system_id = s;
         }
@@ -178,7 +201,10 @@ impl FileConfig {
         }
         if let Some(q) = self.queue_len {
             if q == 0 {
-                return Err(ConfigError::Value { key: "queue_len", message: "must be at least 1".into() });
+                return Err(ConfigError::Value {
+                    key: "queue_len",
+                    message: "must be at least 1".into(),
+                });
             }
             config.link.queue_len = q;
         }
@@ -196,7 +222,10 @@ fn positive_secs(key: &'static str, v: f64) -> Result<Duration, ConfigError> {
     if v.is_finite() && v > 0.0 {
         Ok(Duration::from_secs_f64(v))
     } else {
-        Err(ConfigError::Value { key, message: format!("must be a positive number of seconds, got {v}") })
+        Err(ConfigError::Value {
+            key,
+            message: format!("must be a positive number of seconds, got {v}"),
+        })
     }
 }
 
@@ -222,9 +251,15 @@ mod tests {
         let e = FileConfig::parse("srve = []").unwrap_err();
         assert!(e.contains("unknown field"), "{e}");
         let mut c = Config::default();
-        let e = FileConfig::parse("serve = [\"bogus:1\"]").unwrap().apply(&mut c).unwrap_err();
+        let e = FileConfig::parse("serve = [\"bogus:1\"]")
+            .unwrap()
+            .apply(&mut c)
+            .unwrap_err();
         assert!(e.to_string().contains("serve"), "{e}");
-        let e = FileConfig::parse("udp_peer_timeout_s = nan").unwrap().apply(&mut c).unwrap_err();
+        let e = FileConfig::parse("udp_peer_timeout_s = nan")
+            .unwrap()
+            .apply(&mut c)
+            .unwrap_err();
         assert!(e.to_string().contains("udp_peer_timeout_s"), "{e}");
     }
 }

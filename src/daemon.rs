@@ -70,7 +70,11 @@ pub fn describe(url: &LinkUrl, addr: Option<SocketAddr>) -> String {
 ///
 /// # Errors
 /// A serve or vehicle endpoint that cannot be opened, or a log that cannot be created.
-pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut JoinSet<()>) -> Result<Running, DaemonError> {
+pub async fn start(
+    config: &Config,
+    cancel: &CancellationToken,
+    tasks: &mut JoinSet<()>,
+) -> Result<Running, DaemonError> {
     let tlog = match &config.log_dir {
         Some(dir) => Some(TlogHandle::start(dir, TLOG_QUEUE)?),
         None => None,
@@ -92,23 +96,42 @@ pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut Join
     for url in &config.serve {
         let h = spawn_endpoint(url, client_tx.clone(), config.link.clone(), cancel.clone())
             .await
-            .map_err(|source| DaemonError::Link { url: url.clone(), source })?;
+            .map_err(|source| DaemonError::Link {
+                url: url.clone(),
+                source,
+            })?;
         serving.push((url.clone(), h.local_addr()));
         tasks.spawn(h.join());
     }
 
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
-    let (_, link_task) = spawn_stream_link(router_end, "vtol-gcs (own traffic)", client_tx, config.link.clone(), cancel.clone());
+    let (_, link_task) = spawn_stream_link(
+        router_end,
+        "vtol-gcs (own traffic)",
+        client_tx,
+        config.link.clone(),
+        cancel.clone(),
+    );
     tasks.spawn(async move {
         let _ = link_task.await;
     });
-    tasks.spawn(gcs::run(gcs_end, config.system_id, config.component_id, cancel.clone()));
+    tasks.spawn(gcs::run(
+        gcs_end,
+        config.system_id,
+        config.component_id,
+        cancel.clone(),
+    ));
 
     match &config.vehicle {
         VehicleSource::Embedded => {
             let (twin_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
-            let (_, link_task) =
-                spawn_stream_link(router_end, "embedded twin", vehicle_tx, config.link.clone(), cancel.clone());
+            let (_, link_task) = spawn_stream_link(
+                router_end,
+                "embedded twin",
+                vehicle_tx,
+                config.link.clone(),
+                cancel.clone(),
+            );
             tasks.spawn(async move {
                 let _ = link_task.await;
             });
@@ -117,12 +140,20 @@ pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut Join
         VehicleSource::Url(url) => {
             let h = spawn_endpoint(url, vehicle_tx, config.link.clone(), cancel.clone())
                 .await
-                .map_err(|source| DaemonError::Link { url: url.clone(), source })?;
+                .map_err(|source| DaemonError::Link {
+                    url: url.clone(),
+                    source,
+                })?;
             tasks.spawn(h.join());
         }
     }
 
-    let running = Running { serving, tlog_path, state: state_rx, router: router_handle };
+    let running = Running {
+        serving,
+        tlog_path,
+        state: state_rx,
+        router: router_handle,
+    };
     let interval = config.status_interval;
     let status_running = running.clone();
     let cancel_status = cancel.clone();
@@ -146,7 +177,10 @@ pub async fn start(config: &Config, cancel: &CancellationToken, tasks: &mut Join
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.
 async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToken) {
-    let config = ServeConfig { listen: Vec::new(), ..ServeConfig::default() };
+    let config = ServeConfig {
+        listen: Vec::new(),
+        ..ServeConfig::default()
+    };
     match Twin::start(config, cancel).await {
         Ok(twin) => {
             twin.attach_stream(stream, "vtol-gcs");

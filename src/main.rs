@@ -90,7 +90,9 @@ fn main() -> anyhow::Result<()> {
             wait_for_shutdown_signal().await;
             signal_cancel.cancel();
         });
-        vtol_gcs::daemon::run(config, cancel).await.map_err(anyhow::Error::from)
+        vtol_gcs::daemon::run(config, cancel)
+            .await
+            .map_err(anyhow::Error::from)
     })
 }
 
@@ -98,13 +100,14 @@ async fn wait_for_shutdown_signal() {
     let ctrl_c = tokio::signal::ctrl_c();
     #[cfg(unix)]
     {
-        let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(s) => s,
-            Err(_) => {
-                let _ = ctrl_c.await;
-                return;
-            }
-        };
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => s,
+                Err(_) => {
+                    let _ = ctrl_c.await;
+                    return;
+                }
+            };
         tokio::select! {
             _ = ctrl_c => {}
             _ = term.recv() => {}

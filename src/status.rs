@@ -9,7 +9,12 @@ use crate::vehicle::VehicleState;
 
 /// Formats the status line for the first vehicle (or says none is heard yet).
 #[must_use]
-pub fn line(state: &VehicleState, links: &[LinkInfo], tlog_records: Option<u64>, now: Instant) -> String {
+pub fn line(
+    state: &VehicleState,
+    links: &[LinkInfo],
+    tlog_records: Option<u64>,
+    now: Instant,
+) -> String {
     let mut s = String::new();
     match state.vehicles.values().next() {
         None => s.push_str("no vehicle heard yet"),
@@ -37,10 +42,18 @@ pub fn line(state: &VehicleState, links: &[LinkInfo], tlog_records: Option<u64>,
     }
     for (id, h) in state.links.iter().filter(|(_, h)| h.side == Side::Vehicle) {
         let health = if h.is_lost(now) { "LOST" } else { "ok" };
-        let _ = write!(s, " | vehicle {id} {health} {:.0} Hz loss {:.1}%", h.rate_hz, h.loss_pct());
+        let _ = write!(
+            s,
+            " | vehicle {id} {health} {:.0} Hz loss {:.1}%",
+            h.rate_hz,
+            h.loss_pct()
+        );
     }
     let clients = links.iter().filter(|l| l.side == Side::Client).count();
-    let dropped: u64 = links.iter().map(|l| l.stats.snapshot().tx_dropped_queue_full).sum();
+    let dropped: u64 = links
+        .iter()
+        .map(|l| l.stats.snapshot().tx_dropped_queue_full)
+        .sum();
     let _ = write!(s, " | links {clients} client(s), {dropped} dropped");
     if let Some(n) = tlog_records {
         let _ = write!(s, " | tlog {n} rec");

@@ -58,7 +58,11 @@ impl Record {
     /// A record stamped now.
     #[must_use]
     pub fn now(direction: Direction, frame: Frame) -> Self {
-        Self { t_us: unix_time_us(), direction, frame }
+        Self {
+            t_us: unix_time_us(),
+            direction,
+            frame,
+        }
     }
 }
 
@@ -115,8 +119,13 @@ impl TlogWriter {
             .truncate(true)
             .write(true)
             .open(path)
-            .map_err(|source| TlogError::Create { path: path.to_owned(), source })?;
-        Ok(Self { out: BufWriter::with_capacity(64 * 1024, file) })
+            .map_err(|source| TlogError::Create {
+                path: path.to_owned(),
+                source,
+            })?;
+        Ok(Self {
+            out: BufWriter::with_capacity(64 * 1024, file),
+        })
     }
 
     /// Appends one record. Returns false if the record was withheld (SETUP_SIGNING).
@@ -164,8 +173,10 @@ impl TlogHandle {
     /// # Errors
     /// The directory or the file cannot be created.
     pub fn start(dir: &Path, queue_len: usize) -> Result<Self, TlogError> {
-        std::fs::create_dir_all(dir)
-            .map_err(|source| TlogError::Create { path: dir.to_owned(), source })?;
+        std::fs::create_dir_all(dir).map_err(|source| TlogError::Create {
+            path: dir.to_owned(),
+            source,
+        })?;
         let path = dir.join(log_file_name(SystemTime::now()));
         Self::start_at(&path, queue_len)
     }
@@ -182,8 +193,16 @@ impl TlogHandle {
         let thread = std::thread::Builder::new()
             .name("tlog-writer".into())
             .spawn(move || writer_loop(writer, &rx, &thread_stats))
-            .map_err(|source| TlogError::Create { path: path.to_owned(), source })?;
-        Ok(Self { tx, path: path.to_owned(), stats, thread: Some(thread) })
+            .map_err(|source| TlogError::Create {
+                path: path.to_owned(),
+                source,
+            })?;
+        Ok(Self {
+            tx,
+            path: path.to_owned(),
+            stats,
+            thread: Some(thread),
+        })
     }
 
     /// Queues a record without blocking; a full queue drops it and counts the drop.
@@ -191,7 +210,9 @@ impl TlogHandle {
         match self.tx.try_send(record) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => {
-                self.stats.dropped_queue_full.fetch_add(1, Ordering::Relaxed);
+                self.stats
+                    .dropped_queue_full
+                    .fetch_add(1, Ordering::Relaxed);
             }
             Err(TrySendError::Disconnected(_)) => {
                 self.stats.write_errors.fetch_add(1, Ordering::Relaxed);
@@ -324,7 +345,11 @@ impl TlogReader {
     /// Reads records from bytes.
     #[must_use]
     pub fn from_bytes(data: Vec<u8>) -> Self {
-        Self { data, pos: 0, skipped_bytes: 0 }
+        Self {
+            data,
+            pos: 0,
+            skipped_bytes: 0,
+        }
     }
 }
 
@@ -383,10 +408,31 @@ mod tests {
         let path = dir.path().join("a.tlog");
         let mut w = TlogWriter::create(&path).unwrap();
         let t = 1_795_346_880_485_324;
-        assert!(w.write(&Record { t_us: t, direction: Direction::FromVehicle, frame: heartbeat(1) }).unwrap());
-        assert!(w.write(&Record { t_us: t + 10, direction: Direction::ToVehicle, frame: heartbeat(2) }).unwrap());
+        assert!(
+            w.write(&Record {
+                t_us: t,
+                direction: Direction::FromVehicle,
+                frame: heartbeat(1)
+            })
+            .unwrap()
+        );
+        assert!(
+            w.write(&Record {
+                t_us: t + 10,
+                direction: Direction::ToVehicle,
+                frame: heartbeat(2)
+            })
+            .unwrap()
+        );
         let signing = MavMessage::SETUP_SIGNING(dialect::SETUP_SIGNING_DATA::default());
-        assert!(!w.write(&Record { t_us: t, direction: Direction::ToVehicle, frame: Frame::encode_v2(255, 0, 3, &signing) }).unwrap());
+        assert!(
+            !w.write(&Record {
+                t_us: t,
+                direction: Direction::ToVehicle,
+                frame: Frame::encode_v2(255, 0, 3, &signing)
+            })
+            .unwrap()
+        );
         w.flush().unwrap();
         let recs: Vec<_> = TlogReader::open(&path).unwrap().collect();
         assert_eq!(recs.len(), 2);
@@ -401,7 +447,12 @@ mod tests {
         let path = dir.path().join("b.tlog");
         let mut w = TlogWriter::create(&path).unwrap();
         for seq in 0..3 {
-            w.write(&Record { t_us: 8, direction: Direction::FromVehicle, frame: heartbeat(seq) }).unwrap();
+            w.write(&Record {
+                t_us: 8,
+                direction: Direction::FromVehicle,
+                frame: heartbeat(seq),
+            })
+            .unwrap();
         }
         w.flush().unwrap();
         let mut data = std::fs::read(&path).unwrap();

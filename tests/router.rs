@@ -71,16 +71,32 @@ async fn harness(n_clients: usize) -> Harness {
     let mut clients = Vec::new();
     for i in 0..n_clients {
         let (c, far) = tokio::io::duplex(1 << 16);
-        spawn_stream_link(far, format!("client {i}"), ctx.clone(), LinkOptions::default(), cancel.clone());
+        spawn_stream_link(
+            far,
+            format!("client {i}"),
+            ctx.clone(),
+            LinkOptions::default(),
+            cancel.clone(),
+        );
         clients.push(c);
     }
     // Wait until the router has every link up (an event, with an upper bound).
     let mut links = handle.links.clone();
-    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == n_clients + 1))
-        .await
-        .expect("links up in time")
-        .unwrap();
-    Harness { vehicle, clients, cancel, router_task, tlog_path, _dir: dir }
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        links.wait_for(|l| l.len() == n_clients + 1),
+    )
+    .await
+    .expect("links up in time")
+    .unwrap();
+    Harness {
+        vehicle,
+        clients,
+        cancel,
+        router_task,
+        tlog_path,
+        _dir: dir,
+    }
 }
 
 async fn finish(h: Harness) -> Vec<(u64, Frame)> {
@@ -106,7 +122,11 @@ async fn targeted_frames_reach_only_links_where_the_target_was_seen() {
     h.vehicle.write_all(targeted.as_bytes()).await.unwrap();
     h.vehicle.write_all(marker.as_bytes()).await.unwrap();
     // Each client also hears the other's broadcast; keep the vehicle's frames.
-    let from_vehicle = |v: Vec<Frame>| v.into_iter().filter(|f| f.system_id() == 1).collect::<Vec<_>>();
+    let from_vehicle = |v: Vec<Frame>| {
+        v.into_iter()
+            .filter(|f| f.system_id() == 1)
+            .collect::<Vec<_>>()
+    };
     let c1 = from_vehicle(read_frames(&mut h.clients[1], 3, Duration::from_secs(5)).await);
     assert_eq!(c1, vec![targeted.clone(), marker.clone()]);
     // Client 0 gets the broadcast marker and nothing of the vehicle's before it.
@@ -150,4 +170,61 @@ proptest! {
             assert_eq!(log.len(), frames.len() + 1);
         });
     }
+}
+
+#[tokio::test]
+async fn unknown_message_ids_and_v1_frames_are_forwarded_unchanged() {
+    let mut h = harness(1).await;
+    // An id no dialect here knows, framed correctly (its CRC cannot be checked).
+    let id = 65_001;
+    assert!(
+        vtol_link::frame::crc_extra(id).is_none(),
+        "pick an id the dialect does not know"
+    );
+    let unknown = Frame::encode_raw_v2(1, 1, 5, id, &[1, 2, 3, 4], 77).unwrap();
+    let v1 = Frame::encode_v1(1, 1, 6, &statustext(3)).unwrap();
+    let marker = Frame::encode_v2(1, 1, 7, &statustext(4));
+    for f in [&unknown, &v1, &marker] {
+        h.vehicle.write_all(f.as_bytes()).await.unwrap();
+    }
+    let got = read_frames(&mut h.clients[0], 3, Duration::from_secs(5)).await;
+    assert_eq!(
+        got.iter()
+            .map(|f| f.as_bytes().to_vec())
+            .collect::<Vec<_>>(),
+        vec![
+            unknown.as_bytes().to_vec(),
+            v1.as_bytes().to_vec(),
+            marker.as_bytes().to_vec()
+        ]
+    );
+    finish(h).await;
+}
+
+#[tokio::test]
+async fn a_slow_client_loses_frames_counted_while_the_others_get_everything() {
+    let mut h = harness(2).await;
+    // Client 1 never reads: its duplex buffer fills, then its egress queue, then drops start.
+    let burst: Vec<Frame> = (0..3000u32)
+        .map(|i| Frame::encode_v2(1, 1, (i % 256) as u8, &statustext((i % 250) as u8)))
+        .collect();
+    let mut bytes = Vec::new();
+    for f in &burst {
+        bytes.extend_from_slice(f.as_bytes());
+    }
+    let writer = {
+        let mut vehicle = h.vehicle;
+        tokio::spawn(async move {
+            vehicle.write_all(&bytes).await.unwrap();
+            vehicle
+        })
+    };
+    let got = read_frames(&mut h.clients[0], burst.len(), Duration::from_secs(20)).await;
+    assert_eq!(
+        got.len(),
+        burst.len(),
+        "the reading client must get every frame"
+    );
+    h.vehicle = writer.await.unwrap();
+    finish(h).await;
 }

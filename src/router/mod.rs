@@ -102,14 +102,19 @@ pub struct Router {
 
 impl std::fmt::Debug for Router {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Router").field("links", &self.live).finish_non_exhaustive()
+        f.debug_struct("Router")
+            .field("links", &self.live)
+            .finish_non_exhaustive()
     }
 }
 
 impl Router {
     /// A router that logs to `tlog` (if any) and copies every frame to `tap` (if any).
     #[must_use]
-    pub fn new(tlog: Option<TlogHandle>, tap: Option<mpsc::Sender<Tapped>>) -> (Self, RouterHandle) {
+    pub fn new(
+        tlog: Option<TlogHandle>,
+        tap: Option<mpsc::Sender<Tapped>>,
+    ) -> (Self, RouterHandle) {
         let (links_tx, links) = watch::channel(Vec::new());
         let stats = Arc::new(RouterStats::default());
         let router = Self {
@@ -187,13 +192,21 @@ impl Router {
 
     fn route(&mut self, ingress: LinkId, side: Side, frame: Frame) {
         self.stats.frames_in.fetch_add(1, Ordering::Relaxed);
-        self.table.learn(ingress, frame.system_id(), frame.component_id());
+        self.table
+            .learn(ingress, frame.system_id(), frame.component_id());
         let addressing = addressing(&frame);
         if let Some(command) = addressing.command {
-            self.table.note_command(ingress, frame.system_id(), frame.component_id(), command);
+            self.table
+                .note_command(ingress, frame.system_id(), frame.component_id(), command);
         }
         if let Some(tap) = &self.tap
-            && tap.try_send(Tapped { link: ingress, side, frame: frame.clone() }).is_err()
+            && tap
+                .try_send(Tapped {
+                    link: ingress,
+                    side,
+                    frame: frame.clone(),
+                })
+                .is_err()
         {
             self.stats.dropped_tap.fetch_add(1, Ordering::Relaxed);
         }
@@ -208,12 +221,16 @@ impl Router {
             };
             tlog.log(Record::now(direction, frame.clone()));
         }
-        let route = self.table.route(ingress, &addressing, &self.live, &mut self.out);
+        let route = self
+            .table
+            .route(ingress, &addressing, &self.live, &mut self.out);
         if route == Route::Unroutable {
             self.stats.unroutable.fetch_add(1, Ordering::Relaxed);
         }
         for link in &self.out {
-            let Some(e) = self.egress.get(link) else { continue };
+            let Some(e) = self.egress.get(link) else {
+                continue;
+            };
             match e.tx.try_send(frame.clone()) {
                 Ok(()) => {
                     self.stats.frames_out.fetch_add(1, Ordering::Relaxed);
@@ -221,7 +238,9 @@ impl Router {
                 // Counted by the link itself (tx_dropped_queue_full).
                 Err(vtol_link::SendError::Full) => {}
                 Err(vtol_link::SendError::Closed) => {
-                    self.stats.dropped_link_closed.fetch_add(1, Ordering::Relaxed);
+                    self.stats
+                        .dropped_link_closed
+                        .fetch_add(1, Ordering::Relaxed);
                 }
             }
         }
@@ -231,13 +250,18 @@ impl Router {
 /// Reads what routing needs from a frame without decoding it.
 #[must_use]
 pub fn addressing(frame: &Frame) -> Addressing {
-    let mut a = Addressing { target: frame.target(), ..Addressing::default() };
+    let mut a = Addressing {
+        target: frame.target(),
+        ..Addressing::default()
+    };
     if let Some(cmd) = frame.raw_command() {
         a.command = Some(cmd.command);
     } else if frame.message_id() == MSG_ID_COMMAND_ACK {
         let p = frame.payload();
-        a.ack_of_command =
-            Some(u16::from_le_bytes([p.first().copied().unwrap_or(0), p.get(1).copied().unwrap_or(0)]));
+        a.ack_of_command = Some(u16::from_le_bytes([
+            p.first().copied().unwrap_or(0),
+            p.get(1).copied().unwrap_or(0),
+        ]));
     }
     a
 }

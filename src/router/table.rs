@@ -76,7 +76,8 @@ impl RoutingTable {
 
     /// Remembers that `link` sent `command` as (system, component), so the ACK goes back there.
     pub fn note_command(&mut self, link: LinkId, system: u8, component: u8, command: u16) {
-        self.pending_commands.insert((system, component, command), link);
+        self.pending_commands
+            .insert((system, component, command), link);
     }
 
     /// Forgets everything learnt about a link that went down.
@@ -95,7 +96,9 @@ impl RoutingTable {
     /// Links where `(system, component)` was seen.
     #[must_use]
     pub fn links_of(&self, system: u8, component: u8) -> &[LinkId] {
-        self.components.get(&(system, component)).map_or(&[], Vec::as_slice)
+        self.components
+            .get(&(system, component))
+            .map_or(&[], Vec::as_slice)
     }
 
     /// Whether any component of `system` was seen on `link`.
@@ -133,8 +136,17 @@ impl RoutingTable {
         } else {
             self.systems.get(&system).map_or(&[][..], Vec::as_slice)
         };
-        out.extend(candidates.iter().copied().filter(|l| *l != ingress && links.contains(l)));
-        if candidates.is_empty() { Route::Unroutable } else { Route::Targeted }
+        out.extend(
+            candidates
+                .iter()
+                .copied()
+                .filter(|l| *l != ingress && links.contains(l)),
+        );
+        if candidates.is_empty() {
+            Route::Unroutable
+        } else {
+            Route::Targeted
+        }
     }
 }
 
@@ -159,7 +171,12 @@ mod tests {
     fn broadcast_goes_everywhere_but_ingress() {
         let mut t = table();
         let mut out = Vec::new();
-        let r = t.route(VEHICLE, &Addressing::default(), &[VEHICLE, SCRIPT_A, SCRIPT_B], &mut out);
+        let r = t.route(
+            VEHICLE,
+            &Addressing::default(),
+            &[VEHICLE, SCRIPT_A, SCRIPT_B],
+            &mut out,
+        );
         assert_eq!(r, Route::Broadcast);
         assert_eq!(out, vec![SCRIPT_A, SCRIPT_B]);
     }
@@ -168,14 +185,29 @@ mod tests {
     fn targeted_to_vehicle_and_unknown_component_falls_back_to_system() {
         let mut t = table();
         let mut out = Vec::new();
-        let a = Addressing { target: Some((1, 0)), ..Default::default() };
-        assert_eq!(t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A, SCRIPT_B], &mut out), Route::Targeted);
+        let a = Addressing {
+            target: Some((1, 0)),
+            ..Default::default()
+        };
+        assert_eq!(
+            t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A, SCRIPT_B], &mut out),
+            Route::Targeted
+        );
         assert_eq!(out, vec![VEHICLE]);
-        let a = Addressing { target: Some((1, 100)), ..Default::default() };
+        let a = Addressing {
+            target: Some((1, 100)),
+            ..Default::default()
+        };
         t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A, SCRIPT_B], &mut out);
         assert_eq!(out, vec![VEHICLE]);
-        let a = Addressing { target: Some((9, 1)), ..Default::default() };
-        assert_eq!(t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A], &mut out), Route::Unroutable);
+        let a = Addressing {
+            target: Some((9, 1)),
+            ..Default::default()
+        };
+        assert_eq!(
+            t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A], &mut out),
+            Route::Unroutable
+        );
         assert!(out.is_empty());
     }
 
@@ -185,7 +217,11 @@ mod tests {
         let links = [VEHICLE, SCRIPT_A, SCRIPT_B];
         t.note_command(SCRIPT_B, 255, 0, 400);
         let mut out = Vec::new();
-        let ack = Addressing { target: Some((255, 0)), ack_of_command: Some(400), command: None };
+        let ack = Addressing {
+            target: Some((255, 0)),
+            ack_of_command: Some(400),
+            command: None,
+        };
         t.route(VEHICLE, &ack, &links, &mut out);
         assert_eq!(out, vec![SCRIPT_B]);
         // The pending entry is used once; a second ACK falls back to plain routing.
@@ -200,8 +236,14 @@ mod tests {
         assert_eq!(t.links_of(255, 0), &[SCRIPT_B]);
         t.forget_link(VEHICLE);
         let mut out = Vec::new();
-        let a = Addressing { target: Some((1, 1)), ..Default::default() };
-        assert_eq!(t.route(SCRIPT_B, &a, &[SCRIPT_B], &mut out), Route::Unroutable);
+        let a = Addressing {
+            target: Some((1, 1)),
+            ..Default::default()
+        };
+        assert_eq!(
+            t.route(SCRIPT_B, &a, &[SCRIPT_B], &mut out),
+            Route::Unroutable
+        );
     }
 
     proptest! {

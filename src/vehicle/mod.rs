@@ -15,7 +15,11 @@ pub use state::{VehicleState, VehicleView};
 const PUBLISH_EVERY: Duration = Duration::from_millis(20);
 
 /// Runs the tracker until the tap closes or `cancel` fires.
-pub async fn run(mut tap: mpsc::Receiver<Tapped>, publish: watch::Sender<VehicleState>, cancel: CancellationToken) {
+pub async fn run(
+    mut tap: mpsc::Receiver<Tapped>,
+    publish: watch::Sender<VehicleState>,
+    cancel: CancellationToken,
+) {
     let mut state = VehicleState::default();
     let mut last_publish = Instant::now();
     let mut dirty = false;

@@ -67,7 +67,8 @@ impl VehicleView {
     /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
     #[must_use]
     pub fn mode_name(&self) -> String {
-        plane_mode_name(self.custom_mode).map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
+        plane_mode_name(self.custom_mode)
+            .map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
     }
 }
 
@@ -123,7 +124,11 @@ impl LinkHealth {
     #[must_use]
     pub fn loss_pct(&self) -> f64 {
         let total = self.frames + self.lost;
-        if total == 0 { 0.0 } else { 100.0 * self.lost as f64 / total as f64 }
+        if total == 0 {
+            0.0
+        } else {
+            100.0 * self.lost as f64 / total as f64
+        }
     }
 
     /// Whether the link has been silent for [`LINK_TIMEOUT`].
@@ -183,12 +188,16 @@ impl VehicleState {
             v.mav_type = hb.mavtype;
             v.autopilot = hb.autopilot;
             v.custom_mode = hb.custom_mode;
-            v.armed = hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            v.armed = hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
             v.system_status = hb.system_status;
             v.last_heartbeat = now;
             return;
         }
-        let Some(v) = self.vehicles.get_mut(&key) else { return };
+        let Some(v) = self.vehicles.get_mut(&key) else {
+            return;
+        };
         match msg {
             MavMessage::ATTITUDE(a) => {
                 v.attitude = Some(Attitude {
@@ -205,9 +214,21 @@ impl VehicleState {
             }
             MavMessage::SERVO_OUTPUT_RAW(s) => {
                 v.servo_us = [
-                    s.servo1_raw, s.servo2_raw, s.servo3_raw, s.servo4_raw, s.servo5_raw,
-                    s.servo6_raw, s.servo7_raw, s.servo8_raw, s.servo9_raw, s.servo10_raw,
-                    s.servo11_raw, s.servo12_raw, s.servo13_raw, s.servo14_raw, s.servo15_raw,
+                    s.servo1_raw,
+                    s.servo2_raw,
+                    s.servo3_raw,
+                    s.servo4_raw,
+                    s.servo5_raw,
+                    s.servo6_raw,
+                    s.servo7_raw,
+                    s.servo8_raw,
+                    s.servo9_raw,
+                    s.servo10_raw,
+                    s.servo11_raw,
+                    s.servo12_raw,
+                    s.servo13_raw,
+                    s.servo14_raw,
+                    s.servo15_raw,
                     s.servo16_raw,
                 ];
             }
@@ -242,7 +263,10 @@ impl VehicleState {
             h.window_count = 0;
         }
         let seq = frame.seq();
-        if let Some(last) = self.last_seq.insert((link, frame.system_id(), frame.component_id()), seq) {
+        if let Some(last) = self
+            .last_seq
+            .insert((link, frame.system_id(), frame.component_id()), seq)
+        {
             h.lost += u64::from(seq.wrapping_sub(last).wrapping_sub(1));
         }
     }
@@ -278,11 +302,29 @@ mod tests {
     fn vehicle_found_by_heartbeat_and_gcs_ignored() {
         let mut s = VehicleState::default();
         let now = Instant::now();
-        let gcs = hb(MavType::MAV_TYPE_GCS, MavAutopilot::MAV_AUTOPILOT_INVALID, false);
-        s.apply(LinkId(1), Side::Client, &Frame::encode_v2(255, 190, 0, &gcs), now);
+        let gcs = hb(
+            MavType::MAV_TYPE_GCS,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+            false,
+        );
+        s.apply(
+            LinkId(1),
+            Side::Client,
+            &Frame::encode_v2(255, 190, 0, &gcs),
+            now,
+        );
         assert!(s.vehicles.is_empty());
-        let v = hb(MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR, MavAutopilot::MAV_AUTOPILOT_GENERIC, true);
-        s.apply(LinkId(2), Side::Vehicle, &Frame::encode_v2(1, 1, 0, &v), now);
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            true,
+        );
+        s.apply(
+            LinkId(2),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 0, &v),
+            now,
+        );
         let view = &s.vehicles[&(1, 1)];
         assert!(view.armed);
         assert_eq!(view.mode_name(), "QHOVER");
@@ -292,9 +334,18 @@ mod tests {
     fn sequence_gaps_count_as_loss() {
         let mut s = VehicleState::default();
         let now = Instant::now();
-        let v = hb(MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR, MavAutopilot::MAV_AUTOPILOT_GENERIC, false);
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
         for seq in [250u8, 251, 253, 254, 255, 0, 3] {
-            s.apply(LinkId(1), Side::Vehicle, &Frame::encode_v2(1, 1, seq, &v), now);
+            s.apply(
+                LinkId(1),
+                Side::Vehicle,
+                &Frame::encode_v2(1, 1, seq, &v),
+                now,
+            );
         }
         let h = &s.links[&LinkId(1)];
         assert_eq!(h.frames, 7);

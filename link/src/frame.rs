@@ -1,0 +1,813 @@
+//! One complete MAVLink frame held as raw, cheaply clonable bytes.
+//!
+//! The daemon forwards frames unchanged (sequence numbers and signatures must survive the
+//! bridge), so the wire bytes are the source of truth and every field is read from them on
+//! demand. Typed decoding through the `mavlink` crate is optional and may fail (strict enums,
+//! PROTOCOL.md E.6.1) without losing the frame. Routing data (`target()`) is read from byte
+//! offsets learnt once from the dialect, so it works even when the typed decode would fail.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::sync::OnceLock;
+
+use bytes::Bytes;
+use mavlink::{MavlinkVersion, Message};
+
+use crate::dialect::MavMessage;
+
+/// First byte of a MAVLink 1 frame.
+pub const MAGIC_V1: u8 = 0xFE;
+/// First byte of a MAVLink 2 frame.
+pub const MAGIC_V2: u8 = 0xFD;
+/// Bytes before the payload in a v1 frame (magic included).
+pub const HEADER_LEN_V1: usize = 6;
+/// Bytes before the payload in a v2 frame (magic included).
+pub const HEADER_LEN_V2: usize = 10;
+/// Bytes of the checksum that follows the payload.
+pub const CRC_LEN: usize = 2;
+/// Bytes of a MAVLink 2 signature (link id, 6-byte timestamp, 6-byte signature).
+pub const SIGNATURE_LEN: usize = 13;
+/// The only incompat flag defined by MAVLink 2: the frame carries a signature.
+pub const INCOMPAT_SIGNED: u8 = 0x01;
+/// Largest possible frame: v2 header, 255-byte payload, CRC and signature.
+pub const MAX_FRAME_LEN: usize = HEADER_LEN_V2 + 255 + CRC_LEN + SIGNATURE_LEN;
+
+/// Message id of COMMAND_INT.
+pub const MSG_ID_COMMAND_INT: u32 = 75;
+/// Message id of COMMAND_LONG.
+pub const MSG_ID_COMMAND_LONG: u32 = 76;
+/// Message id of COMMAND_ACK.
+pub const MSG_ID_COMMAND_ACK: u32 = 77;
+/// CRC_EXTRA of COMMAND_ACK (PROTOCOL.md D.1).
+pub const CRC_EXTRA_COMMAND_ACK: u8 = 143;
+
+/// Why bytes are not a valid frame, or a frame does not decode.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    /// Too few bytes for the header the magic announces.
+    #[error("frame too short: {len_bytes} bytes")]
+    TooShort {
+        /// Bytes available.
+        len_bytes: usize,
+    },
+    /// The first byte is neither 0xFE nor 0xFD.
+    #[error("bad magic byte 0x{0:02x}")]
+    BadMagic(u8),
+    /// The header's length field disagrees with the number of bytes.
+    #[error("frame length mismatch: header says {expected_bytes} bytes, got {actual_bytes}")]
+    LengthMismatch {
+        /// Length computed from the header.
+        expected_bytes: usize,
+        /// Length of the buffer.
+        actual_bytes: usize,
+    },
+    /// A message the dialect knows, with a checksum that does not match.
+    #[error("bad CRC for message id {message_id}")]
+    BadCrc {
+        /// The frame's message id.
+        message_id: u32,
+    },
+    /// Incompat flags other than "signed": the frame must be dropped.
+    #[error("unknown incompat flags 0x{0:02x}")]
+    BadIncompat(u8),
+    /// A payload longer than 255 bytes cannot be framed.
+    #[error("payload of {0} bytes does not fit a frame (max 255)")]
+    PayloadTooLong(usize),
+    /// MAVLink 1 carries only message ids up to 255.
+    #[error("message id {0} cannot be sent as MAVLink 1")]
+    IdTooLargeForV1(u32),
+    /// Message ids have 24 bits in MAVLink 2.
+    #[error("message id {0} does not fit in 24 bits")]
+    IdTooLarge(u32),
+    /// The message id is not in the dialect (no CRC_EXTRA, no typed decoding).
+    #[error("message id {0} is not in the dialect")]
+    UnknownMessage(u32),
+    /// The typed decoder rejected the payload (e.g. an enum value the XML does not define).
+    #[error("cannot decode message id {message_id}: {source}")]
+    Parse {
+        /// The frame's message id.
+        message_id: u32,
+        /// The `mavlink` crate's error.
+        source: mavlink::error::ParserError,
+    },
+}
+
+/// What the dialect tells us about one message id, computed once.
+#[derive(Debug, Clone, Copy)]
+struct MsgInfo {
+    name: &'static str,
+    crc_extra: u8,
+    /// Byte offset of `target_system` in the (zero-filled) payload.
+    target_system_offset: Option<u8>,
+    /// Byte offset of `target_component` in the (zero-filled) payload.
+    target_component_offset: Option<u8>,
+}
+
+/// Finds the payload byte a setter changes, by serialising the message before and after.
+fn field_offset(msg: &MavMessage, set: impl Fn(&mut MavMessage) -> bool) -> Option<u8> {
+    let mut before = [0u8; 255];
+    let mut after = [0u8; 255];
+    msg.ser(MavlinkVersion::V2, &mut before);
+    let mut changed = msg.clone();
+    if !set(&mut changed) {
+        return None;
+    }
+    changed.ser(MavlinkVersion::V2, &mut after);
+    let pos = before.iter().zip(after.iter()).position(|(a, b)| a != b)?;
+    u8::try_from(pos).ok()
+}
+
+/// The dialect's message table. The generated code has no list of ids, so probe every id that
+/// fits in 16 bits (all ardupilotmega ids do) once; that takes a few milliseconds.
+fn dialect_table() -> &'static HashMap<u32, MsgInfo> {
+    static TABLE: OnceLock<HashMap<u32, MsgInfo>> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut table = HashMap::new();
+        for id in 0..=u32::from(u16::MAX) {
+            let Some(msg) = MavMessage::default_message_from_id(id) else {
+                continue;
+            };
+            // 0xA5 differs from every default (targets default to 0), so exactly one byte moves.
+            let target_system_offset = field_offset(&msg, |m| {
+                m.target_system_id_mut().map(|t| *t = 0xA5).is_some()
+            });
+            let target_component_offset = field_offset(&msg, |m| {
+                m.target_component_id_mut().map(|t| *t = 0xA5).is_some()
+            });
+            table.insert(
+                id,
+                MsgInfo {
+                    name: msg.message_name(),
+                    crc_extra: MavMessage::extra_crc(id),
+                    target_system_offset,
+                    target_component_offset,
+                },
+            );
+        }
+        table
+    })
+}
+
+/// Every message id the dialect knows, ascending.
+pub fn known_message_ids() -> Vec<u32> {
+    let mut ids: Vec<u32> = dialect_table().keys().copied().collect();
+    ids.sort_unstable();
+    ids
+}
+
+/// The CRC_EXTRA of a message id, or `None` if the dialect does not know it.
+pub fn crc_extra(message_id: u32) -> Option<u8> {
+    dialect_table().get(&message_id).map(|i| i.crc_extra)
+}
+
+/// The dialect's name of a message id (e.g. `"HEARTBEAT"`), if known.
+pub fn message_name(message_id: u32) -> Option<&'static str> {
+    dialect_table().get(&message_id).map(|i| i.name)
+}
+
+/// MAVLink's CRC (X.25 / MCRF4XX) over `data` followed by `crc_extra`.
+pub fn frame_crc(data: &[u8], crc_extra: u8) -> u16 {
+    mavlink::calculate_crc(data, crc_extra)
+}
+
+/// Total frame length from the first bytes of a candidate frame, if enough bytes are there
+/// (v1: 2 bytes; v2: 3 bytes, the incompat byte decides about the signature).
+pub fn frame_len_from_prefix(prefix: &[u8]) -> Option<usize> {
+    match *prefix.first()? {
+        MAGIC_V1 => Some(HEADER_LEN_V1 + usize::from(*prefix.get(1)?) + CRC_LEN),
+        MAGIC_V2 => {
+            let payload = usize::from(*prefix.get(1)?);
+            let signed = prefix.get(2)? & INCOMPAT_SIGNED != 0;
+            Some(HEADER_LEN_V2 + payload + CRC_LEN + if signed { SIGNATURE_LEN } else { 0 })
+        }
+        _ => None,
+    }
+}
+
+/// One complete MAVLink v1 or v2 frame (signature included), as it was on the wire.
+///
+/// Cloning is cheap (reference-counted bytes), so one frame can be queued to many links.
+/// Invariant: the length fields match the buffer, and if the dialect knows the message id the
+/// CRC is correct ([`Frame::is_verified`]). Frames of unknown ids are kept for forwarding.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Frame {
+    bytes: Bytes,
+    verified: bool,
+}
+
+impl fmt::Debug for Frame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Frame")
+            .field("version", &self.version())
+            .field("seq", &self.seq())
+            .field("system_id", &self.system_id())
+            .field("component_id", &self.component_id())
+            .field("message_id", &self.message_id())
+            .field("name", &self.message_name())
+            .field("len_bytes", &self.bytes.len())
+            .field("signed", &self.is_signed())
+            .field("verified", &self.verified)
+            .finish()
+    }
+}
+
+impl Frame {
+    /// Checks the framing of `bytes` (magic, lengths, incompat flags and, for ids the dialect
+    /// knows, the CRC) and wraps them without copying.
+    pub fn from_bytes(bytes: Bytes) -> Result<Frame, FrameError> {
+        let first = *bytes.first().ok_or(FrameError::TooShort { len_bytes: 0 })?;
+        if first != MAGIC_V1 && first != MAGIC_V2 {
+            return Err(FrameError::BadMagic(first));
+        }
+        let expected = frame_len_from_prefix(&bytes).ok_or(FrameError::TooShort {
+            len_bytes: bytes.len(),
+        })?;
+        if expected != bytes.len() {
+            return Err(FrameError::LengthMismatch {
+                expected_bytes: expected,
+                actual_bytes: bytes.len(),
+            });
+        }
+        if first == MAGIC_V2 && bytes[2] & !INCOMPAT_SIGNED != 0 {
+            return Err(FrameError::BadIncompat(bytes[2]));
+        }
+        let mut frame = Frame {
+            bytes,
+            verified: false,
+        };
+        if let Some(extra) = crc_extra(frame.message_id()) {
+            if frame.computed_crc(extra) != frame.crc() {
+                return Err(FrameError::BadCrc {
+                    message_id: frame.message_id(),
+                });
+            }
+            frame.verified = true;
+        }
+        Ok(frame)
+    }
+
+    /// Wraps bytes whose framing the decoder already checked.
+    pub(crate) fn from_checked(bytes: Bytes, verified: bool) -> Frame {
+        Frame { bytes, verified }
+    }
+
+    /// Builds a MAVLink 2 frame (unsigned) from a typed message. Trailing zero bytes of the
+    /// payload are stripped, as the spec asks.
+    pub fn encode_v2(system_id: u8, component_id: u8, seq: u8, msg: &MavMessage) -> Frame {
+        let mut payload = [0u8; 255];
+        let len = msg.ser(MavlinkVersion::V2, &mut payload);
+        let id = msg.message_id();
+        // Cannot fail: the payload fits and the id is from the dialect itself.
+        Self::encode_raw_v2(
+            system_id,
+            component_id,
+            seq,
+            id,
+            &payload[..len],
+            MavMessage::extra_crc(id),
+        )
+        .map(|mut f| {
+            f.verified = true;
+            f
+        })
+        .unwrap_or_else(|e| unreachable!("dialect message does not frame: {e}"))
+    }
+
+    /// Builds a MAVLink 1 frame from a typed message (no extension fields, as v1 requires).
+    pub fn encode_v1(
+        system_id: u8,
+        component_id: u8,
+        seq: u8,
+        msg: &MavMessage,
+    ) -> Result<Frame, FrameError> {
+        let mut payload = [0u8; 255];
+        let len = msg.ser(MavlinkVersion::V1, &mut payload);
+        let id = msg.message_id();
+        let id_u8 = u8::try_from(id).map_err(|_| FrameError::IdTooLargeForV1(id))?;
+        let mut buf = Vec::with_capacity(HEADER_LEN_V1 + len + CRC_LEN);
+        buf.extend_from_slice(&[MAGIC_V1, len as u8, seq, system_id, component_id, id_u8]);
+        buf.extend_from_slice(&payload[..len]);
+        let crc = frame_crc(&buf[1..], MavMessage::extra_crc(id));
+        buf.extend_from_slice(&crc.to_le_bytes());
+        Ok(Frame {
+            bytes: Bytes::from(buf),
+            verified: true,
+        })
+    }
+
+    /// Builds an unsigned MAVLink 2 frame from a raw payload with an explicit CRC_EXTRA, for
+    /// messages the typed dialect cannot express (unknown ids, or enum values it rejects).
+    /// The payload is sent as given (strip trailing zeros yourself if you care).
+    pub fn encode_raw_v2(
+        system_id: u8,
+        component_id: u8,
+        seq: u8,
+        message_id: u32,
+        payload: &[u8],
+        crc_extra: u8,
+    ) -> Result<Frame, FrameError> {
+        let len =
+            u8::try_from(payload.len()).map_err(|_| FrameError::PayloadTooLong(payload.len()))?;
+        let id = message_id.to_le_bytes();
+        if id[3] != 0 {
+            return Err(FrameError::IdTooLarge(message_id));
+        }
+        let mut buf = Vec::with_capacity(HEADER_LEN_V2 + payload.len() + CRC_LEN);
+        buf.extend_from_slice(&[
+            MAGIC_V2,
+            len,
+            0,
+            0,
+            seq,
+            system_id,
+            component_id,
+            id[0],
+            id[1],
+            id[2],
+        ]);
+        buf.extend_from_slice(payload);
+        let crc = frame_crc(&buf[1..], crc_extra);
+        buf.extend_from_slice(&crc.to_le_bytes());
+        let verified = crc_extra_matches(message_id, crc_extra);
+        Ok(Frame {
+            bytes: Bytes::from(buf),
+            verified,
+        })
+    }
+
+    /// The protocol version (from the magic byte).
+    pub fn version(&self) -> MavlinkVersion {
+        if self.bytes[0] == MAGIC_V2 {
+            MavlinkVersion::V2
+        } else {
+            MavlinkVersion::V1
+        }
+    }
+
+    /// True for MAVLink 2 frames.
+    pub fn is_v2(&self) -> bool {
+        self.bytes[0] == MAGIC_V2
+    }
+
+    fn header_len(&self) -> usize {
+        if self.is_v2() {
+            HEADER_LEN_V2
+        } else {
+            HEADER_LEN_V1
+        }
+    }
+
+    /// Payload length as on the wire (v2 may be truncated).
+    pub fn payload_len(&self) -> usize {
+        usize::from(self.bytes[1])
+    }
+
+    /// Packet sequence number of the sender.
+    pub fn seq(&self) -> u8 {
+        self.bytes[if self.is_v2() { 4 } else { 2 }]
+    }
+
+    /// Sender's system id.
+    pub fn system_id(&self) -> u8 {
+        self.bytes[if self.is_v2() { 5 } else { 3 }]
+    }
+
+    /// Sender's component id.
+    pub fn component_id(&self) -> u8 {
+        self.bytes[if self.is_v2() { 6 } else { 4 }]
+    }
+
+    /// Message id (24 bits in v2, 8 in v1).
+    pub fn message_id(&self) -> u32 {
+        if self.is_v2() {
+            u32::from_le_bytes([self.bytes[7], self.bytes[8], self.bytes[9], 0])
+        } else {
+            u32::from(self.bytes[5])
+        }
+    }
+
+    /// Incompat flags (0 for v1).
+    pub fn incompat_flags(&self) -> u8 {
+        if self.is_v2() { self.bytes[2] } else { 0 }
+    }
+
+    /// Compat flags (0 for v1).
+    pub fn compat_flags(&self) -> u8 {
+        if self.is_v2() { self.bytes[3] } else { 0 }
+    }
+
+    /// True if the frame carries a MAVLink 2 signature.
+    pub fn is_signed(&self) -> bool {
+        self.incompat_flags() & INCOMPAT_SIGNED != 0
+    }
+
+    /// The 13 signature bytes (link id, timestamp, signature) of a signed frame.
+    pub fn signature(&self) -> Option<&[u8]> {
+        self.is_signed()
+            .then(|| &self.bytes[self.bytes.len() - SIGNATURE_LEN..])
+    }
+
+    /// True if the dialect knows the message id and the CRC was checked against its
+    /// CRC_EXTRA. False frames have only plausible framing: forward them, never trust them.
+    pub fn is_verified(&self) -> bool {
+        self.verified
+    }
+
+    /// The payload as on the wire (possibly truncated, not zero-filled).
+    pub fn payload(&self) -> &[u8] {
+        let start = self.header_len();
+        &self.bytes[start..start + self.payload_len()]
+    }
+
+    /// The checksum stored in the frame.
+    pub fn crc(&self) -> u16 {
+        let at = self.header_len() + self.payload_len();
+        u16::from_le_bytes([self.bytes[at], self.bytes[at + 1]])
+    }
+
+    fn computed_crc(&self, crc_extra: u8) -> u16 {
+        frame_crc(
+            &self.bytes[1..self.header_len() + self.payload_len()],
+            crc_extra,
+        )
+    }
+
+    /// The complete frame, exactly as received (forward these bytes).
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    /// The underlying shared buffer (cloning it does not copy).
+    pub fn bytes(&self) -> &Bytes {
+        &self.bytes
+    }
+
+    /// Consumes the frame and returns its buffer.
+    pub fn into_bytes(self) -> Bytes {
+        self.bytes
+    }
+
+    /// Total length in bytes, signature included.
+    pub fn len(&self) -> usize {
+        self.bytes.len()
+    }
+
+    /// Always false: a frame has at least a header. Present for API symmetry with `len`.
+    pub fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+
+    /// The dialect's name for the message id, if known.
+    pub fn message_name(&self) -> Option<&'static str> {
+        message_name(self.message_id())
+    }
+
+    /// Where the message is addressed: `Some((target_system, target_component))` for a
+    /// message with a target field whose `target_system` is not 0; `None` means "deliver
+    /// everywhere": no target field (or an id the dialect does not know), or
+    /// `target_system == 0`. Messages with only a `target_system` report component 0 (all
+    /// components). Truncated v2 payloads read as zero-filled. This reads byte offsets learnt
+    /// from the dialect, so it works even when [`Frame::decode`] fails on an enum value.
+    pub fn target(&self) -> Option<(u8, u8)> {
+        let info = dialect_table().get(&self.message_id())?;
+        let read = |off: Option<u8>| {
+            off.map_or(0, |o| {
+                self.payload().get(usize::from(o)).copied().unwrap_or(0)
+            })
+        };
+        info.target_system_offset?;
+        let system = read(info.target_system_offset);
+        if system == 0 {
+            return None;
+        }
+        Some((system, read(info.target_component_offset)))
+    }
+
+    /// Decodes the payload into a typed ardupilotmega message. Failure (unknown id, enum value
+    /// the dialect rejects) leaves the frame intact for forwarding.
+    pub fn decode(&self) -> Result<MavMessage, FrameError> {
+        let id = self.message_id();
+        if !self.verified {
+            return Err(FrameError::UnknownMessage(id));
+        }
+        MavMessage::parse(self.version(), id, self.payload()).map_err(|source| FrameError::Parse {
+            message_id: id,
+            source,
+        })
+    }
+
+    /// Reads a COMMAND_LONG (76) or COMMAND_INT (75) without the typed decoder, so that
+    /// commands the dialect's `MavCmd` does not know can still be acknowledged.
+    pub fn raw_command(&self) -> Option<RawCommand> {
+        let id = self.message_id();
+        if id != MSG_ID_COMMAND_LONG && id != MSG_ID_COMMAND_INT {
+            return None;
+        }
+        // Zero-fill the truncated v2 payload; both layouts put command at 28..30 and the
+        // targets at 30/31 (the f32/i32 fields come first).
+        let mut p = [0u8; 35];
+        let n = self.payload().len().min(p.len());
+        p[..n].copy_from_slice(&self.payload()[..n]);
+        let f = |i: usize| f32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+        let i = |i: usize| i32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+        let kind = if id == MSG_ID_COMMAND_LONG {
+            RawCommandKind::Long {
+                params: [f(0), f(4), f(8), f(12), f(16), f(20), f(24)],
+                confirmation: p[32],
+            }
+        } else {
+            RawCommandKind::Int {
+                params: [f(0), f(4), f(8), f(12)],
+                x: i(16),
+                y: i(20),
+                z: f(24),
+                frame: p[32],
+                current: p[33],
+                autocontinue: p[34],
+            }
+        };
+        Some(RawCommand {
+            command: u16::from_le_bytes([p[28], p[29]]),
+            target_system: p[30],
+            target_component: p[31],
+            kind,
+        })
+    }
+}
+
+fn crc_extra_matches(message_id: u32, extra: u8) -> bool {
+    crc_extra(message_id) == Some(extra)
+}
+
+/// A COMMAND_LONG or COMMAND_INT read from raw bytes (see [`Frame::raw_command`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RawCommand {
+    /// MAV_CMD value, even ones the dialect does not define.
+    pub command: u16,
+    /// Addressed system (0 = all).
+    pub target_system: u8,
+    /// Addressed component (0 = all).
+    pub target_component: u8,
+    /// The fields that differ between the two messages.
+    pub kind: RawCommandKind,
+}
+
+/// The message-specific part of a [`RawCommand`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RawCommandKind {
+    /// COMMAND_LONG (76).
+    Long {
+        /// param1..param7.
+        params: [f32; 7],
+        /// 0 for the first transmission, incremented on retries.
+        confirmation: u8,
+    },
+    /// COMMAND_INT (75).
+    Int {
+        /// param1..param4.
+        params: [f32; 4],
+        /// param5 (latitude in 1e-7 deg or local x).
+        x: i32,
+        /// param6.
+        y: i32,
+        /// param7.
+        z: f32,
+        /// MAV_FRAME value.
+        frame: u8,
+        /// Unused by MAVLink (kept for completeness).
+        current: u8,
+        /// Unused by MAVLink (kept for completeness).
+        autocontinue: u8,
+    },
+}
+
+/// A COMMAND_ACK built by hand, for command ids the typed `MavCmd` rejects (PROTOCOL.md E.6.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawCommandAck {
+    /// The command being acknowledged (any u16).
+    pub command: u16,
+    /// MAV_RESULT value (3 = UNSUPPORTED).
+    pub result: u8,
+    /// Progress in percent, 255 if unknown.
+    pub progress: u8,
+    /// Additional result information.
+    pub result_param2: i32,
+    /// System that sent the command.
+    pub target_system: u8,
+    /// Component that sent the command.
+    pub target_component: u8,
+}
+
+impl RawCommandAck {
+    /// MAV_RESULT_UNSUPPORTED.
+    pub const RESULT_UNSUPPORTED: u8 = 3;
+
+    /// An UNSUPPORTED ack for `cmd`, addressed back to its sender.
+    pub fn unsupported(cmd: &RawCommand, sender_system: u8, sender_component: u8) -> Self {
+        RawCommandAck {
+            command: cmd.command,
+            result: Self::RESULT_UNSUPPORTED,
+            progress: 0xFF,
+            result_param2: 0,
+            target_system: sender_system,
+            target_component: sender_component,
+        }
+    }
+
+    /// The ack as an unsigned MAVLink 2 frame (payload trailing zeros stripped).
+    pub fn to_frame(&self, system_id: u8, component_id: u8, seq: u8) -> Frame {
+        let c = self.command.to_le_bytes();
+        let r = self.result_param2.to_le_bytes();
+        let payload = [
+            c[0],
+            c[1],
+            self.result,
+            self.progress,
+            r[0],
+            r[1],
+            r[2],
+            r[3],
+            self.target_system,
+            self.target_component,
+        ];
+        let len = mavlink::utils::remove_trailing_zeroes(&payload);
+        Frame::encode_raw_v2(
+            system_id,
+            component_id,
+            seq,
+            MSG_ID_COMMAND_ACK,
+            &payload[..len],
+            CRC_EXTRA_COMMAND_ACK,
+        )
+        .unwrap_or_else(|e| unreachable!("10-byte ack does not frame: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dialect as apm;
+
+    fn heartbeat() -> MavMessage {
+        MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
+            custom_mode: 17,
+            mavtype: apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            autopilot: apm::MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            base_mode: apm::MavModeFlag::from_bits_retain(0x81),
+            system_status: apm::MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        })
+    }
+
+    #[test]
+    fn heartbeat_bytes_match_protocol_probe() {
+        // PROTOCOL.md D.1 [probe] bytes.
+        let v2 = Frame::encode_v2(1, 1, 0, &heartbeat());
+        assert_eq!(
+            v2.as_bytes(),
+            &[
+                0xfd, 0x09, 0, 0, 0, 1, 1, 0, 0, 0, 0x11, 0, 0, 0, 0x13, 0, 0x81, 3, 3, 0xb8, 0xcf
+            ]
+        );
+        let v1 = Frame::encode_v1(1, 1, 0, &heartbeat()).unwrap();
+        assert_eq!(
+            v1.as_bytes(),
+            &[
+                0xfe, 0x09, 0, 1, 1, 0, 0x11, 0, 0, 0, 0x13, 0, 0x81, 3, 3, 0x22, 0x0c
+            ]
+        );
+        for f in [v1, v2] {
+            assert!(f.is_verified());
+            assert_eq!(f.decode().unwrap(), heartbeat());
+            assert_eq!(f.target(), None);
+            assert_eq!(f.message_name(), Some("HEARTBEAT"));
+            assert_eq!(Frame::from_bytes(f.bytes().clone()).unwrap(), f);
+        }
+    }
+
+    #[test]
+    fn from_bytes_rejects_bad_crc_and_lengths() {
+        let f = Frame::encode_v2(1, 1, 0, &heartbeat());
+        let mut b = f.as_bytes().to_vec();
+        b[12] ^= 1;
+        assert!(matches!(
+            Frame::from_bytes(Bytes::from(b.clone())),
+            Err(FrameError::BadCrc { message_id: 0 })
+        ));
+        b.pop();
+        assert!(matches!(
+            Frame::from_bytes(Bytes::from(b)),
+            Err(FrameError::LengthMismatch { .. })
+        ));
+        let mut b = f.as_bytes().to_vec();
+        b[2] = 0x02;
+        assert!(matches!(
+            Frame::from_bytes(Bytes::from(b)),
+            Err(FrameError::BadIncompat(2))
+        ));
+    }
+
+    #[test]
+    fn target_matches_typed_decoder_for_every_message() {
+        let mut with_target = 0;
+        for &id in dialect_table().keys() {
+            let mut msg = MavMessage::default_message_from_id(id).unwrap();
+            if let Some(t) = msg.target_system_id_mut() {
+                *t = 0x12;
+            }
+            if let Some(t) = msg.target_component_id_mut() {
+                *t = 0x34;
+            }
+            let f = Frame::encode_v2(7, 8, 9, &msg);
+            let expected = msg
+                .target_system_id()
+                .map(|s| (s, msg.target_component_id().unwrap_or(0)));
+            assert_eq!(f.target(), expected, "message {}", msg.message_name());
+            with_target += usize::from(expected.is_some());
+        }
+        assert!(with_target > 50, "only {with_target} messages with targets");
+    }
+
+    #[test]
+    fn target_survives_unknown_enum_and_truncation() {
+        // COMMAND_ACK for command 11 (SET_MODE is a message, not a MAV_CMD): typed decode fails.
+        let ack = RawCommandAck {
+            command: 11,
+            result: 0,
+            progress: 0,
+            result_param2: 0,
+            target_system: 255,
+            target_component: 0,
+        };
+        let f = ack.to_frame(1, 1, 5);
+        assert!(f.is_verified());
+        assert!(matches!(f.decode(), Err(FrameError::Parse { .. })));
+        assert_eq!(f.target(), Some((255, 0)));
+        // Payload: 0b 00 00 00 00 00 00 00 ff -> 9 bytes (trailing zero stripped).
+        assert_eq!(f.payload_len(), 9);
+    }
+
+    #[test]
+    fn raw_command_reads_long_and_int() {
+        let long = MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
+            param1: 1.0,
+            param2: 21196.0,
+            command: apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            target_system: 1,
+            target_component: 0,
+            confirmation: 2,
+            ..Default::default()
+        });
+        let f = Frame::encode_v2(255, 190, 0, &long);
+        let c = f.raw_command().unwrap();
+        assert_eq!(c.command, 400);
+        assert_eq!((c.target_system, c.target_component), (1, 0));
+        assert!(matches!(
+            c.kind,
+            RawCommandKind::Long { params, confirmation: 2 } if params[1] == 21196.0
+        ));
+        let int = MavMessage::COMMAND_INT(apm::COMMAND_INT_DATA {
+            x: -5,
+            command: apm::MavCmd::MAV_CMD_DO_REPOSITION,
+            target_system: 3,
+            target_component: 1,
+            frame: apm::MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            ..Default::default()
+        });
+        let c = Frame::encode_v2(255, 190, 0, &int).raw_command().unwrap();
+        assert_eq!(c.command, 192);
+        assert_eq!((c.target_system, c.target_component), (3, 1));
+        assert!(matches!(
+            c.kind,
+            RawCommandKind::Int {
+                x: -5,
+                frame: 3,
+                ..
+            }
+        ));
+        assert!(
+            Frame::encode_v2(1, 1, 0, &heartbeat())
+                .raw_command()
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn unsupported_ack_for_unknown_command_decodes_in_raw_form() {
+        // COMMAND_LONG with a command the dialect rejects, built by hand.
+        let mut p = [0u8; 33];
+        p[28..30].copy_from_slice(&65000u16.to_le_bytes());
+        p[30] = 1;
+        p[31] = 1;
+        let f = Frame::encode_raw_v2(255, 190, 3, MSG_ID_COMMAND_LONG, &p[..32], 152).unwrap();
+        assert!(f.is_verified());
+        assert!(f.decode().is_err());
+        let cmd = f.raw_command().unwrap();
+        assert_eq!(cmd.command, 65000);
+        let ack =
+            RawCommandAck::unsupported(&cmd, f.system_id(), f.component_id()).to_frame(1, 1, 0);
+        assert_eq!(ack.target(), Some((255, 190)));
+        assert_eq!(ack.payload(), &[0xe8, 0xfd, 3, 0xff, 0, 0, 0, 0, 255, 190]);
+        assert_eq!(Frame::from_bytes(ack.bytes().clone()).unwrap(), ack);
+    }
+}

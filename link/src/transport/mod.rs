@@ -1,0 +1,486 @@
+//! Tokio transports: turn a [`LinkUrl`] into links that report [`LinkEvent`]s.
+//!
+//! A *link* is one peer connection: a TCP client or accepted socket, a serial port, one UDP
+//! peer address, or an in-memory pipe. Each link announces itself with `Up` (carrying its
+//! bounded egress queue), reports every received frame, and ends with `Down`. An *endpoint*
+//! is what a URL opens: a listener yields many links, a client or serial port one link that
+//! keeps its [`LinkId`] across reconnects. Parse errors are counted and skipped; I/O errors end
+//! the link (and clients reconnect with capped back-off); nothing panics or spins.
+
+mod serial;
+mod stream;
+mod tcp;
+mod udp;
+
+use std::fmt;
+use std::io;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::time::Duration;
+
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+
+use crate::decoder::DecodeStats;
+use crate::frame::Frame;
+use crate::url::{LinkUrl, UrlError};
+
+pub use stream::{run_stream_link, spawn_stream_link};
+
+/// Identifies one link for the life of the process (unique across all endpoints).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct LinkId(pub u32);
+
+impl LinkId {
+    /// A fresh id from the process-wide counter (starts at 1).
+    pub fn next() -> LinkId {
+        static NEXT: AtomicU32 = AtomicU32::new(1);
+        LinkId(NEXT.fetch_add(1, Ordering::Relaxed))
+    }
+}
+
+impl fmt::Display for LinkId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "link#{}", self.0)
+    }
+}
+
+/// What links report to their owner.
+#[derive(Debug)]
+pub enum LinkEvent {
+    /// A link is connected. `tx` is its egress queue; it closes when the link goes down.
+    Up {
+        /// The link.
+        id: LinkId,
+        /// Human-readable peer (`tcp 127.0.0.1:5760`, `udp 10.0.0.2:14550`, device path).
+        peer: String,
+        /// Bounded egress queue of this link (and its counters).
+        tx: LinkSender,
+    },
+    /// A frame arrived on a link.
+    Frame {
+        /// The link it arrived on.
+        id: LinkId,
+        /// The frame, raw bytes as received.
+        frame: Frame,
+    },
+    /// A link went away (EOF, I/O error, UDP silence, shutdown).
+    Down {
+        /// The link.
+        id: LinkId,
+        /// Why, for logs and the TUI.
+        reason: String,
+    },
+}
+
+/// Per-link counters, shared between the link task and its owner.
+#[derive(Debug, Default)]
+pub struct LinkStats {
+    rx_frames: AtomicU64,
+    rx_bytes: AtomicU64,
+    tx_frames: AtomicU64,
+    tx_bytes: AtomicU64,
+    tx_dropped_queue_full: AtomicU64,
+    tx_errors: AtomicU64,
+    bad_crc: AtomicU64,
+    garbage_bytes: AtomicU64,
+    unknown_id: AtomicU64,
+    bad_incompat: AtomicU64,
+}
+
+/// A copy of [`LinkStats`] at one instant.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStatsSnapshot {
+    /// Frames received (verified and unverified).
+    pub rx_frames: u64,
+    /// Bytes received, garbage included.
+    pub rx_bytes: u64,
+    /// Frames written to the transport.
+    pub tx_frames: u64,
+    /// Bytes written to the transport.
+    pub tx_bytes: u64,
+    /// Frames refused because the egress queue was full (slow peer).
+    pub tx_dropped_queue_full: u64,
+    /// Frames lost to send errors (UDP only; stream errors end the link).
+    pub tx_errors: u64,
+    /// Received candidates with a bad CRC.
+    pub bad_crc: u64,
+    /// Received bytes skipped while resyncing.
+    pub garbage_bytes: u64,
+    /// Received frames with message ids the dialect does not know.
+    pub unknown_id: u64,
+    /// Received frames dropped for unknown incompat flags.
+    pub bad_incompat: u64,
+}
+
+impl LinkStats {
+    /// Reads every counter.
+    pub fn snapshot(&self) -> LinkStatsSnapshot {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        LinkStatsSnapshot {
+            rx_frames: g(&self.rx_frames),
+            rx_bytes: g(&self.rx_bytes),
+            tx_frames: g(&self.tx_frames),
+            tx_bytes: g(&self.tx_bytes),
+            tx_dropped_queue_full: g(&self.tx_dropped_queue_full),
+            tx_errors: g(&self.tx_errors),
+            bad_crc: g(&self.bad_crc),
+            garbage_bytes: g(&self.garbage_bytes),
+            unknown_id: g(&self.unknown_id),
+            bad_incompat: g(&self.bad_incompat),
+        }
+    }
+
+    pub(crate) fn add_decode(&self, d: &DecodeStats) {
+        let add = |a: &AtomicU64, v: u64| {
+            if v != 0 {
+                a.fetch_add(v, Ordering::Relaxed);
+            }
+        };
+        add(&self.rx_frames, d.frames);
+        add(&self.bad_crc, d.bad_crc);
+        add(&self.garbage_bytes, d.garbage_bytes);
+        add(&self.unknown_id, d.unknown_id);
+        add(&self.bad_incompat, d.bad_incompat);
+    }
+
+    pub(crate) fn add_rx_bytes(&self, n: usize) {
+        self.rx_bytes.fetch_add(n as u64, Ordering::Relaxed);
+    }
+
+    pub(crate) fn add_tx(&self, frames: usize, bytes: usize) {
+        self.tx_frames.fetch_add(frames as u64, Ordering::Relaxed);
+        self.tx_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    pub(crate) fn add_tx_error(&self) {
+        self.tx_errors.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Why [`LinkSender::try_send`] refused a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SendError {
+    /// The queue is full: the frame was dropped and counted.
+    #[error("egress queue full, frame dropped")]
+    Full,
+    /// The link is down.
+    #[error("link is down")]
+    Closed,
+}
+
+/// The egress side of one link: a bounded queue plus the link's counters.
+///
+/// `try_send` never waits, so one slow peer cannot stall the router; a full queue drops the
+/// frame and counts it in `tx_dropped_queue_full`.
+#[derive(Debug, Clone)]
+pub struct LinkSender {
+    tx: mpsc::Sender<Frame>,
+    stats: Arc<LinkStats>,
+}
+
+impl LinkSender {
+    pub(crate) fn new(tx: mpsc::Sender<Frame>, stats: Arc<LinkStats>) -> Self {
+        LinkSender { tx, stats }
+    }
+
+    /// Queues a frame without waiting; a full queue drops it (counted).
+    pub fn try_send(&self, frame: Frame) -> Result<(), SendError> {
+        match self.tx.try_send(frame) {
+            Ok(()) => Ok(()),
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                self.stats
+                    .tx_dropped_queue_full
+                    .fetch_add(1, Ordering::Relaxed);
+                Err(SendError::Full)
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => Err(SendError::Closed),
+        }
+    }
+
+    /// Queues a frame, waiting for room (for traffic that must not be dropped, e.g. a
+    /// vehicle's replies on an in-memory link). Errors only if the link is down.
+    pub async fn send(&self, frame: Frame) -> Result<(), SendError> {
+        self.tx.send(frame).await.map_err(|_| SendError::Closed)
+    }
+
+    /// True once the link is down.
+    pub fn is_closed(&self) -> bool {
+        self.tx.is_closed()
+    }
+
+    /// Completes when the link is down (its queue's receiver is gone).
+    pub async fn closed(&self) {
+        self.tx.closed().await
+    }
+
+    /// The link's counters.
+    pub fn stats(&self) -> &Arc<LinkStats> {
+        &self.stats
+    }
+}
+
+/// Tuning for links. `Default` gives the values documented on each field.
+#[derive(Debug, Clone)]
+pub struct LinkOptions {
+    /// Egress queue length per link, in frames (default 1024).
+    pub queue_len: usize,
+    /// A UDP peer that sends nothing for this long goes down (default 10 s).
+    pub udp_peer_timeout: Duration,
+    /// First reconnect delay for TCP clients and serial ports (default 100 ms).
+    pub reconnect_min: Duration,
+    /// Cap of the doubling reconnect delay (default 2 s).
+    pub reconnect_max: Duration,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        LinkOptions {
+            queue_len: 1024,
+            udp_peer_timeout: Duration::from_secs(10),
+            reconnect_min: Duration::from_millis(100),
+            reconnect_max: Duration::from_secs(2),
+        }
+    }
+}
+
+/// Errors opening an endpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The URL did not parse.
+    #[error(transparent)]
+    Url(#[from] UrlError),
+    /// Name resolution failed.
+    #[error("cannot resolve '{host}': {source}")]
+    Resolve {
+        /// The host name.
+        host: String,
+        /// The resolver's error.
+        source: io::Error,
+    },
+    /// The name resolved to nothing.
+    #[error("'{host}' resolved to no address")]
+    NoAddress {
+        /// The host name.
+        host: String,
+    },
+    /// Binding a socket failed (address in use, permission…).
+    #[error("cannot bind {url} ({addr}): {source}")]
+    Bind {
+        /// The endpoint's URL.
+        url: String,
+        /// The address tried.
+        addr: SocketAddr,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// Another I/O error while opening.
+    #[error("{url}: {source}")]
+    Io {
+        /// The endpoint's URL.
+        url: String,
+        /// The OS error.
+        source: io::Error,
+    },
+}
+
+/// A running endpoint.
+#[derive(Debug)]
+pub struct EndpointHandle {
+    url: LinkUrl,
+    local_addr: Option<SocketAddr>,
+    link_id: Option<LinkId>,
+    task: JoinHandle<()>,
+}
+
+impl EndpointHandle {
+    /// The URL this endpoint was opened from.
+    pub fn url(&self) -> &LinkUrl {
+        &self.url
+    }
+
+    /// The bound local address (udpin, udpout, tcpin); `None` for tcp clients and serial.
+    /// With port 0 this is where the OS put us.
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.local_addr
+    }
+
+    /// The fixed link id of single-link endpoints (udpout, tcp, serial).
+    pub fn link_id(&self) -> Option<LinkId> {
+        self.link_id
+    }
+
+    /// True once the endpoint and all its links have stopped.
+    pub fn is_finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
+    /// Waits until the endpoint and all its links have stopped (after cancellation).
+    pub async fn join(self) {
+        if let Err(e) = self.task.await {
+            tracing::error!(url = %self.url, "endpoint task failed: {e}");
+        }
+    }
+
+    /// The task handle, for `select!` or abort.
+    pub fn into_join_handle(self) -> JoinHandle<()> {
+        self.task
+    }
+}
+
+/// Opens the endpoint a URL describes and runs it until `cancel` fires.
+///
+/// Listeners and udpout bind before this returns (so errors like "address in use" surface
+/// here and [`EndpointHandle::local_addr`] is known). TCP clients and serial ports never fail
+/// here: they retry with back-off until they connect, since a vehicle may appear later.
+pub async fn spawn_endpoint(
+    url: &LinkUrl,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) -> Result<EndpointHandle, LinkError> {
+    let (local_addr, link_id, task) = match url {
+        LinkUrl::UdpIn { host, port } => {
+            let (addr, task) = udp::spawn_udpin(url, host, *port, events, opts, cancel).await?;
+            (Some(addr), None, task)
+        }
+        LinkUrl::UdpOut { host, port } => {
+            let (addr, id, task) =
+                udp::spawn_udpout(url, host, *port, events, opts, cancel).await?;
+            (Some(addr), Some(id), task)
+        }
+        LinkUrl::TcpIn { host, port } => {
+            let (addr, task) = tcp::spawn_tcpin(url, host, *port, events, opts, cancel).await?;
+            (Some(addr), None, task)
+        }
+        LinkUrl::Tcp { host, port } => {
+            let (id, task) = tcp::spawn_tcp_client(host.clone(), *port, events, opts, cancel);
+            (None, Some(id), task)
+        }
+        LinkUrl::Serial { device, baud } => {
+            let (id, task) = serial::spawn_serial(device.clone(), *baud, events, opts, cancel);
+            (None, Some(id), task)
+        }
+    };
+    Ok(EndpointHandle {
+        url: url.clone(),
+        local_addr,
+        link_id,
+        task,
+    })
+}
+
+/// Resolves `host:port`, IPv4 addresses first (so `localhost` binds and connects like
+/// pymavlink does).
+pub(crate) async fn resolve(host: &str, port: u16) -> Result<Vec<SocketAddr>, LinkError> {
+    let mut addrs: Vec<SocketAddr> = tokio::net::lookup_host((host, port))
+        .await
+        .map_err(|source| LinkError::Resolve {
+            host: host.to_string(),
+            source,
+        })?
+        .collect();
+    addrs.sort_by_key(|a| !a.is_ipv4());
+    if addrs.is_empty() {
+        return Err(LinkError::NoAddress {
+            host: host.to_string(),
+        });
+    }
+    Ok(addrs)
+}
+
+/// Sends an event unless shutting down; false if the link should stop.
+pub(crate) async fn emit(
+    events: &mpsc::Sender<LinkEvent>,
+    event: LinkEvent,
+    cancel: &CancellationToken,
+) -> bool {
+    tokio::select! {
+        biased;
+        _ = cancel.cancelled() => false,
+        r = events.send(event) => r.is_ok(),
+    }
+}
+
+/// Reports a link as down. During shutdown the owner may be gone or not reading, so do not
+/// wait then.
+pub(crate) async fn emit_down(
+    events: &mpsc::Sender<LinkEvent>,
+    id: LinkId,
+    reason: String,
+    cancel: &CancellationToken,
+) {
+    tracing::debug!(%id, %reason, "link down");
+    let ev = LinkEvent::Down { id, reason };
+    if cancel.is_cancelled() {
+        let _ = events.try_send(ev);
+    } else {
+        let _ = events.send(ev).await;
+    }
+}
+
+/// Sleeps unless cancelled; false if cancelled.
+pub(crate) async fn sleep_or_cancel(d: Duration, cancel: &CancellationToken) -> bool {
+    tokio::select! {
+        _ = cancel.cancelled() => false,
+        _ = tokio::time::sleep(d) => true,
+    }
+}
+
+/// Capped exponential back-off for reconnects.
+#[derive(Debug)]
+pub(crate) struct Backoff {
+    next: Duration,
+    min: Duration,
+    max: Duration,
+}
+
+impl Backoff {
+    pub(crate) fn new(opts: &LinkOptions) -> Self {
+        let min = opts.reconnect_min.max(Duration::from_millis(1));
+        Backoff {
+            next: min,
+            min,
+            max: opts.reconnect_max.max(min),
+        }
+    }
+
+    /// The delay to wait now; doubles the following one up to the cap.
+    pub(crate) fn next_delay(&mut self) -> Duration {
+        let d = self.next;
+        self.next = (self.next * 2).min(self.max);
+        d
+    }
+
+    /// After a connection that lasted, start again from the minimum.
+    pub(crate) fn reset(&mut self) {
+        self.next = self.min;
+    }
+
+    pub(crate) fn max(&self) -> Duration {
+        self.max
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_to_cap_and_resets() {
+        let mut b = Backoff::new(&LinkOptions::default());
+        let seq: Vec<_> = (0..7).map(|_| b.next_delay().as_millis()).collect();
+        assert_eq!(seq, vec![100, 200, 400, 800, 1600, 2000, 2000]);
+        b.reset();
+        assert_eq!(b.next_delay().as_millis(), 100);
+    }
+
+    #[test]
+    fn link_ids_are_unique() {
+        let a = LinkId::next();
+        let b = LinkId::next();
+        assert_ne!(a, b);
+    }
+}

@@ -1,0 +1,149 @@
+//! A link over any byte stream: TCP sockets, serial ports, `tokio::io::duplex` pipes.
+//!
+//! The reader feeds a [`FrameDecoder`] and reports frames; the writer drains the egress
+//! queue, batching whatever is queued into one `write_all` (streams have no datagram
+//! boundaries to preserve, and fewer syscalls matter at high telemetry rates).
+
+use std::sync::Arc;
+
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+
+use super::{LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down};
+use crate::decoder::FrameDecoder;
+use crate::frame::Frame;
+
+/// Upper bound of one batched write; more queued frames wait for the next write.
+const MAX_BATCH_BYTES: usize = 64 * 1024;
+/// Room reserved in the decoder's buffer before each read.
+const READ_CHUNK_BYTES: usize = 8 * 1024;
+
+/// Runs one stream link until EOF, an I/O error, the owner going away, or `cancel`.
+///
+/// Sends `Up` (with a fresh egress queue) first and `Down` last; returns the reason it ended.
+/// `stats` may be shared across reconnects of the same link. Use this directly to keep one
+/// [`LinkId`] across your own reconnect loop; otherwise see [`spawn_stream_link`].
+/// Writes are never flushed, so pass an unbuffered stream (sockets, serial ports and
+/// `tokio::io::duplex` are fine; a `BufWriter` is not).
+pub async fn run_stream_link<S>(
+    id: LinkId,
+    peer: String,
+    stream: S,
+    stats: Arc<LinkStats>,
+    events: &mpsc::Sender<LinkEvent>,
+    opts: &LinkOptions,
+    cancel: &CancellationToken,
+) -> String
+where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+{
+    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
+    let up = LinkEvent::Up {
+        id,
+        peer: peer.clone(),
+        tx: LinkSender::new(tx, stats.clone()),
+    };
+    tracing::debug!(%id, %peer, "link up");
+    if !emit(events, up, cancel).await {
+        return "shutdown".to_string();
+    }
+    let (rd, wr) = tokio::io::split(stream);
+    let reason = tokio::select! {
+        _ = cancel.cancelled() => "shutdown".to_string(),
+        r = read_loop(id, rd, &stats, events, cancel) => r,
+        r = write_loop(wr, rx, &stats) => r,
+    };
+    emit_down(events, id, reason.clone(), cancel).await;
+    reason
+}
+
+/// Spawns a stream link with a new [`LinkId`] (e.g. one end of `tokio::io::duplex` for an
+/// in-memory vehicle). The task ends when the stream does, or on `cancel`.
+pub fn spawn_stream_link<S>(
+    stream: S,
+    peer: impl Into<String>,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) -> (LinkId, JoinHandle<()>)
+where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+{
+    let id = LinkId::next();
+    let peer = peer.into();
+    let task = tokio::spawn(async move {
+        let stats = Arc::new(LinkStats::default());
+        run_stream_link(id, peer, stream, stats, &events, &opts, &cancel).await;
+    });
+    (id, task)
+}
+
+async fn read_loop<R: AsyncRead>(
+    id: LinkId,
+    rd: R,
+    stats: &LinkStats,
+    events: &mpsc::Sender<LinkEvent>,
+    cancel: &CancellationToken,
+) -> String {
+    tokio::pin!(rd);
+    let mut decoder = FrameDecoder::new();
+    loop {
+        decoder.buffer_mut().reserve(READ_CHUNK_BYTES);
+        match rd.read_buf(decoder.buffer_mut()).await {
+            Ok(0) => {
+                for frame in decoder.finish() {
+                    if !emit(events, LinkEvent::Frame { id, frame }, cancel).await {
+                        break;
+                    }
+                }
+                stats.add_decode(&decoder.take_stats());
+                return "end of stream".to_string();
+            }
+            Ok(n) => stats.add_rx_bytes(n),
+            Err(e) => return format!("read error: {e}"),
+        }
+        while let Some(frame) = decoder.next_frame() {
+            stats.add_decode(&decoder.take_stats());
+            if !emit(events, LinkEvent::Frame { id, frame }, cancel).await {
+                return "event receiver closed".to_string();
+            }
+        }
+        stats.add_decode(&decoder.take_stats());
+    }
+}
+
+async fn write_loop<W: AsyncWrite>(
+    wr: W,
+    mut rx: mpsc::Receiver<Frame>,
+    stats: &LinkStats,
+) -> String {
+    tokio::pin!(wr);
+    let mut batch: Vec<u8> = Vec::with_capacity(MAX_BATCH_BYTES);
+    loop {
+        let Some(first) = rx.recv().await else {
+            // The owner dropped every sender: keep receiving, just never send again.
+            std::future::pending::<()>().await;
+            unreachable!();
+        };
+        batch.clear();
+        batch.extend_from_slice(first.as_bytes());
+        let mut frames = 1;
+        while batch.len() < MAX_BATCH_BYTES {
+            match rx.try_recv() {
+                Ok(f) => {
+                    batch.extend_from_slice(f.as_bytes());
+                    frames += 1;
+                }
+                Err(_) => break,
+            }
+        }
+        // No flush: on a serial port it is tcdrain(), which would block the runtime thread
+        // until the UART has sent everything. Streams passed here must not buffer writes.
+        if let Err(e) = wr.write_all(&batch).await {
+            return format!("write error: {e}");
+        }
+        stats.add_tx(frames, batch.len());
+    }
+}

@@ -1,0 +1,314 @@
+//! UDP endpoints: `udpin` (server, one link per peer heard) and `udpout` (fixed destination).
+//!
+//! Unlike the `mavlink` crate's udpin, which replies only to the last sender (PROTOCOL.md
+//! E.3), every peer address is its own link with its own queue, decoder and counters, as
+//! pymavlink's `mavudp` keeps a client set. Each frame goes out as its own datagram, which is
+//! what pymavlink and MAVProxy expect.
+//!
+//! Each received datagram is parsed to its end ([`FrameDecoder::finish`]): MAVLink over UDP
+//! carries whole frames, and treating the datagram boundary as final means a false candidate
+//! (e.g. a stray 0xFE with a large length) can never hold back the real frames behind it until
+//! the next datagram. The cost: a frame split across two datagrams (a raw serial-to-UDP
+//! bridge) is dropped, where pymavlink would reassemble it.
+
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::net::UdpSocket;
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+use tokio_util::task::TaskTracker;
+
+use super::{
+    LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down, resolve,
+    sleep_or_cancel,
+};
+use crate::decoder::FrameDecoder;
+use crate::frame::Frame;
+use crate::url::LinkUrl;
+
+/// Largest UDP payload.
+const MAX_DATAGRAM_BYTES: usize = 65_536;
+/// Pause after a receive error so a persistent error cannot become a busy loop.
+const RECV_ERROR_PAUSE: Duration = Duration::from_millis(50);
+
+/// State of one UDP peer (one link) of a udpin socket.
+struct Peer {
+    id: LinkId,
+    last_heard: Instant,
+    decoder: FrameDecoder,
+    stats: Arc<LinkStats>,
+    writer_cancel: CancellationToken,
+}
+
+async fn bind(url: &LinkUrl, addrs: &[SocketAddr]) -> Result<UdpSocket, LinkError> {
+    let mut last = None;
+    for &addr in addrs {
+        match UdpSocket::bind(addr).await {
+            Ok(s) => return Ok(s),
+            Err(source) => last = Some((addr, source)),
+        }
+    }
+    let (addr, source) = last.expect("resolve returns at least one address");
+    Err(LinkError::Bind {
+        url: url.to_string(),
+        addr,
+        source,
+    })
+}
+
+fn local_addr(url: &LinkUrl, sock: &UdpSocket) -> Result<SocketAddr, LinkError> {
+    sock.local_addr().map_err(|source| LinkError::Io {
+        url: url.to_string(),
+        source,
+    })
+}
+
+/// Writes one link's queue to `dest`, one datagram per frame, until cancelled.
+async fn udp_writer(
+    sock: Arc<UdpSocket>,
+    dest: SocketAddr,
+    mut rx: mpsc::Receiver<Frame>,
+    stats: Arc<LinkStats>,
+    cancel: CancellationToken,
+) {
+    loop {
+        let frame = tokio::select! {
+            _ = cancel.cancelled() => return,
+            f = rx.recv() => f,
+        };
+        let Some(frame) = frame else {
+            // Owner dropped the sender: nothing more to send, wait for the end.
+            cancel.cancelled().await;
+            return;
+        };
+        match sock.send_to(frame.as_bytes(), dest).await {
+            Ok(n) => stats.add_tx(1, n),
+            Err(e) => {
+                // A datagram lost to e.g. ENOBUFS or an unreachable route; UDP has no link to
+                // tear down, so count it and go on.
+                tracing::debug!(%dest, "udp send error: {e}");
+                stats.add_tx_error();
+            }
+        }
+    }
+}
+
+/// Creates the state of a newly heard peer, spawns its writer and returns its `Up` event.
+fn new_peer(
+    sock: &Arc<UdpSocket>,
+    addr: SocketAddr,
+    writers: &TaskTracker,
+    opts: &LinkOptions,
+    cancel: &CancellationToken,
+) -> (Peer, LinkEvent) {
+    let id = LinkId::next();
+    let stats = Arc::new(LinkStats::default());
+    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
+    let writer_cancel = cancel.child_token();
+    writers.spawn(udp_writer(
+        sock.clone(),
+        addr,
+        rx,
+        stats.clone(),
+        writer_cancel.clone(),
+    ));
+    tracing::debug!(%id, %addr, "udp peer up");
+    let up = LinkEvent::Up {
+        id,
+        peer: format!("udp {addr}"),
+        tx: LinkSender::new(tx, stats.clone()),
+    };
+    let peer = Peer {
+        id,
+        last_heard: Instant::now(),
+        decoder: FrameDecoder::new(),
+        stats,
+        writer_cancel,
+    };
+    (peer, up)
+}
+
+/// Binds a udpin socket and spawns its task.
+pub(super) async fn spawn_udpin(
+    url: &LinkUrl,
+    host: &str,
+    port: u16,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
+    let addrs = resolve(host, port).await?;
+    let sock = Arc::new(bind(url, &addrs).await?);
+    let local = local_addr(url, &sock)?;
+    tracing::info!(%url, %local, "udpin listening");
+    let task = tokio::spawn(udpin_task(sock, events, opts, cancel));
+    Ok((local, task))
+}
+
+async fn udpin_task(
+    sock: Arc<UdpSocket>,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) {
+    let writers = TaskTracker::new();
+    let mut peers: HashMap<SocketAddr, Peer> = HashMap::new();
+    let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
+    let timeout = opts.udp_peer_timeout;
+    // Check often enough that a peer expires within ~25 % of the timeout.
+    let period = (timeout / 4).clamp(Duration::from_millis(5), Duration::from_secs(1));
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    'run: loop {
+        tokio::select! {
+            _ = cancel.cancelled() => break,
+            _ = tick.tick() => {
+                let now = Instant::now();
+                let expired: Vec<SocketAddr> = peers
+                    .iter()
+                    .filter(|(_, p)| now.duration_since(p.last_heard) >= timeout)
+                    .map(|(a, _)| *a)
+                    .collect();
+                for addr in expired {
+                    if let Some(p) = peers.remove(&addr) {
+                        p.writer_cancel.cancel();
+                        let reason = format!("udp peer {addr} silent for {timeout:?}");
+                        emit_down(&events, p.id, reason, &cancel).await;
+                    }
+                }
+            }
+            r = sock.recv_from(&mut buf) => {
+                let (n, addr) = match r {
+                    Ok(x) => x,
+                    Err(e) => {
+                        // E.g. ECONNREFUSED from an ICMP error on some platforms: not fatal.
+                        tracing::debug!("udpin receive error: {e}");
+                        if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
+                            break;
+                        }
+                        continue;
+                    }
+                };
+                let peer = match peers.entry(addr) {
+                    Entry::Occupied(o) => o.into_mut(),
+                    Entry::Vacant(v) => {
+                        let (peer, up) = new_peer(&sock, addr, &writers, &opts, &cancel);
+                        if !emit(&events, up, &cancel).await {
+                            peer.writer_cancel.cancel();
+                            break;
+                        }
+                        v.insert(peer)
+                    }
+                };
+                peer.last_heard = Instant::now();
+                peer.stats.add_rx_bytes(n);
+                peer.decoder.push(&buf[..n]);
+                let frames = peer.decoder.finish();
+                peer.stats.add_decode(&peer.decoder.take_stats());
+                for frame in frames {
+                    if !emit(&events, LinkEvent::Frame { id: peer.id, frame }, &cancel).await {
+                        break 'run;
+                    }
+                }
+            }
+        }
+    }
+    for (_, p) in peers.drain() {
+        p.writer_cancel.cancel();
+        emit_down(&events, p.id, "shutdown".to_string(), &cancel).await;
+    }
+    writers.close();
+    writers.wait().await;
+}
+
+/// Binds an ephemeral socket for udpout and spawns its single link.
+pub(super) async fn spawn_udpout(
+    url: &LinkUrl,
+    host: &str,
+    port: u16,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) -> Result<(SocketAddr, LinkId, JoinHandle<()>), LinkError> {
+    let dest = resolve(host, port).await?[0];
+    let any: SocketAddr = if dest.is_ipv4() {
+        (Ipv4Addr::UNSPECIFIED, 0).into()
+    } else {
+        (Ipv6Addr::UNSPECIFIED, 0).into()
+    };
+    let sock = Arc::new(bind(url, &[any]).await?);
+    let local = local_addr(url, &sock)?;
+    let id = LinkId::next();
+    tracing::info!(%url, %local, %id, "udpout sending to {dest}");
+    let task = tokio::spawn(udpout_task(id, sock, dest, events, opts, cancel));
+    Ok((local, id, task))
+}
+
+async fn udpout_task(
+    id: LinkId,
+    sock: Arc<UdpSocket>,
+    dest: SocketAddr,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) {
+    let stats = Arc::new(LinkStats::default());
+    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
+    let writer_cancel = cancel.child_token();
+    let writer = tokio::spawn(udp_writer(
+        sock.clone(),
+        dest,
+        rx,
+        stats.clone(),
+        writer_cancel.clone(),
+    ));
+    let up = LinkEvent::Up {
+        id,
+        peer: format!("udp {dest}"),
+        tx: LinkSender::new(tx, stats.clone()),
+    };
+    let mut reason = "shutdown".to_string();
+    if emit(&events, up, &cancel).await {
+        // Replies may come from any address (the peer may answer from another port); one
+        // decoder suffices since there is one logical peer.
+        let mut decoder = FrameDecoder::new();
+        let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
+        'run: loop {
+            let r = tokio::select! {
+                _ = cancel.cancelled() => break,
+                r = sock.recv_from(&mut buf) => r,
+            };
+            let n = match r {
+                Ok((n, _from)) => n,
+                Err(e) => {
+                    // Linux reports ECONNREFUSED only on connected sockets, others may report
+                    // it here when nobody listens yet: keep going, slowly.
+                    tracing::debug!(%id, "udpout receive error: {e}");
+                    if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
+                        break;
+                    }
+                    continue;
+                }
+            };
+            stats.add_rx_bytes(n);
+            decoder.push(&buf[..n]);
+            let frames = decoder.finish();
+            stats.add_decode(&decoder.take_stats());
+            for frame in frames {
+                if !emit(&events, LinkEvent::Frame { id, frame }, &cancel).await {
+                    reason = "event receiver closed".to_string();
+                    break 'run;
+                }
+            }
+        }
+    }
+    writer_cancel.cancel();
+    let _ = writer.await;
+    emit_down(&events, id, reason, &cancel).await;
+}
