@@ -462,6 +462,24 @@ mod tests {
     }
 
     #[test]
+    fn a_full_disk_is_counted_and_the_writer_keeps_taking_records() {
+        let full = Path::new("/dev/full");
+        if !full.exists() {
+            return;
+        }
+        let h = TlogHandle::start_at(full, 16).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        // Keep logging until the failed flush shows up in the counters.
+        while h.stats.write_errors.load(Ordering::Relaxed) == 0 {
+            h.log(Record::now(Direction::FromVehicle, heartbeat(1)));
+            assert!(Instant::now() < deadline, "write error never reported");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        h.log(Record::now(Direction::FromVehicle, heartbeat(2)));
+        h.close();
+    }
+
+    #[test]
     fn writer_thread_flushes_within_the_interval() {
         let dir = tempfile::tempdir().unwrap();
         let h = TlogHandle::start(dir.path(), 16).unwrap();
