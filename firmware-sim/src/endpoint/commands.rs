@@ -1,0 +1,256 @@
+//! The command protocol (`PROTOCOL.md` A.4) and the legacy SET_MODE / REQUEST_DATA_STREAM (A.5).
+//!
+//! Every COMMAND_LONG/COMMAND_INT addressed to us gets exactly one COMMAND_ACK, built from raw
+//! bytes so that command ids the dialect does not know still get `UNSUPPORTED`. A retransmission
+//! (`confirmation` > 0) of the command last done for the same sender gets the same result again
+//! without acting twice.
+
+use mavlink::dialects::ardupilotmega as apm;
+
+use super::wire::{RawCommand, command_ack_payload};
+use super::{Endpoint, InFrame, LinkKey, streams};
+use crate::mode::FlightMode;
+use crate::vehicle::ArmError;
+
+/// `MAV_RESULT` values.
+pub mod result {
+    /// Done.
+    pub const ACCEPTED: u8 = 0;
+    /// Valid, not possible right now.
+    pub const TEMPORARILY_REJECTED: u8 = 1;
+    /// Invalid parameters or not allowed.
+    pub const DENIED: u8 = 2;
+    /// Not implemented.
+    pub const UNSUPPORTED: u8 = 3;
+    /// Tried and failed.
+    pub const FAILED: u8 = 4;
+}
+
+/// Command numbers the twin implements.
+pub mod cmd {
+    /// MAV_CMD_DO_SET_MODE.
+    pub const DO_SET_MODE: u16 = 176;
+    /// MAV_CMD_COMPONENT_ARM_DISARM.
+    pub const COMPONENT_ARM_DISARM: u16 = 400;
+    /// MAV_CMD_GET_MESSAGE_INTERVAL.
+    pub const GET_MESSAGE_INTERVAL: u16 = 510;
+    /// MAV_CMD_SET_MESSAGE_INTERVAL.
+    pub const SET_MESSAGE_INTERVAL: u16 = 511;
+    /// MAV_CMD_REQUEST_MESSAGE.
+    pub const REQUEST_MESSAGE: u16 = 512;
+    /// MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES.
+    pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 = 520;
+    /// MAV_CMD_DO_VTOL_TRANSITION.
+    pub const DO_VTOL_TRANSITION: u16 = 3000;
+}
+
+/// The force-arm magic number (ArduPilot, common.xml).
+pub const FORCE_MAGIC: f32 = 21196.0;
+
+/// How long a remembered result answers retransmissions, µs.
+const RETRY_WINDOW_US: u64 = 5_000_000;
+
+/// The last command done per sender, to answer retries without acting twice.
+#[derive(Debug, Clone, Default)]
+pub struct CommandMemory {
+    /// (sender sysid, sender compid, command) → (result, sim time done).
+    last: std::collections::HashMap<(u8, u8, u16), (u8, u64)>,
+}
+
+impl Endpoint {
+    pub(super) fn handle_command(&mut self, link: LinkKey, frame: &InFrame, c: &RawCommand) {
+        let key = (frame.sysid, frame.compid, c.command);
+        let remembered = self.commands.last.get(&key).copied();
+        let result = match remembered {
+            Some((r, at))
+                if c.confirmation > 0 && self.now_us.saturating_sub(at) < RETRY_WINDOW_US =>
+            {
+                r
+            }
+            _ => {
+                let mut follow_up = Vec::new();
+                let r = self.execute(link, c, &mut follow_up);
+                self.commands.last.insert(key, (r, self.now_us));
+                self.ack(link, frame, c.command, r);
+                for msg in follow_up {
+                    self.send(link, &msg);
+                }
+                return;
+            }
+        };
+        self.ack(link, frame, c.command, result);
+    }
+
+    fn ack(&mut self, link: LinkKey, frame: &InFrame, command: u16, result: u8) {
+        let payload = command_ack_payload(command, result, (frame.sysid, frame.compid));
+        self.send_raw(link, 77, &payload);
+    }
+
+    /// Runs a command. Messages that must follow the ACK go to `after` (ArduPilot ACKs a
+    /// REQUEST_MESSAGE first and sends the message after).
+    fn execute(&mut self, link: LinkKey, c: &RawCommand, after: &mut Vec<apm::MavMessage>) -> u8 {
+        let p = c.params;
+        match c.command {
+            cmd::COMPONENT_ARM_DISARM => self.cmd_arm_disarm(link, p[0], p[1]),
+            cmd::DO_SET_MODE => {
+                // Only CUSTOM_MODE_ENABLED matters; SAFETY_ARMED in p1 is ignored (common.xml).
+                if (p[0] as u32) & 1 == 0 {
+                    return result::DENIED;
+                }
+                self.apply_custom_mode(link, p[1] as u32)
+            }
+            cmd::SET_MESSAGE_INTERVAL => {
+                let now = self.now_us;
+                let msgid = p[0] as u32;
+                let ok = self
+                    .links
+                    .get_mut(&link)
+                    .is_some_and(|l| l.schedule.set_interval(msgid, f64::from(p[1]), now));
+                if ok { result::ACCEPTED } else { result::DENIED }
+            }
+            cmd::GET_MESSAGE_INTERVAL => {
+                let msgid = p[0] as u32;
+                let interval = self
+                    .links
+                    .get(&link)
+                    .and_then(|l| l.schedule.interval_us(msgid))
+                    // A message we cannot stream has interval 0 with "not supported" semantics;
+                    // common.xml: 0 = not sent / unknown.
+                    .unwrap_or(0);
+                after.push(apm::MavMessage::MESSAGE_INTERVAL(
+                    apm::MESSAGE_INTERVAL_DATA {
+                        interval_us: interval.clamp(i64::from(i32::MIN), i64::from(i32::MAX))
+                            as i32,
+                        message_id: msgid as u16,
+                    },
+                ));
+                result::ACCEPTED
+            }
+            cmd::REQUEST_MESSAGE => {
+                let msgid = p[0] as u32;
+                if !streams::can_produce(msgid) {
+                    return result::FAILED;
+                }
+                let errors = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
+                match self.build_message(msgid, errors) {
+                    Some(m) => {
+                        after.push(m);
+                        result::ACCEPTED
+                    }
+                    None => result::FAILED,
+                }
+            }
+            cmd::REQUEST_AUTOPILOT_CAPABILITIES => {
+                after.push(streams::autopilot_version(self.sysid));
+                result::ACCEPTED
+            }
+            cmd::DO_VTOL_TRANSITION => match p[0] as u32 {
+                // Hover (MC) is all the twin models; asking for it is a no-op success.
+                3 => result::ACCEPTED,
+                4 => {
+                    self.send(
+                        link,
+                        &streams::statustext(
+                            apm::MavSeverity::MAV_SEVERITY_WARNING,
+                            "Forward flight is not modelled",
+                        ),
+                    );
+                    result::DENIED
+                }
+                _ => result::DENIED,
+            },
+            _ => result::UNSUPPORTED,
+        }
+    }
+
+    fn cmd_arm_disarm(&mut self, link: LinkKey, p1: f32, p2: f32) -> u8 {
+        let force = p2 == FORCE_MAGIC;
+        let outcome = if p1 == 1.0 {
+            if self.vehicle.telemetry().armed {
+                return result::ACCEPTED;
+            }
+            self.vehicle.arm(force)
+        } else if p1 == 0.0 {
+            if !self.vehicle.telemetry().armed {
+                return result::ACCEPTED;
+            }
+            self.vehicle.disarm(force)
+        } else {
+            return result::DENIED;
+        };
+        match outcome {
+            Ok(()) => {
+                // Announce now so the text precedes the next heartbeat showing the change.
+                self.report_vehicle_events();
+                result::ACCEPTED
+            }
+            Err(e) => {
+                let text = match e {
+                    ArmError::PreArm(_) => format!("PreArm: {e}"),
+                    ArmError::InFlight => format!("Disarm: {e}"),
+                };
+                let msg = streams::statustext(apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
+                self.send(link, &msg);
+                result::FAILED
+            }
+        }
+    }
+
+    fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
+        match FlightMode::from_custom_mode(custom_mode) {
+            Some(mode) => {
+                self.vehicle.set_mode(mode);
+                result::ACCEPTED
+            }
+            None => {
+                let text = format!("Mode {custom_mode} not available");
+                self.send(
+                    link,
+                    &streams::statustext(apm::MavSeverity::MAV_SEVERITY_WARNING, &text),
+                );
+                result::FAILED
+            }
+        }
+    }
+
+    // SET_MODE and REQUEST_DATA_STREAM are deprecated in common.xml, but MAVProxy and older
+    // GCSs still send them (A.5).
+    #[allow(deprecated)]
+    /// SET_MODE (11): like DO_SET_MODE, without an ACK (A.5: COMMAND_ACK(11) is not encodable).
+    pub(super) fn on_set_mode(&mut self, m: &apm::SET_MODE_DATA) {
+        if m.target_system != self.sysid
+            || !m
+                .base_mode
+                .contains(apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+        {
+            return;
+        }
+        if let Some(mode) = FlightMode::from_custom_mode(m.custom_mode) {
+            self.vehicle.set_mode(mode);
+        }
+    }
+
+    #[allow(deprecated)]
+    /// REQUEST_DATA_STREAM (66): group rates on this link; ALL (0) = every group. No ACK.
+    pub(super) fn on_request_data_stream(
+        &mut self,
+        link: LinkKey,
+        r: &apm::REQUEST_DATA_STREAM_DATA,
+    ) {
+        let hz = if r.start_stop == 0 {
+            0.0
+        } else {
+            f64::from(r.req_message_rate)
+        };
+        let groups: Vec<streams::Group> = match r.req_stream_id as u8 {
+            0 => streams::Group::ALL.to_vec(),
+            n => streams::Group::from_stream_id(n).into_iter().collect(),
+        };
+        let now = self.now_us;
+        if let Some(l) = self.links.get_mut(&link) {
+            for g in groups {
+                l.schedule.set_group(g, Some(hz), now);
+            }
+        }
+    }
+}

@@ -1,0 +1,380 @@
+//! The vehicle side of MAVLink (`PROTOCOL.md` (A)) as a synchronous state machine with no I/O:
+//! [`Endpoint::handle`] takes one received frame and returns the replies; [`Endpoint::tick`]
+//! advances the twin to a sim time and returns the telemetry that became due. The serve loop
+//! ([`crate::serve`]) owns sockets and clocks; tests drive the endpoint directly.
+//!
+//! Identity: system id `SYSID_THISMAV` (or `--sysid`), component id 1. Output is always
+//! MAVLink 2, from the first frame; input may be v1 or v2. A message is processed when its
+//! `target_system` is 0 or ours and its `target_component` is 0 or 1, or when it has no target.
+//!
+//! One concern per file: [`heartbeat`] (HEARTBEAT, GCS failsafe), [`streams`] (telemetry and
+//! rates), [`params_protocol`], [`commands`] (COMMAND_LONG/INT and legacy SET_MODE /
+//! REQUEST_DATA_STREAM), [`manual`] (MANUAL_CONTROL, RC_CHANNELS_OVERRIDE, position targets),
+//! [`ftp`] (the NAK that sends MAVProxy to the parameter protocol), [`wire`] (framing).
+
+pub mod commands;
+pub mod ftp;
+pub mod heartbeat;
+pub mod manual;
+pub mod params_protocol;
+pub mod streams;
+pub mod wire;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::path::PathBuf;
+
+use mavlink::dialects::ardupilotmega as apm;
+
+use crate::params::Params;
+use crate::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
+
+pub use wire::InFrame;
+
+/// Our component id (MAV_COMP_ID_AUTOPILOT1): pymavlink reads params of `(sysid, 1)`.
+pub const COMPID: u8 = 1;
+
+/// Physics step in µs.
+const STEP_US: u64 = (PHYSICS_DT_S * 1e6) as u64;
+
+/// Identifies one connection (a TCP client, a UDP peer set, an in-memory stream). The serve loop
+/// assigns them; the endpoint keeps per-link sequence numbers, stream rates and param queues.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct LinkKey(pub u64);
+
+/// A frame to send on one link.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Outbound {
+    /// Destination link.
+    pub link: LinkKey,
+    /// A complete MAVLink 2 frame.
+    pub frame: Vec<u8>,
+}
+
+/// How to build an endpoint.
+#[derive(Debug, Clone, Default)]
+pub struct EndpointConfig {
+    /// The twin. Its gains and control rate are replaced by the parameter table's.
+    pub vehicle: VehicleConfig,
+    /// Parameter values at start (defaults, or loaded from `param_file`).
+    pub params: Params,
+    /// Where accepted parameter changes are saved (atomically), if anywhere.
+    pub param_file: Option<PathBuf>,
+    /// System id override (`--sysid`); None = `SYSID_THISMAV`.
+    pub sysid: Option<u8>,
+}
+
+/// Counters for diagnostics and tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EndpointStats {
+    /// Frames handled (valid, any target).
+    pub frames_in: u64,
+    /// Frames that failed CRC or framing (reported by the transports plus our own parse).
+    pub bad_frames: u64,
+    /// Valid frames addressed to another system or component.
+    pub not_for_us: u64,
+    /// Frames sent.
+    pub frames_out: u64,
+}
+
+#[derive(Debug, Clone)]
+struct LinkState {
+    seq: u8,
+    schedule: streams::Schedule,
+    /// Param indices still to send for a PARAM_REQUEST_LIST.
+    param_queue: VecDeque<u16>,
+}
+
+/// The MAVLink vehicle: the twin, its parameters, and the protocol state of every link.
+#[derive(Debug)]
+pub struct Endpoint {
+    sysid: u8,
+    vehicle: Vehicle,
+    params: Params,
+    param_file: Option<PathBuf>,
+    now_us: u64,
+    links: BTreeMap<LinkKey, LinkState>,
+    out: Vec<Outbound>,
+    stats: EndpointStats,
+    commands: commands::CommandMemory,
+    manual: manual::ManualState,
+    failsafe: heartbeat::Failsafe,
+    /// One-shot `SIM_PUSH_*` parameters to reset to 0 at a sim time, µs.
+    push_resets: Vec<(&'static str, u64)>,
+    last_armed: bool,
+    last_state: SystemState,
+}
+
+impl Endpoint {
+    /// A vehicle at sim time 0 with no links yet.
+    #[must_use]
+    pub fn new(config: EndpointConfig) -> Self {
+        let EndpointConfig {
+            mut vehicle,
+            params,
+            param_file,
+            sysid,
+        } = config;
+        vehicle.gains = params.gains();
+        vehicle.control_rate_hz = params.value("CTRL_RATE_HZ");
+        let sysid = sysid.unwrap_or(params.value("SYSID_THISMAV") as u8);
+        let vehicle = Vehicle::new(vehicle);
+        let last_armed = vehicle.telemetry().armed;
+        let last_state = vehicle.telemetry().state;
+        let mut ep = Self {
+            sysid,
+            vehicle,
+            params,
+            param_file,
+            now_us: 0,
+            links: BTreeMap::new(),
+            out: Vec::new(),
+            stats: EndpointStats::default(),
+            commands: commands::CommandMemory::default(),
+            manual: manual::ManualState::default(),
+            failsafe: heartbeat::Failsafe::default(),
+            push_resets: Vec::new(),
+            last_armed,
+            last_state,
+        };
+        ep.apply_wind();
+        ep
+    }
+
+    /// Our system id.
+    #[must_use]
+    pub fn sysid(&self) -> u8 {
+        self.sysid
+    }
+
+    /// Current sim time, µs.
+    #[must_use]
+    pub fn now_us(&self) -> u64 {
+        self.now_us
+    }
+
+    /// The twin.
+    #[must_use]
+    pub fn vehicle(&self) -> &Vehicle {
+        &self.vehicle
+    }
+
+    /// The parameter table.
+    #[must_use]
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Counters.
+    #[must_use]
+    pub fn stats(&self) -> EndpointStats {
+        self.stats
+    }
+
+    /// Adds bad frames counted by a transport's decoder (reported in SYS_STATUS `errors_comm`).
+    pub fn note_bad_frames(&mut self, n: u64) {
+        self.stats.bad_frames += n;
+    }
+
+    /// Registers a link. Telemetry and heartbeats start on it at the next tick.
+    pub fn add_link(&mut self, link: LinkKey) {
+        let groups = self.group_rates_from_params();
+        self.links.entry(link).or_insert_with(|| LinkState {
+            seq: 0,
+            schedule: streams::Schedule::new(groups),
+            param_queue: VecDeque::new(),
+        });
+    }
+
+    /// Forgets a link (client disconnected).
+    pub fn remove_link(&mut self, link: LinkKey) {
+        self.links.remove(&link);
+    }
+
+    /// Handles one complete frame received on `link` and returns the replies.
+    pub fn handle(&mut self, link: LinkKey, bytes: &[u8]) -> Vec<Outbound> {
+        self.add_link(link);
+        match wire::parse_frame(bytes) {
+            Ok(frame) => self.handle_frame(link, &frame),
+            Err(wire::WireError::UnknownMessage(_)) => {}
+            Err(_) => self.stats.bad_frames += 1,
+        }
+        std::mem::take(&mut self.out)
+    }
+
+    /// Advances the twin to sim time `now_us` (1 kHz physics steps) and returns the frames that
+    /// became due: streams, heartbeats, paced parameter lists, status texts.
+    pub fn tick(&mut self, now_us: u64) -> Vec<Outbound> {
+        while self.now_us + STEP_US <= now_us {
+            self.vehicle.step();
+            self.now_us += STEP_US;
+        }
+        self.manual.expire(self.now_us, &mut self.vehicle);
+        self.expire_pushes();
+        self.check_failsafe();
+        self.report_vehicle_events();
+        self.drain_param_queues();
+        let errors_comm = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
+        let keys: Vec<LinkKey> = self.links.keys().copied().collect();
+        for link in keys {
+            let due = match self.links.get_mut(&link) {
+                Some(l) => l.schedule.due(self.now_us),
+                None => continue,
+            };
+            for msgid in due {
+                if let Some(msg) = self.build_message(msgid, errors_comm) {
+                    self.send(link, &msg);
+                }
+            }
+        }
+        std::mem::take(&mut self.out)
+    }
+
+    fn build_message(&self, msgid: u32, errors_comm: u16) -> Option<apm::MavMessage> {
+        match msgid {
+            streams::id::HEARTBEAT => Some(self.heartbeat()),
+            streams::id::AUTOPILOT_VERSION => Some(streams::autopilot_version(self.sysid)),
+            _ => streams::build(msgid, self.vehicle.telemetry(), errors_comm),
+        }
+    }
+
+    fn handle_frame(&mut self, link: LinkKey, frame: &InFrame) {
+        self.stats.frames_in += 1;
+        // Commands first, raw: the typed decoder cannot represent unknown command ids.
+        if let Some(cmd) = wire::raw_command(frame) {
+            if self.for_us(Some(cmd.target_system), Some(cmd.target_component)) {
+                self.handle_command(link, frame, &cmd);
+            } else {
+                self.stats.not_for_us += 1;
+            }
+            return;
+        }
+        let msg = match frame.decode() {
+            Ok(m) => m,
+            Err(_) => {
+                // PARAM_SET with a param_type outside the enum: the contract ignores the type.
+                if let Some((value, tsys, tcomp, name)) = wire::raw_param_set(frame)
+                    && self.for_us(Some(tsys), Some(tcomp))
+                {
+                    self.param_set(link, frame, &name, value);
+                }
+                return;
+            }
+        };
+        use mavlink::Message;
+        if !self.for_us(msg.target_system_id(), msg.target_component_id()) {
+            self.stats.not_for_us += 1;
+            return;
+        }
+        use apm::MavMessage as M;
+        // SET_MODE and REQUEST_DATA_STREAM are deprecated but still sent by MAVProxy (A.5).
+        #[allow(deprecated)]
+        match msg {
+            M::HEARTBEAT(hb) => self.on_heartbeat(frame, &hb),
+            M::PARAM_REQUEST_LIST(_) => self.param_request_list(link),
+            M::PARAM_REQUEST_READ(r) => self.param_request_read(link, frame, &r),
+            M::PARAM_SET(s) => {
+                let name = s.param_id.to_str().unwrap_or("").to_owned();
+                self.param_set(link, frame, &name, s.param_value);
+            }
+            M::SET_MODE(m) => self.on_set_mode(&m),
+            M::REQUEST_DATA_STREAM(r) => self.on_request_data_stream(link, &r),
+            M::MANUAL_CONTROL(m) => self.on_manual_control(frame, &m),
+            M::RC_CHANNELS_OVERRIDE(o) => self.on_rc_override(frame, &o),
+            M::SET_POSITION_TARGET_LOCAL_NED(t) => self.on_position_target(&t),
+            M::FILE_TRANSFER_PROTOCOL(f) => self.on_ftp(link, frame, &f),
+            M::TIMESYNC(t) => self.on_timesync(link, frame, &t),
+            _ => {}
+        }
+    }
+
+    /// Routing rule of `PROTOCOL.md` A.1: no target, or target 0 or ours.
+    fn for_us(&self, sys: Option<u8>, comp: Option<u8>) -> bool {
+        sys.is_none_or(|s| s == 0 || s == self.sysid) && comp.is_none_or(|c| c == 0 || c == COMPID)
+    }
+
+    fn next_seq(&mut self, link: LinkKey) -> u8 {
+        self.add_link(link);
+        let l = self
+            .links
+            .get_mut(&link)
+            .unwrap_or_else(|| unreachable!("link just added"));
+        let s = l.seq;
+        l.seq = s.wrapping_add(1);
+        s
+    }
+
+    /// Queues a typed message on one link.
+    fn send(&mut self, link: LinkKey, msg: &apm::MavMessage) {
+        let seq = self.next_seq(link);
+        let frame = wire::encode_v2(seq, self.sysid, COMPID, msg);
+        self.stats.frames_out += 1;
+        self.out.push(Outbound { link, frame });
+    }
+
+    /// Queues a hand-built payload on one link.
+    fn send_raw(&mut self, link: LinkKey, msgid: u32, payload: &[u8]) {
+        let seq = self.next_seq(link);
+        let frame = wire::encode_v2_raw(seq, self.sysid, COMPID, msgid, payload);
+        self.stats.frames_out += 1;
+        self.out.push(Outbound { link, frame });
+    }
+
+    /// Queues a message on every link.
+    fn broadcast(&mut self, msg: &apm::MavMessage) {
+        let keys: Vec<LinkKey> = self.links.keys().copied().collect();
+        for link in keys {
+            self.send(link, msg);
+        }
+    }
+
+    /// A STATUSTEXT on every link (events concern every GCS).
+    fn announce(&mut self, severity: apm::MavSeverity, text: &str) {
+        tracing::info!(target: "firmware_sim::endpoint", "{text}");
+        self.broadcast(&streams::statustext(severity, text));
+    }
+
+    fn group_rates_from_params(&self) -> [Option<f64>; 6] {
+        streams::Group::ALL.map(|g| {
+            let v = self.params.value(g.param());
+            (v >= 0.0).then_some(v)
+        })
+    }
+
+    fn on_timesync(&mut self, link: LinkKey, frame: &InFrame, t: &apm::TIMESYNC_DATA) {
+        // tc1 == 0 is a request; anything else is someone's reply to their own request.
+        if t.tc1 != 0 {
+            return;
+        }
+        let reply = apm::MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
+            tc1: (self.now_us * 1000) as i64,
+            ts1: t.ts1,
+            target_system: frame.sysid,
+            target_component: frame.compid,
+        });
+        self.send(link, &reply);
+    }
+
+    /// STATUSTEXT for changes the vehicle makes on its own (QLAND disarm, crash) or that
+    /// commands caused.
+    fn report_vehicle_events(&mut self) {
+        let t = *self.vehicle.telemetry();
+        if t.armed != self.last_armed {
+            self.last_armed = t.armed;
+            let text = if t.armed {
+                "Arming motors"
+            } else {
+                "Disarming motors"
+            };
+            self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, text);
+        }
+        if t.state != self.last_state {
+            self.last_state = t.state;
+            if t.state == SystemState::Emergency {
+                self.announce(apm::MavSeverity::MAV_SEVERITY_CRITICAL, "Crash detected");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

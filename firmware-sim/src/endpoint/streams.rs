@@ -1,0 +1,592 @@
+//! Telemetry: which messages the twin can produce, how each is built from a [`Telemetry`]
+//! snapshot (NED/FRD at the wire, converted here through [`crate::frames`]), and the per-link
+//! schedule of rates.
+//!
+//! A message's rate on a link is, in order of precedence: a `SET_MESSAGE_INTERVAL` for that
+//! message on that link; the rate of its ArduPlane stream group, set on that link by
+//! `REQUEST_DATA_STREAM` or for every link by the `SR0_*` parameters (−1 = not set); the
+//! per-message default of [`STREAMABLE`]. A `REQUEST_DATA_STREAM` clears the per-message
+//! intervals of its members, as MAVProxy's periodic re-request does on ArduPilot.
+
+use mavlink::dialects::ardupilotmega as apm;
+use mavlink::types::CharArray;
+use nalgebra::Vector3;
+
+use crate::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
+use crate::vehicle::Telemetry;
+
+/// Message ids the twin produces.
+pub mod id {
+    /// HEARTBEAT.
+    pub const HEARTBEAT: u32 = 0;
+    /// SYS_STATUS.
+    pub const SYS_STATUS: u32 = 1;
+    /// SYSTEM_TIME.
+    pub const SYSTEM_TIME: u32 = 2;
+    /// SCALED_IMU.
+    pub const SCALED_IMU: u32 = 26;
+    /// RAW_IMU.
+    pub const RAW_IMU: u32 = 27;
+    /// ATTITUDE.
+    pub const ATTITUDE: u32 = 30;
+    /// ATTITUDE_QUATERNION.
+    pub const ATTITUDE_QUATERNION: u32 = 31;
+    /// LOCAL_POSITION_NED.
+    pub const LOCAL_POSITION_NED: u32 = 32;
+    /// SERVO_OUTPUT_RAW.
+    pub const SERVO_OUTPUT_RAW: u32 = 36;
+    /// RC_CHANNELS.
+    pub const RC_CHANNELS: u32 = 65;
+    /// AUTOPILOT_VERSION (on request only).
+    pub const AUTOPILOT_VERSION: u32 = 148;
+    /// EXTENDED_SYS_STATE.
+    pub const EXTENDED_SYS_STATE: u32 = 245;
+}
+
+/// ArduPlane stream groups (`MAV_DATA_STREAM`), as the `SR0_*` parameters name them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Group {
+    /// RAW_SENSORS (1): `SR0_RAW_SENS`.
+    RawSensors,
+    /// EXTENDED_STATUS (2): `SR0_EXT_STAT`.
+    ExtendedStatus,
+    /// RC_CHANNELS (3): `SR0_RC_CHAN`.
+    RcChannels,
+    /// POSITION (6): `SR0_POSITION`.
+    Position,
+    /// EXTRA1 (10): `SR0_EXTRA1`.
+    Extra1,
+    /// EXTRA3 (12): `SR0_EXTRA3`.
+    Extra3,
+}
+
+impl Group {
+    /// Every group, in `GROUP_PARAMS` order.
+    pub const ALL: [Self; 6] = [
+        Self::RawSensors,
+        Self::ExtendedStatus,
+        Self::RcChannels,
+        Self::Position,
+        Self::Extra1,
+        Self::Extra3,
+    ];
+
+    /// The group for a `MAV_DATA_STREAM` number (EXTRA2 and RAW_CONTROLLER have no members).
+    #[must_use]
+    pub fn from_stream_id(n: u8) -> Option<Self> {
+        Some(match n {
+            1 => Self::RawSensors,
+            2 => Self::ExtendedStatus,
+            3 => Self::RcChannels,
+            6 => Self::Position,
+            10 => Self::Extra1,
+            12 => Self::Extra3,
+            _ => return None,
+        })
+    }
+
+    /// The `SR0_*` parameter.
+    #[must_use]
+    pub const fn param(self) -> &'static str {
+        match self {
+            Self::RawSensors => "SR0_RAW_SENS",
+            Self::ExtendedStatus => "SR0_EXT_STAT",
+            Self::RcChannels => "SR0_RC_CHAN",
+            Self::Position => "SR0_POSITION",
+            Self::Extra1 => "SR0_EXTRA1",
+            Self::Extra3 => "SR0_EXTRA3",
+        }
+    }
+
+    fn index(self) -> usize {
+        Self::ALL.iter().position(|g| *g == self).unwrap_or(0)
+    }
+}
+
+/// A streamable message: id, default rate, group.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamDef {
+    /// Message id.
+    pub msgid: u32,
+    /// Default rate, Hz (0 = off unless requested).
+    pub default_hz: f64,
+    /// ArduPlane group, if any.
+    pub group: Option<Group>,
+}
+
+/// Every message the twin streams, with its default rate.
+pub const STREAMABLE: [StreamDef; 11] = [
+    StreamDef {
+        msgid: id::HEARTBEAT,
+        default_hz: 1.0,
+        group: None,
+    },
+    StreamDef {
+        msgid: id::SYS_STATUS,
+        default_hz: 1.0,
+        group: Some(Group::ExtendedStatus),
+    },
+    StreamDef {
+        msgid: id::SYSTEM_TIME,
+        default_hz: 1.0,
+        group: Some(Group::Extra3),
+    },
+    StreamDef {
+        msgid: id::SCALED_IMU,
+        default_hz: 2.0,
+        group: Some(Group::RawSensors),
+    },
+    StreamDef {
+        msgid: id::RAW_IMU,
+        default_hz: 2.0,
+        group: Some(Group::RawSensors),
+    },
+    StreamDef {
+        msgid: id::ATTITUDE,
+        default_hz: 20.0,
+        group: Some(Group::Extra1),
+    },
+    StreamDef {
+        msgid: id::ATTITUDE_QUATERNION,
+        default_hz: 0.0,
+        group: None,
+    },
+    StreamDef {
+        msgid: id::LOCAL_POSITION_NED,
+        default_hz: 10.0,
+        group: Some(Group::Position),
+    },
+    StreamDef {
+        msgid: id::SERVO_OUTPUT_RAW,
+        default_hz: 10.0,
+        group: Some(Group::RcChannels),
+    },
+    StreamDef {
+        msgid: id::RC_CHANNELS,
+        default_hz: 4.0,
+        group: Some(Group::RcChannels),
+    },
+    StreamDef {
+        msgid: id::EXTENDED_SYS_STATE,
+        default_hz: 1.0,
+        group: Some(Group::ExtendedStatus),
+    },
+];
+
+/// A per-message interval request.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Interval {
+    Disabled,
+    Every(u64),
+}
+
+fn hz_to_interval(hz: f64) -> Interval {
+    if hz > 0.0 {
+        Interval::Every((1e6 / hz).round() as u64)
+    } else {
+        Interval::Disabled
+    }
+}
+
+/// The stream schedule of one link.
+#[derive(Debug, Clone)]
+pub struct Schedule {
+    /// Per-message override from SET_MESSAGE_INTERVAL.
+    overrides: [Option<Interval>; STREAMABLE.len()],
+    /// Group rates on this link, Hz (None = not set: per-message defaults).
+    group_hz: [Option<f64>; Group::ALL.len()],
+    next_due_us: [u64; STREAMABLE.len()],
+}
+
+impl Schedule {
+    /// A schedule with the given `SR0_*` group rates (None = per-message defaults).
+    #[must_use]
+    pub fn new(group_hz: [Option<f64>; Group::ALL.len()]) -> Self {
+        Self {
+            overrides: [None; STREAMABLE.len()],
+            group_hz,
+            next_due_us: [0; STREAMABLE.len()],
+        }
+    }
+
+    fn slot(msgid: u32) -> Option<usize> {
+        STREAMABLE.iter().position(|s| s.msgid == msgid)
+    }
+
+    fn effective(&self, k: usize) -> Interval {
+        if let Some(i) = self.overrides[k] {
+            return i;
+        }
+        let def = &STREAMABLE[k];
+        match def.group.and_then(|g| self.group_hz[g.index()]) {
+            Some(hz) => hz_to_interval(hz),
+            None => hz_to_interval(def.default_hz),
+        }
+    }
+
+    /// Current interval of a message on this link: `Some(µs)`, `Some(-1)` when disabled, None
+    /// when the twin cannot stream it.
+    #[must_use]
+    pub fn interval_us(&self, msgid: u32) -> Option<i64> {
+        let k = Self::slot(msgid)?;
+        Some(match self.effective(k) {
+            Interval::Disabled => -1,
+            Interval::Every(us) => us as i64,
+        })
+    }
+
+    /// SET_MESSAGE_INTERVAL semantics: −1 disables, 0 restores the default, > 0 is µs.
+    /// Returns false when the message cannot be streamed or the interval is invalid.
+    pub fn set_interval(&mut self, msgid: u32, interval_us: f64, now_us: u64) -> bool {
+        let Some(k) = Self::slot(msgid) else {
+            return false;
+        };
+        self.overrides[k] = match interval_us {
+            -1.0 => Some(Interval::Disabled),
+            0.0 => None,
+            x if x > 0.0 && x.is_finite() => Some(Interval::Every(x.round().max(1.0) as u64)),
+            _ => return false,
+        };
+        self.next_due_us[k] = now_us;
+        true
+    }
+
+    /// REQUEST_DATA_STREAM / `SR0_*`: sets a group's rate (None = back to defaults) and clears
+    /// the per-message overrides of its members.
+    pub fn set_group(&mut self, group: Group, hz: Option<f64>, now_us: u64) {
+        self.group_hz[group.index()] = hz;
+        for (k, def) in STREAMABLE.iter().enumerate() {
+            if def.group == Some(group) {
+                self.overrides[k] = None;
+                self.next_due_us[k] = now_us;
+            }
+        }
+    }
+
+    /// Message ids due at `now_us`, advancing their next due time.
+    pub fn due(&mut self, now_us: u64) -> Vec<u32> {
+        let mut out = Vec::new();
+        for (k, def) in STREAMABLE.iter().enumerate() {
+            let Interval::Every(iv) = self.effective(k) else {
+                continue;
+            };
+            if now_us >= self.next_due_us[k] {
+                out.push(def.msgid);
+                // Keep the average rate exact; after a gap restart from now instead of bursting.
+                self.next_due_us[k] += iv;
+                if self.next_due_us[k] <= now_us {
+                    self.next_due_us[k] = now_us + iv;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Whether the twin can build a message on request (REQUEST_MESSAGE).
+#[must_use]
+pub fn can_produce(msgid: u32) -> bool {
+    Schedule::slot(msgid).is_some() || msgid == id::AUTOPILOT_VERSION
+}
+
+/// Standard gravity for mG conversions.
+const G_M_S2: f64 = 9.80665;
+
+fn time_boot_ms(t: &Telemetry) -> u32 {
+    (t.t_us / 1000) as u32
+}
+
+fn clamp_i16(v: f64) -> i16 {
+    v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+}
+
+/// Sensor bits SYS_STATUS reports: rate gyros, accelerometer, the external position sensor, the
+/// control loops, motor outputs and the RC receiver.
+fn sensors() -> apm::MavSysStatusSensor {
+    use apm::MavSysStatusSensor as S;
+    S::MAV_SYS_STATUS_SENSOR_3D_GYRO
+        | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL
+        | S::MAV_SYS_STATUS_SENSOR_VISION_POSITION
+        | S::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+        | S::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+        | S::MAV_SYS_STATUS_SENSOR_YAW_POSITION
+        | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+        | S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+        | S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        | S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+}
+
+/// Builds a streamable telemetry message (not HEARTBEAT, which needs endpoint state).
+#[must_use]
+pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMessage> {
+    use apm::MavMessage as M;
+    let ms = time_boot_ms(t);
+    let [roll, pitch, yaw] = euler_to_ned_rpy(&t.euler_est);
+    let [p, q, r] = body_rates_to_frd(&t.omega_est_rad_s);
+    Some(match msgid {
+        id::SYS_STATUS => {
+            let present = sensors();
+            let mut enabled = present;
+            if !t.armed {
+                enabled.remove(apm::MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS);
+            }
+            M::SYS_STATUS(apm::SYS_STATUS_DATA {
+                onboard_control_sensors_present: present,
+                onboard_control_sensors_enabled: enabled,
+                onboard_control_sensors_health: present,
+                load: 0,
+                voltage_battery: u16::MAX,
+                current_battery: -1,
+                drop_rate_comm: 0,
+                errors_comm,
+                errors_count1: 0,
+                errors_count2: 0,
+                errors_count3: 0,
+                errors_count4: 0,
+                battery_remaining: -1,
+                onboard_control_sensors_present_extended: apm::MavSysStatusSensorExtended::empty(),
+                onboard_control_sensors_enabled_extended: apm::MavSysStatusSensorExtended::empty(),
+                onboard_control_sensors_health_extended: apm::MavSysStatusSensorExtended::empty(),
+            })
+        }
+        // Unix time is unknown to a deterministic twin: 0 as common.xml allows.
+        id::SYSTEM_TIME => M::SYSTEM_TIME(apm::SYSTEM_TIME_DATA {
+            time_unix_usec: 0,
+            time_boot_ms: ms,
+        }),
+        id::ATTITUDE => M::ATTITUDE(apm::ATTITUDE_DATA {
+            time_boot_ms: ms,
+            roll: roll as f32,
+            pitch: pitch as f32,
+            yaw: yaw as f32,
+            rollspeed: p as f32,
+            pitchspeed: q as f32,
+            yawspeed: r as f32,
+        }),
+        id::ATTITUDE_QUATERNION => {
+            let qn = quaternion_from_rpy(roll, pitch, yaw);
+            M::ATTITUDE_QUATERNION(apm::ATTITUDE_QUATERNION_DATA {
+                time_boot_ms: ms,
+                q1: qn[0] as f32,
+                q2: qn[1] as f32,
+                q3: qn[2] as f32,
+                q4: qn[3] as f32,
+                rollspeed: p as f32,
+                pitchspeed: q as f32,
+                yawspeed: r as f32,
+                repr_offset_q: [0.0; 4],
+            })
+        }
+        id::LOCAL_POSITION_NED => {
+            let pos = paper_to_ned(&t.pos_m);
+            let vel = paper_to_ned(&t.vel_m_s);
+            M::LOCAL_POSITION_NED(apm::LOCAL_POSITION_NED_DATA {
+                time_boot_ms: ms,
+                x: pos[0] as f32,
+                y: pos[1] as f32,
+                z: pos[2] as f32,
+                vx: vel[0] as f32,
+                vy: vel[1] as f32,
+                vz: vel[2] as f32,
+            })
+        }
+        id::SERVO_OUTPUT_RAW => {
+            let s = t.pwm_us;
+            M::SERVO_OUTPUT_RAW(apm::SERVO_OUTPUT_RAW_DATA {
+                // u32 µs wraps after ~71.6 min, as on ArduPilot.
+                time_usec: t.t_us as u32,
+                servo1_raw: s[0],
+                servo2_raw: s[1],
+                servo3_raw: s[2],
+                servo4_raw: s[3],
+                servo5_raw: s[4],
+                ..Default::default()
+            })
+        }
+        id::RC_CHANNELS => {
+            let c = t.rc_us;
+            M::RC_CHANNELS(apm::RC_CHANNELS_DATA {
+                time_boot_ms: ms,
+                chan1_raw: c[0],
+                chan2_raw: c[1],
+                chan3_raw: c[2],
+                chan4_raw: c[3],
+                chan5_raw: c[4],
+                chan6_raw: c[5],
+                chan7_raw: c[6],
+                chan8_raw: c[7],
+                chan9_raw: u16::MAX,
+                chan10_raw: u16::MAX,
+                chan11_raw: u16::MAX,
+                chan12_raw: u16::MAX,
+                chan13_raw: u16::MAX,
+                chan14_raw: u16::MAX,
+                chan15_raw: u16::MAX,
+                chan16_raw: u16::MAX,
+                chan17_raw: u16::MAX,
+                chan18_raw: u16::MAX,
+                chancount: 8,
+                rssi: u8::MAX,
+            })
+        }
+        id::SCALED_IMU => {
+            // Sensor axes are the paper's body axes; FRD at the wire. The ADXL203 has no z axis.
+            let acc = body_rates_to_frd(&Vector3::new(t.accel_m_s2[0], t.accel_m_s2[1], 0.0));
+            let gyro = body_rates_to_frd(&Vector3::from(t.gyro_rad_s));
+            let mg = |a: f64| clamp_i16(a / G_M_S2 * 1000.0);
+            let mrad = |w: f64| clamp_i16(w * 1000.0);
+            M::SCALED_IMU(apm::SCALED_IMU_DATA {
+                time_boot_ms: ms,
+                xacc: mg(acc[0]),
+                yacc: mg(acc[1]),
+                zacc: 0,
+                xgyro: mrad(gyro[0]),
+                ygyro: mrad(gyro[1]),
+                zgyro: mrad(gyro[2]),
+                xmag: 0,
+                ymag: 0,
+                zmag: 0,
+                temperature: 2500,
+            })
+        }
+        id::RAW_IMU => {
+            // The 12-bit ADC counts as sampled, in sensor axes: gyro x, y, z; accel x, y.
+            let c = t.adc_counts.map(|v| v as i16);
+            M::RAW_IMU(apm::RAW_IMU_DATA {
+                time_usec: t.t_us,
+                xacc: c[3],
+                yacc: c[4],
+                zacc: 0,
+                xgyro: c[0],
+                ygyro: c[1],
+                zgyro: c[2],
+                xmag: 0,
+                ymag: 0,
+                zmag: 0,
+                id: 0,
+                temperature: 2500,
+            })
+        }
+        id::EXTENDED_SYS_STATE => M::EXTENDED_SYS_STATE(apm::EXTENDED_SYS_STATE_DATA {
+            vtol_state: apm::MavVtolState::MAV_VTOL_STATE_MC,
+            landed_state: if t.landed {
+                apm::MavLandedState::MAV_LANDED_STATE_ON_GROUND
+            } else {
+                apm::MavLandedState::MAV_LANDED_STATE_IN_AIR
+            },
+        }),
+        id::AUTOPILOT_VERSION => return Some(autopilot_version(0)),
+        _ => return None,
+    })
+}
+
+/// AUTOPILOT_VERSION: MAVLink 2, C-cast parameters, COMMAND_INT, local position targets.
+#[must_use]
+pub fn autopilot_version(sysid: u8) -> apm::MavMessage {
+    use apm::MavProtocolCapability as C;
+    let (major, minor, patch) = crate_version();
+    // ArduPilot layout: major.minor.patch.type with type 255 = FIRMWARE_VERSION_TYPE_OFFICIAL.
+    let sw = (major << 24) | (minor << 16) | (patch << 8) | 255;
+    let mut custom = [0u8; 8];
+    custom[..7].copy_from_slice(b"vtoltwn");
+    apm::MavMessage::AUTOPILOT_VERSION(apm::AUTOPILOT_VERSION_DATA {
+        capabilities: C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
+        uid: 0x7654_0000 + u64::from(sysid),
+        flight_sw_version: sw,
+        middleware_sw_version: 0,
+        os_sw_version: 0,
+        board_version: 0,
+        vendor_id: 0,
+        product_id: 0,
+        flight_custom_version: custom,
+        middleware_custom_version: [0; 8],
+        os_custom_version: [0; 8],
+        uid2: [0; 18],
+    })
+}
+
+fn crate_version() -> (u32, u32, u32) {
+    let mut it = env!("CARGO_PKG_VERSION")
+        .split('.')
+        .map(|s| s.parse().unwrap_or(0));
+    (
+        it.next().unwrap_or(0),
+        it.next().unwrap_or(0),
+        it.next().unwrap_or(0),
+    )
+}
+
+/// Quaternion (w, x, y, z) of NED roll, pitch, yaw (ZYX).
+#[must_use]
+pub fn quaternion_from_rpy(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
+    let (sr, cr) = (roll / 2.0).sin_cos();
+    let (sp, cp) = (pitch / 2.0).sin_cos();
+    let (sy, cy) = (yaw / 2.0).sin_cos();
+    [
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ]
+}
+
+/// A STATUSTEXT (single chunk; text cut to 50 bytes).
+#[must_use]
+pub fn statustext(severity: apm::MavSeverity, text: &str) -> apm::MavMessage {
+    let cut: String = text.chars().take(50).collect();
+    apm::MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
+        severity,
+        text: CharArray::from(cut.as_str()),
+        id: 0,
+        chunk_seq: 0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_rates_and_overrides() {
+        let mut s = Schedule::new([None; 6]);
+        assert_eq!(s.interval_us(id::ATTITUDE), Some(50_000));
+        assert_eq!(s.interval_us(id::ATTITUDE_QUATERNION), Some(-1));
+        assert_eq!(s.interval_us(id::AUTOPILOT_VERSION), None);
+        assert!(s.set_interval(id::ATTITUDE, 100_000.0, 0));
+        assert_eq!(s.interval_us(id::ATTITUDE), Some(100_000));
+        s.set_group(Group::Extra1, Some(4.0), 0);
+        assert_eq!(
+            s.interval_us(id::ATTITUDE),
+            Some(250_000),
+            "group request clears override"
+        );
+        assert!(s.set_interval(id::ATTITUDE, -1.0, 0));
+        assert_eq!(s.interval_us(id::ATTITUDE), Some(-1));
+        assert!(s.set_interval(id::ATTITUDE, 0.0, 0));
+        assert_eq!(s.interval_us(id::ATTITUDE), Some(250_000));
+        assert!(!s.set_interval(id::ATTITUDE, -5.0, 0));
+    }
+
+    #[test]
+    fn due_keeps_the_average_rate() {
+        let mut s = Schedule::new([None; 6]);
+        let mut count = 0;
+        // 10 s in 7 ms ticks: ATTITUDE at 20 Hz gives 200 (± the first one).
+        let mut t = 0;
+        while t <= 10_000_000 {
+            count += s.due(t).iter().filter(|&&m| m == id::ATTITUDE).count();
+            t += 7_000;
+        }
+        assert!((200..=201).contains(&count), "{count}");
+    }
+
+    #[test]
+    fn quaternion_identity_and_yaw() {
+        assert_eq!(quaternion_from_rpy(0.0, 0.0, 0.0), [1.0, 0.0, 0.0, 0.0]);
+        let q = quaternion_from_rpy(0.0, 0.0, std::f64::consts::PI);
+        assert!((q[3] - 1.0).abs() < 1e-12);
+    }
+}

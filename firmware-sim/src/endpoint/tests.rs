@@ -1,0 +1,735 @@
+//! State-machine tests of the endpoint: frames in, frames out, no sockets and no sleeping.
+
+use mavlink::dialects::ardupilotmega as apm;
+use mavlink::types::CharArray;
+use mavlink::{MAVLinkV1MessageRaw, MavHeader};
+
+use super::wire::{self, encode_v2, encode_v2_raw, parse_frame};
+use super::*;
+use crate::params::TABLE;
+
+const GCS: LinkKey = LinkKey(1);
+const GCS_SYSID: u8 = 255;
+const GCS_COMPID: u8 = 190;
+
+fn endpoint() -> Endpoint {
+    let mut config = EndpointConfig::default();
+    config.vehicle.ideal_sensors = true;
+    let mut ep = Endpoint::new(config);
+    ep.add_link(GCS);
+    ep
+}
+
+fn v2(msg: &apm::MavMessage) -> Vec<u8> {
+    encode_v2(7, GCS_SYSID, GCS_COMPID, msg)
+}
+
+fn v1(msg: &apm::MavMessage) -> Vec<u8> {
+    let mut raw = MAVLinkV1MessageRaw::new();
+    let header = MavHeader {
+        system_id: u32::from(GCS_SYSID),
+        component_id: GCS_COMPID,
+        sequence: 3,
+    };
+    raw.serialize_message(header, msg);
+    raw.raw_bytes().to_vec()
+}
+
+/// Every outbound frame must be MAVLink 2 from (1, 1); returns the typed messages.
+fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
+    out.iter()
+        .filter_map(|o| {
+            assert_eq!(o.frame[0], 0xFD, "always MAVLink 2");
+            let f = parse_frame(&o.frame).expect("valid frame");
+            assert_eq!((f.sysid, f.compid), (1, COMPID));
+            f.decode().ok()
+        })
+        .collect()
+}
+
+fn command_long(command: apm::MavCmd, p: [f32; 7], confirmation: u8) -> apm::MavMessage {
+    apm::MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: 1,
+        target_component: 0,
+        confirmation,
+    })
+}
+
+/// (command, result) of every COMMAND_ACK, read from raw bytes (unknown ids do not decode).
+fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
+    out.iter()
+        .filter_map(|o| parse_frame(&o.frame).ok())
+        .filter(|f| f.msgid == 77)
+        .map(|f| {
+            let p = f.padded(10);
+            assert_eq!(
+                (p[8], p[9]),
+                (GCS_SYSID, GCS_COMPID),
+                "ACK targets the sender"
+            );
+            (u16::from_le_bytes([p[0], p[1]]), p[2])
+        })
+        .collect()
+}
+
+fn heartbeat_of(msgs: &[apm::MavMessage]) -> apm::HEARTBEAT_DATA {
+    msgs.iter()
+        .rev()
+        .find_map(|m| match m {
+            apm::MavMessage::HEARTBEAT(h) => Some(h.clone()),
+            _ => None,
+        })
+        .expect("a heartbeat")
+}
+
+fn param_set(name: &str, value: f32) -> apm::MavMessage {
+    apm::MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
+        param_value: value,
+        target_system: 1,
+        target_component: 1,
+        param_id: CharArray::from(name),
+        param_type: apm::MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
+}
+
+fn param_values(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_VALUE_DATA> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::PARAM_VALUE(v) => Some(v.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn param_errors(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_ERROR_DATA> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::PARAM_ERROR(v) => Some(v.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn texts(msgs: &[apm::MavMessage]) -> Vec<String> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Ticks in 5 ms steps up to `until_us`, collecting everything.
+fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
+    let mut out = Vec::new();
+    let mut t = ep.now_us();
+    while t < until_us {
+        t = (t + 5_000).min(until_us);
+        out.extend(ep.tick(t));
+    }
+    out
+}
+
+#[test]
+fn heartbeat_fields_and_not_armed_by_default() {
+    let mut ep = endpoint();
+    let out = run_until(&mut ep, 2_500_000);
+    let hb = heartbeat_of(&decode(&out));
+    assert_eq!(hb.mavtype, apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR);
+    assert_eq!(hb.mavtype as u8, 19);
+    assert_eq!(hb.autopilot, apm::MavAutopilot::MAV_AUTOPILOT_GENERIC);
+    assert!(
+        hb.base_mode
+            .contains(apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    );
+    assert!(
+        !hb.base_mode
+            .contains(apm::MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
+        "disarmed"
+    );
+    assert_eq!(hb.custom_mode, 17, "QSTABILIZE");
+    assert_eq!(hb.system_status, apm::MavState::MAV_STATE_STANDBY);
+    assert_eq!(hb.mavlink_version, 3);
+    let count = decode(&out)
+        .iter()
+        .filter(|m| matches!(m, apm::MavMessage::HEARTBEAT(_)))
+        .count();
+    assert_eq!(count, 3, "1 Hz: at 0, 1 and 2 s");
+}
+
+#[test]
+fn param_list_is_complete_and_paced() {
+    let mut ep = endpoint();
+    let first = ep.handle(
+        GCS,
+        &v2(&apm::MavMessage::PARAM_REQUEST_LIST(
+            apm::PARAM_REQUEST_LIST_DATA {
+                target_system: 1,
+                target_component: 0,
+            },
+        )),
+    );
+    assert!(
+        param_values(&decode(&first)).is_empty(),
+        "values are paced from tick"
+    );
+    let out = run_until(&mut ep, 200_000);
+    let values = param_values(&decode(&out));
+    assert_eq!(values.len(), TABLE.len());
+    for (i, v) in values.iter().enumerate() {
+        assert_eq!(usize::from(v.param_index), i);
+        assert_eq!(usize::from(v.param_count), TABLE.len());
+        assert_eq!(v.param_id.to_str().unwrap(), TABLE[i].name);
+    }
+}
+
+#[test]
+fn param_set_echoes_stored_value_type_and_index() {
+    let mut ep = endpoint();
+    let msgs = decode(&ep.handle(GCS, &v2(&param_set("LAT_SAT_A", 1.5))));
+    let [echo] = &param_values(&msgs)[..] else {
+        panic!("one echo: {msgs:?}")
+    };
+    assert_eq!(echo.param_id.to_str().unwrap(), "LAT_SAT_A");
+    assert_eq!(echo.param_value, 1.5);
+    assert_eq!(echo.param_type, apm::MavParamType::MAV_PARAM_TYPE_REAL32);
+    assert_eq!(
+        usize::from(echo.param_index),
+        Params::index_of("LAT_SAT_A").unwrap()
+    );
+    assert_eq!(usize::from(echo.param_count), TABLE.len());
+    assert_eq!(
+        ep.vehicle().gains().lateral.a,
+        f64::from(1.5f32),
+        "applied to the controller"
+    );
+
+    // An integer parameter sent as REAL32 (pymavlink's default) is C-cast and echoed as INT16.
+    let msgs = decode(&ep.handle(GCS, &v2(&param_set("SR0_EXTRA1", 4.6))));
+    let [echo] = &param_values(&msgs)[..] else {
+        panic!()
+    };
+    assert_eq!(
+        (echo.param_value, echo.param_type),
+        (5.0, apm::MavParamType::MAV_PARAM_TYPE_INT16)
+    );
+}
+
+#[test]
+fn refused_param_write_keeps_value_and_says_why() {
+    let mut ep = endpoint();
+    // a = 0.9 breaks a > b + c + d (= 1.0).
+    let msgs = decode(&ep.handle(GCS, &v2(&param_set("LAT_SAT_A", 0.9))));
+    let [echo] = &param_values(&msgs)[..] else {
+        panic!("{msgs:?}")
+    };
+    assert_eq!(echo.param_value, 1.2, "unchanged value echoed");
+    let [err] = &param_errors(&msgs)[..] else {
+        panic!("{msgs:?}")
+    };
+    assert_eq!(
+        err.error,
+        apm::MavParamError::MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE
+    );
+    assert_eq!(
+        (err.target_system, err.target_component),
+        (GCS_SYSID, GCS_COMPID)
+    );
+    let t = texts(&msgs);
+    assert!(
+        t.iter().any(|s| s.starts_with("Param write denied")),
+        "{t:?}"
+    );
+    assert_eq!(ep.params().value("LAT_SAT_A"), 1.2);
+
+    for (name, value, code) in [
+        (
+            "ALT_KP",
+            f32::NAN,
+            apm::MavParamError::MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+        ),
+        (
+            "SERVO1_FUNCTION",
+            33.0,
+            apm::MavParamError::MAV_PARAM_ERROR_READ_ONLY,
+        ),
+    ] {
+        let msgs = decode(&ep.handle(GCS, &v2(&param_set(name, value))));
+        assert_eq!(param_errors(&msgs)[0].error, code, "{name}");
+        assert_eq!(param_values(&msgs).len(), 1, "{name}: current value echoed");
+    }
+}
+
+#[test]
+fn unknown_param_gets_param_error_and_no_value() {
+    let mut ep = endpoint();
+    let msgs = decode(&ep.handle(GCS, &v2(&param_set("NO_SUCH_PARAM", 1.0))));
+    assert!(param_values(&msgs).is_empty());
+    let [err] = &param_errors(&msgs)[..] else {
+        panic!("{msgs:?}")
+    };
+    assert_eq!(
+        err.error,
+        apm::MavParamError::MAV_PARAM_ERROR_DOES_NOT_EXIST
+    );
+    assert_eq!(err.param_index, -1);
+    assert_eq!(err.param_id.to_str().unwrap(), "NO_SUCH_PARAM");
+
+    let read = |id: &str, index: i16| {
+        apm::MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
+            param_index: index,
+            target_system: 1,
+            target_component: 1,
+            param_id: CharArray::from(id),
+        })
+    };
+    let msgs = decode(&ep.handle(GCS, &v2(&read("NO_SUCH_PARAM", -1))));
+    assert_eq!(
+        param_errors(&msgs)[0].error,
+        apm::MavParamError::MAV_PARAM_ERROR_DOES_NOT_EXIST
+    );
+    // By name and by index (the id is ignored then).
+    let msgs = decode(&ep.handle(GCS, &v2(&read("HOVER_ALT", -1))));
+    assert_eq!(param_values(&msgs)[0].param_value, 1.0);
+    let msgs = decode(&ep.handle(GCS, &v2(&read("ignored", 0))));
+    assert_eq!(
+        param_values(&msgs)[0].param_id.to_str().unwrap(),
+        TABLE[0].name
+    );
+}
+
+#[test]
+fn param_set_with_type_outside_the_enum_is_still_handled() {
+    let mut ep = endpoint();
+    // PARAM_SET payload: f32 value, tsys, tcomp, char[16] id, u8 type = 0 (not a MAV_PARAM_TYPE).
+    let mut payload = Vec::new();
+    payload.extend_from_slice(&2.5f32.to_le_bytes());
+    payload.extend_from_slice(&[1, 1]);
+    let mut id = [0u8; 16];
+    id[..9].copy_from_slice(b"HOVER_ALT");
+    payload.extend_from_slice(&id);
+    payload.push(0);
+    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, 23, &payload);
+    let msgs = decode(&ep.handle(GCS, &frame));
+    assert_eq!(param_values(&msgs)[0].param_value, 2.5);
+}
+
+#[test]
+fn unknown_command_id_gets_unsupported_via_raw_path() {
+    let mut ep = endpoint();
+    // COMMAND_LONG with command 65000, which the dialect's MavCmd cannot represent.
+    let mut payload = vec![0u8; 33];
+    payload[28..30].copy_from_slice(&65000u16.to_le_bytes());
+    payload[30] = 1;
+    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, wire::COMMAND_LONG_ID, &payload);
+    let out = ep.handle(GCS, &frame);
+    assert_eq!(acks(&out), vec![(65000, commands::result::UNSUPPORTED)]);
+    // A known but unimplemented command too.
+    let out = ep.handle(
+        GCS,
+        &v2(&command_long(
+            apm::MavCmd::MAV_CMD_DO_SET_SERVO,
+            [0.0; 7],
+            0,
+        )),
+    );
+    assert_eq!(acks(&out), vec![(183, commands::result::UNSUPPORTED)]);
+    // Addressed to another system: no ACK at all.
+    payload[30] = 42;
+    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, wire::COMMAND_LONG_ID, &payload);
+    assert!(acks(&ep.handle(GCS, &frame)).is_empty());
+}
+
+#[test]
+fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
+    // Real sensors: the gyro calibration at power-up makes the pre-arm check refuse, with a reason.
+    let mut ep = Endpoint::new(EndpointConfig::default());
+    ep.add_link(GCS);
+    let arm = command_long(
+        apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    let out = ep.handle(GCS, &v2(&arm));
+    assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+    assert!(
+        texts(&decode(&out)).iter().any(|t| t.starts_with("PreArm")),
+        "{:?}",
+        decode(&out)
+    );
+
+    run_until(&mut ep, 2_000_000);
+    let out = ep.handle(GCS, &v2(&arm));
+    assert_eq!(acks(&out), vec![(400, commands::result::ACCEPTED)]);
+    let out = run_until(&mut ep, 3_000_000);
+    let hb = heartbeat_of(&decode(&out));
+    assert!(
+        hb.base_mode
+            .contains(apm::MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+    );
+    assert_eq!(hb.base_mode.bits() & 128, 128);
+
+    // A bad p1 is DENIED.
+    let bad = command_long(
+        apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&bad))),
+        vec![(400, commands::result::DENIED)]
+    );
+
+    // Mode change, then its retransmission with confirmation 1: same ACK, no second action.
+    let mode = |m: f32, c| {
+        command_long(
+            apm::MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, m, 0.0, 0.0, 0.0, 0.0, 0.0],
+            c,
+        )
+    };
+    assert_eq!(acks(&ep.handle(GCS, &v2(&mode(18.0, 0)))), vec![(176, 0)]);
+    ep.vehicle.set_mode(crate::mode::FlightMode::QStabilize);
+    assert_eq!(acks(&ep.handle(GCS, &v2(&mode(18.0, 1)))), vec![(176, 0)]);
+    assert_eq!(
+        ep.vehicle().telemetry().mode,
+        crate::mode::FlightMode::QStabilize,
+        "not redone"
+    );
+    // Unknown mode number.
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&mode(3.0, 0)))),
+        vec![(176, commands::result::FAILED)]
+    );
+}
+
+#[test]
+fn set_message_interval_changes_the_rate() {
+    let mut ep = endpoint();
+    let set = command_long(
+        apm::MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [30.0, 200_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    assert_eq!(acks(&ep.handle(GCS, &v2(&set))), vec![(511, 0)]);
+    let out = run_until(&mut ep, 2_000_000);
+    let n = decode(&out)
+        .iter()
+        .filter(|m| matches!(m, apm::MavMessage::ATTITUDE(_)))
+        .count();
+    assert!((10..=11).contains(&n), "5 Hz for 2 s, got {n}");
+
+    #[allow(deprecated)] // still what GCSs send to read an interval
+    let get = command_long(
+        apm::MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL,
+        [30.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    let out = ep.handle(GCS, &v2(&get));
+    assert_eq!(acks(&out), vec![(510, 0)]);
+    let interval = decode(&out).into_iter().find_map(|m| match m {
+        apm::MavMessage::MESSAGE_INTERVAL(i) => Some(i),
+        _ => None,
+    });
+    assert_eq!(
+        interval.map(|i| (i.message_id, i.interval_us)),
+        Some((30, 200_000))
+    );
+
+    // A message the twin cannot stream is refused.
+    let set = command_long(
+        apm::MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        [33.0, 1e5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&set))),
+        vec![(511, commands::result::DENIED)]
+    );
+}
+
+#[test]
+fn request_message_autopilot_version_follows_the_ack() {
+    let mut ep = endpoint();
+    let req = command_long(
+        apm::MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    let out = ep.handle(GCS, &v2(&req));
+    assert_eq!(acks(&out), vec![(512, 0)]);
+    let msgs = decode(&out);
+    assert!(
+        matches!(msgs[0], apm::MavMessage::COMMAND_ACK(_)),
+        "ACK first"
+    );
+    let apm::MavMessage::AUTOPILOT_VERSION(v) = &msgs[1] else {
+        panic!("{msgs:?}")
+    };
+    use apm::MavProtocolCapability as C;
+    assert!(v.capabilities.contains(
+        C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    ));
+    let bad = command_long(
+        apm::MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        [9999.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&bad))),
+        vec![(512, commands::result::FAILED)]
+    );
+}
+
+#[test]
+fn v1_input_is_accepted_and_answered_in_v2() {
+    let mut ep = endpoint();
+    let out = ep.handle(GCS, &v1(&param_set("HOVER_ALT", 2.0)));
+    let msgs = decode(&out);
+    assert_eq!(param_values(&msgs)[0].param_value, 2.0);
+    let out = ep.handle(
+        GCS,
+        &v1(&command_long(
+            apm::MavCmd::MAV_CMD_DO_VTOL_TRANSITION,
+            [4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        )),
+    );
+    assert_eq!(acks(&out), vec![(3000, commands::result::DENIED)]);
+}
+
+#[test]
+fn ftp_is_nakked_with_file_not_found() {
+    let mut ep = endpoint();
+    let mut payload = [0u8; 251];
+    payload[0..2].copy_from_slice(&41u16.to_le_bytes());
+    payload[3] = 4; // OpenFileRO
+    let msgs = decode(&ep.handle(
+        GCS,
+        &v2(&apm::MavMessage::FILE_TRANSFER_PROTOCOL(
+            apm::FILE_TRANSFER_PROTOCOL_DATA {
+                target_network: 0,
+                target_system: 1,
+                target_component: 1,
+                payload,
+            },
+        )),
+    ));
+    let apm::MavMessage::FILE_TRANSFER_PROTOCOL(r) = &msgs[0] else {
+        panic!("{msgs:?}")
+    };
+    assert_eq!(u16::from_le_bytes([r.payload[0], r.payload[1]]), 42);
+    assert_eq!(
+        (r.payload[3], r.payload[4], r.payload[5], r.payload[12]),
+        (129, 1, 4, 10)
+    );
+    assert_eq!(
+        (r.target_system, r.target_component),
+        (GCS_SYSID, GCS_COMPID)
+    );
+}
+
+#[test]
+fn rc_override_only_from_gcs_and_expires() {
+    let mut ep = endpoint();
+    let ov = apm::MavMessage::RC_CHANNELS_OVERRIDE(apm::RC_CHANNELS_OVERRIDE_DATA {
+        chan1_raw: 1600,
+        chan3_raw: 1300,
+        chan2_raw: u16::MAX,
+        target_system: 1,
+        target_component: 1,
+        ..Default::default()
+    });
+    // From another system id: ignored.
+    let other = encode_v2(0, 200, 190, &ov);
+    ep.handle(GCS, &other);
+    assert_eq!(ep.vehicle().telemetry().rc_us[0], 0);
+    ep.handle(GCS, &v2(&ov));
+    assert_eq!(ep.vehicle().telemetry().rc_us[..3], [1600, 0, 1300]);
+    run_until(&mut ep, 2_000_000);
+    assert_eq!(ep.vehicle().telemetry().rc_us[0], 1600, "still fresh");
+    run_until(&mut ep, 3_100_000);
+    assert_eq!(ep.vehicle().telemetry().rc_us[0], 0, "expired after 3 s");
+}
+
+#[test]
+fn gcs_failsafe_switches_to_qland_when_enabled() {
+    let mut ep = endpoint();
+    ep.set_param("FS_GCS_ENABL", 1.0).unwrap();
+    let hb = apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: apm::MavType::MAV_TYPE_GCS,
+        autopilot: apm::MavAutopilot::MAV_AUTOPILOT_INVALID,
+        base_mode: apm::MavModeFlag::empty(),
+        system_status: apm::MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    });
+    run_until(&mut ep, 1_500_000);
+    ep.handle(GCS, &v2(&hb));
+    ep.vehicle.arm(true).unwrap();
+    let out = run_until(&mut ep, 8_000_000);
+    let msgs = decode(&out);
+    assert!(
+        texts(&msgs)
+            .iter()
+            .any(|t| t.contains("GCS heartbeat lost")),
+        "{:?}",
+        texts(&msgs)
+    );
+    assert_eq!(
+        ep.vehicle().telemetry().mode,
+        crate::mode::FlightMode::QLand
+    );
+    let hb = heartbeat_of(&msgs);
+    assert_eq!(hb.system_status, apm::MavState::MAV_STATE_CRITICAL);
+}
+
+#[test]
+fn bad_crc_is_counted_and_ignored() {
+    let mut ep = endpoint();
+    let mut frame = v2(&param_set("HOVER_ALT", 2.0));
+    let n = frame.len();
+    frame[n - 1] ^= 0xFF;
+    assert!(ep.handle(GCS, &frame).is_empty());
+    assert_eq!(ep.stats().bad_frames, 1);
+    assert_eq!(ep.params().value("HOVER_ALT"), 1.0);
+}
+
+#[test]
+fn telemetry_streams_at_default_rates() {
+    let mut ep = endpoint();
+    let out = run_until(&mut ep, 10_000_000);
+    let msgs = decode(&out);
+    let count = |id: u32| {
+        msgs.iter()
+            .filter(|m| mavlink::Message::message_id(*m) == id)
+            .count()
+    };
+    for (id, hz) in [
+        (30, 20),
+        (32, 10),
+        (36, 10),
+        (65, 4),
+        (1, 1),
+        (2, 1),
+        (245, 1),
+        (27, 2),
+        (26, 2),
+    ] {
+        let n = count(id);
+        assert!(
+            (n as i64 - 10 * hz).abs() <= 1,
+            "msg {id}: {n} in 10 s, want {hz} Hz"
+        );
+    }
+    assert_eq!(count(31), 0, "ATTITUDE_QUATERNION only on request");
+}
+
+#[test]
+#[allow(deprecated)] // SET_MODE and REQUEST_DATA_STREAM: legacy, still sent by MAVProxy
+fn legacy_set_mode_and_request_data_stream() {
+    let mut ep = endpoint();
+    let set_mode = apm::MavMessage::SET_MODE(apm::SET_MODE_DATA {
+        custom_mode: 19,
+        target_system: 1,
+        base_mode: apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    });
+    assert!(
+        acks(&ep.handle(GCS, &v2(&set_mode))).is_empty(),
+        "no ACK for SET_MODE"
+    );
+    assert_eq!(
+        ep.vehicle().telemetry().mode,
+        crate::mode::FlightMode::QLoiter
+    );
+
+    // ALL at 2 Hz: ATTITUDE drops from 20 Hz to 2 Hz; the heartbeat stays at 1 Hz.
+    let rds = apm::MavMessage::REQUEST_DATA_STREAM(apm::REQUEST_DATA_STREAM_DATA {
+        req_message_rate: 2,
+        target_system: 1,
+        target_component: 1,
+        req_stream_id: apm::MavDataStream::MAV_DATA_STREAM_ALL,
+        start_stop: 1,
+    });
+    ep.handle(GCS, &v2(&rds));
+    let msgs = decode(&run_until(&mut ep, 5_000_000));
+    let count = |id: u32| {
+        msgs.iter()
+            .filter(|m| mavlink::Message::message_id(*m) == id)
+            .count()
+    };
+    assert!((9..=11).contains(&count(30)), "ATTITUDE {}", count(30));
+    assert_eq!(count(0), 6, "heartbeats at 0, 1, … 5 s");
+}
+
+#[test]
+fn timesync_request_is_answered() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 1_000_000);
+    let req = apm::MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
+        tc1: 0,
+        ts1: 123_456,
+        target_system: 0,
+        target_component: 0,
+    });
+    let msgs = decode(&ep.handle(GCS, &v2(&req)));
+    let apm::MavMessage::TIMESYNC(t) = &msgs[0] else {
+        panic!("{msgs:?}")
+    };
+    assert_eq!((t.ts1, t.tc1), (123_456, 1_000_000_000));
+    assert_eq!(
+        (t.target_system, t.target_component),
+        (GCS_SYSID, GCS_COMPID)
+    );
+}
+
+#[test]
+fn manual_control_maps_sticks_to_rc() {
+    let mut ep = endpoint();
+    let mc = apm::MavMessage::MANUAL_CONTROL(apm::MANUAL_CONTROL_DATA {
+        x: 1000,
+        y: -1000,
+        z: 500,
+        r: i16::MAX,
+        target: 1,
+        ..Default::default()
+    });
+    ep.handle(GCS, &v2(&mc));
+    assert_eq!(ep.vehicle().telemetry().rc_us[..4], [1000, 1000, 1500, 0]);
+}
+
+#[test]
+fn sim_push_is_one_shot_and_resets() {
+    let mut ep = endpoint();
+    let msgs = decode(&ep.handle(GCS, &v2(&param_set("SIM_PUSH_ROLL", 0.05))));
+    assert_eq!(param_values(&msgs)[0].param_value, 0.05);
+    let msgs = decode(&run_until(&mut ep, 300_000));
+    let reset = param_values(&msgs);
+    assert_eq!(reset.len(), 1, "reset announced after SIM_PUSH_MS");
+    assert_eq!(
+        (reset[0].param_id.to_str().unwrap(), reset[0].param_value),
+        ("SIM_PUSH_ROLL", 0.0)
+    );
+}
+
+#[test]
+fn messages_for_other_systems_are_ignored() {
+    let mut ep = endpoint();
+    let mut set = param_set("HOVER_ALT", 3.0);
+    if let apm::MavMessage::PARAM_SET(p) = &mut set {
+        p.target_system = 9;
+    }
+    assert!(ep.handle(GCS, &v2(&set)).is_empty());
+    assert_eq!(ep.stats().not_for_us, 1);
+    assert_eq!(ep.params().value("HOVER_ALT"), 1.0);
+}

@@ -1,0 +1,465 @@
+//! The twin as a running MAVLink vehicle: transports from `vtol-link`, a sim clock, and the
+//! [`Endpoint`] state machine, wired in one task.
+//!
+//! # Command line (stable; scripts and the pytest suite rely on it)
+//!
+//! ```text
+//! firmware-sim serve [--listen URL]... [--speed N | --fast] [--param-file FILE] [--seed N]
+//!                    [--model paper|physical] [--ideal-sensors] [--sysid N]
+//! ```
+//!
+//! - `--listen URL`, repeatable, default `tcpin:127.0.0.1:5760` (SITL's SERIAL0): `tcpin:` accepts
+//!   many clients and re-accepts; `udpin:` replies to every peer heard; `udpout:` sends at once;
+//!   `tcp:` and `serial:` connect out.
+//! - After every endpoint is bound, one line per `--listen` is printed on stdout, in order:
+//!   `listening <url>` where `<url>` carries the real bound port (so `tcpin:127.0.0.1:0` prints
+//!   e.g. `listening tcpin:127.0.0.1:40121`). Connect-out URLs print as given. Then stdout is
+//!   flushed; logs go to stderr.
+//! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
+//!
+//! # Embedding
+//!
+//! [`Twin::start`] runs the same vehicle inside an existing tokio runtime and returns a
+//! [`Twin`] handle. [`Twin::attach_stream`] connects it to any byte stream, e.g. one end of
+//! `tokio::io::duplex`, carrying real MAVLink frames: this is how the `vtol-gcs` daemon embeds
+//! the twin without a socket.
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), firmware_sim::serve::ServeError> {
+//! use firmware_sim::serve::{ServeConfig, Twin};
+//! let cancel = tokio_util::sync::CancellationToken::new();
+//! let twin = Twin::start(ServeConfig { listen: vec![], ..ServeConfig::default() }, cancel.clone()).await?;
+//! let (ours, theirs) = tokio::io::duplex(64 * 1024);
+//! twin.attach_stream(theirs, "embedded");
+//! // read and write MAVLink frames on `ours`…
+//! # drop(ours);
+//! cancel.cancel();
+//! twin.join().await;
+//! # Ok(()) }
+//! ```
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::time::Instant;
+
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkUrl};
+
+use crate::clock::{ClockMode, SimClock};
+use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
+use crate::params::{ParamFileError, Params};
+
+/// Capacity of the transport → twin event queue.
+const EVENT_QUEUE: usize = 4096;
+
+/// Default listen address: SITL's SERIAL0, loopback only.
+pub const DEFAULT_LISTEN: &str = "tcpin:127.0.0.1:5760";
+
+/// Everything needed to run the twin.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Endpoints to open (may be empty when only [`Twin::attach_stream`] is used).
+    pub listen: Vec<LinkUrl>,
+    /// Real time, scaled, or as fast as possible.
+    pub clock: ClockMode,
+    /// The vehicle, its parameters and identity.
+    pub endpoint: EndpointConfig,
+    /// Queue sizes and timeouts of the links.
+    pub link_options: LinkOptions,
+}
+
+impl Default for ServeConfig {
+    fn default() -> Self {
+        Self {
+            listen: vec![
+                DEFAULT_LISTEN
+                    .parse()
+                    .unwrap_or_else(|_| unreachable!("valid URL")),
+            ],
+            clock: ClockMode::REAL_TIME,
+            endpoint: EndpointConfig::default(),
+            link_options: LinkOptions::default(),
+        }
+    }
+}
+
+impl ServeConfig {
+    /// Loads the parameter file if one is given (a missing file starts from defaults and is
+    /// created on the first change; a corrupt one is an error, never silently replaced).
+    ///
+    /// # Errors
+    /// [`ServeError::Params`].
+    pub fn load_param_file(&mut self) -> Result<(), ServeError> {
+        if let Some(path) = &self.endpoint.param_file
+            && path.exists()
+        {
+            self.endpoint.params = Params::load(path)?;
+        }
+        Ok(())
+    }
+}
+
+/// Why the twin could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// A transport could not be opened (address in use, bad URL…).
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// The parameter file is unusable.
+    #[error(transparent)]
+    Params(#[from] ParamFileError),
+    /// The tokio runtime could not start.
+    #[error("cannot start the runtime: {0}")]
+    Runtime(std::io::Error),
+}
+
+/// One opened endpoint and where it ended up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Bound {
+    /// The URL as configured.
+    pub url: LinkUrl,
+    /// The bound local address (listeners and udpout), with the real port when 0 was asked.
+    pub local_addr: Option<SocketAddr>,
+}
+
+impl Bound {
+    /// The URL with the real port: what `firmware-sim serve` prints after `listening `.
+    #[must_use]
+    pub fn resolved_url(&self) -> String {
+        let port = self.local_addr.map(|a| a.port());
+        match (&self.url, port) {
+            (LinkUrl::TcpIn { host, .. }, Some(p)) => format!("tcpin:{}:{p}", bracket(host)),
+            (LinkUrl::UdpIn { host, .. }, Some(p)) => format!("udpin:{}:{p}", bracket(host)),
+            (url, _) => url.to_string(),
+        }
+    }
+}
+
+fn bracket(host: &str) -> String {
+    if host.contains(':') {
+        format!("[{host}]")
+    } else {
+        host.to_owned()
+    }
+}
+
+/// A running twin.
+#[derive(Debug)]
+pub struct Twin {
+    bound: Vec<Bound>,
+    events: mpsc::Sender<LinkEvent>,
+    options: LinkOptions,
+    cancel: CancellationToken,
+    task: JoinHandle<Endpoint>,
+    endpoints: Vec<vtol_link::EndpointHandle>,
+}
+
+impl Twin {
+    /// Opens every `listen` endpoint (failing fast if one cannot bind) and starts the vehicle
+    /// loop. Runs until `cancel` fires.
+    ///
+    /// # Errors
+    /// [`ServeError::Link`] for the first endpoint that cannot open.
+    pub async fn start(config: ServeConfig, cancel: CancellationToken) -> Result<Self, ServeError> {
+        let (events, rx) = mpsc::channel(EVENT_QUEUE);
+        let mut bound = Vec::new();
+        let mut endpoints = Vec::new();
+        for url in &config.listen {
+            let handle = vtol_link::spawn_endpoint(
+                url,
+                events.clone(),
+                config.link_options.clone(),
+                cancel.child_token(),
+            )
+            .await;
+            let handle = match handle {
+                Ok(h) => h,
+                Err(e) => {
+                    cancel.cancel();
+                    return Err(e.into());
+                }
+            };
+            bound.push(Bound {
+                url: url.clone(),
+                local_addr: handle.local_addr(),
+            });
+            endpoints.push(handle);
+        }
+        let endpoint = Endpoint::new(config.endpoint);
+        let task = tokio::spawn(run(endpoint, config.clock, rx, cancel.clone()));
+        Ok(Self {
+            bound,
+            events,
+            options: config.link_options,
+            cancel,
+            task,
+            endpoints,
+        })
+    }
+
+    /// The opened endpoints, in `listen` order.
+    #[must_use]
+    pub fn bound(&self) -> &[Bound] {
+        &self.bound
+    }
+
+    /// Connects the twin to a byte stream (e.g. one end of `tokio::io::duplex`). The link lives
+    /// until the stream ends or the twin stops.
+    pub fn attach_stream<S>(&self, stream: S, peer: &str) -> LinkId
+    where
+        S: AsyncRead + AsyncWrite + Send + 'static,
+    {
+        let (id, _task) = vtol_link::spawn_stream_link(
+            stream,
+            peer,
+            self.events.clone(),
+            self.options.clone(),
+            self.cancel.child_token(),
+        );
+        id
+    }
+
+    /// Waits for the vehicle loop and every transport to stop (after `cancel`), returning the
+    /// endpoint for inspection.
+    pub async fn join(self) -> Option<Endpoint> {
+        drop(self.events);
+        let endpoint = self.task.await.ok();
+        for e in self.endpoints {
+            e.join().await;
+        }
+        endpoint
+    }
+}
+
+/// Runs the twin until `cancel` fires: the library form of `firmware-sim serve`.
+///
+/// # Errors
+/// See [`Twin::start`].
+pub async fn serve(config: ServeConfig, cancel: CancellationToken) -> Result<(), ServeError> {
+    let twin = Twin::start(config, cancel).await?;
+    twin.join().await;
+    Ok(())
+}
+
+struct LinkEntry {
+    tx: LinkSender,
+    /// Bad frames already reported to the endpoint.
+    bad_seen: u64,
+}
+
+/// The vehicle loop: link events are handled as they come; every clock batch advances the
+/// twin to the due sim time and sends what became due.
+async fn run(
+    mut endpoint: Endpoint,
+    mode: ClockMode,
+    mut events: mpsc::Receiver<LinkEvent>,
+    cancel: CancellationToken,
+) -> Endpoint {
+    let mut clock = SimClock::new(mode, Instant::now());
+    let mut links: HashMap<LinkId, LinkEntry> = HashMap::new();
+    let mut batch = clock.pause().map(|p| {
+        let mut i = tokio::time::interval(p);
+        i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        i
+    });
+    loop {
+        tokio::select! {
+            biased;
+            () = cancel.cancelled() => break,
+            ev = events.recv() => match ev {
+                Some(LinkEvent::Up { id, peer, tx }) => {
+                    tracing::info!(%id, %peer, "link up");
+                    links.insert(id, LinkEntry { tx, bad_seen: 0 });
+                    endpoint.add_link(key(id));
+                }
+                Some(LinkEvent::Frame { id, frame }) => {
+                    let out = endpoint.handle(key(id), frame.as_bytes());
+                    dispatch(&links, out);
+                }
+                Some(LinkEvent::Down { id, reason }) => {
+                    tracing::info!(%id, %reason, "link down");
+                    links.remove(&id);
+                    endpoint.remove_link(key(id));
+                }
+                // Only reachable once every sender is gone; keep flying for attached streams.
+                None => cancel.cancelled().await,
+            },
+            () = next_batch(&mut batch) => {
+                for entry in links.values_mut() {
+                    let s = entry.tx.stats().snapshot();
+                    let bad = s.bad_crc + s.bad_incompat;
+                    endpoint.note_bad_frames(bad.saturating_sub(entry.bad_seen));
+                    entry.bad_seen = bad;
+                }
+                let due = clock.due_sim_us(Instant::now());
+                let out = endpoint.tick(due);
+                dispatch(&links, out);
+            }
+        }
+    }
+    endpoint
+}
+
+async fn next_batch(batch: &mut Option<tokio::time::Interval>) {
+    match batch {
+        Some(i) => {
+            i.tick().await;
+        }
+        // As fast as possible: still yield so link events get their turn.
+        None => tokio::task::yield_now().await,
+    }
+}
+
+fn key(id: LinkId) -> LinkKey {
+    LinkKey(u64::from(id.0))
+}
+
+fn dispatch(links: &HashMap<LinkId, LinkEntry>, out: Vec<Outbound>) {
+    for o in out {
+        let Some(entry) = links.get(&LinkId(o.link.0 as u32)) else {
+            continue;
+        };
+        match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
+            // A full queue is a slow peer: the frame is dropped and counted by the link.
+            Ok(f) => {
+                let _ = entry.tx.try_send(f);
+            }
+            Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
+        }
+    }
+}
+
+/// Flags of `firmware-sim serve` (see the module docs for the stdout contract).
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// Where GCSs connect (repeatable): tcpin:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT,
+    /// tcp:HOST:PORT, serial:DEVICE[:BAUD]. Port 0 = pick a free port.
+    #[arg(long = "listen", value_name = "URL", default_value = DEFAULT_LISTEN)]
+    pub listen: Vec<LinkUrl>,
+    /// Sim time per wall time (2 = twice real time).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed, conflicts_with = "fast")]
+    pub speed: f64,
+    /// Run as fast as the CPU allows (tests).
+    #[arg(long)]
+    pub fast: bool,
+    /// Parameter file (.parm): loaded at start, rewritten atomically on every change.
+    #[arg(long, value_name = "FILE")]
+    pub param_file: Option<std::path::PathBuf>,
+    /// Seed of every random draw (sensor noise, gusts).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Model mode: physical or paper (PHYSICS.md §0).
+    #[arg(long, default_value = "physical")]
+    pub model: crate::airframe::ModelMode,
+    /// Noise, bias and quantisation off.
+    #[arg(long)]
+    pub ideal_sensors: bool,
+    /// MAVLink system id (overrides SYSID_THISMAV), 1–255.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    pub sysid: Option<u8>,
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 1000.0 => Ok(v),
+        _ => Err(format!("speed must be a number in (0, 1000], got '{s}'")),
+    }
+}
+
+impl ServeArgs {
+    /// The configuration these flags describe, parameter file loaded.
+    ///
+    /// # Errors
+    /// [`ServeError::Params`] for an unusable parameter file.
+    pub fn to_config(&self) -> Result<ServeConfig, ServeError> {
+        let mut config = ServeConfig {
+            listen: self.listen.clone(),
+            clock: if self.fast {
+                ClockMode::AsFastAsPossible
+            } else {
+                ClockMode::Scaled { speed: self.speed }
+            },
+            endpoint: EndpointConfig {
+                vehicle: crate::vehicle::VehicleConfig {
+                    model: self.model,
+                    ideal_sensors: self.ideal_sensors,
+                    seed: self.seed,
+                    ..Default::default()
+                },
+                params: Params::new(),
+                param_file: self.param_file.clone(),
+                sysid: self.sysid,
+            },
+            link_options: LinkOptions::default(),
+        };
+        config.load_param_file()?;
+        Ok(config)
+    }
+}
+
+/// `firmware-sim serve`: builds a runtime, opens the endpoints, prints one `listening <url>`
+/// line per endpoint on stdout, and runs until Ctrl-C or SIGTERM.
+///
+/// # Errors
+/// Startup failures (bad parameter file, address in use); I/O errors of the runtime.
+pub fn run_cli(args: &ServeArgs) -> Result<(), ServeError> {
+    // Logs go to stderr so stdout carries only the `listening` lines. A subscriber the caller
+    // installed first wins.
+    let _ = tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .try_init();
+    let config = args.to_config()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(ServeError::Runtime)?;
+    runtime.block_on(async {
+        let cancel = CancellationToken::new();
+        let twin = Twin::start(config, cancel.clone()).await?;
+        {
+            use std::io::Write as _;
+            let mut out = std::io::stdout().lock();
+            for b in twin.bound() {
+                let _ = writeln!(out, "listening {}", b.resolved_url());
+            }
+            let _ = out.flush();
+        }
+        shutdown_signal().await;
+        tracing::info!("shutting down");
+        cancel.cancel();
+        twin.join().await;
+        Ok(())
+    })
+}
+
+/// Resolves on Ctrl-C or (on Unix) SIGTERM.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {}
+        () = term => {}
+    }
+}
