@@ -112,7 +112,10 @@ impl Euler {
     /// Wraps ψ into (−π, π].
     #[must_use]
     pub fn wrapped(self) -> Self {
-        Self { psi: wrap_pi(self.psi), ..self }
+        Self {
+            psi: wrap_pi(self.psi),
+            ..self
+        }
     }
 }
 
@@ -120,21 +123,44 @@ impl Euler {
 #[must_use]
 pub fn wrap_pi(a: f64) -> f64 {
     let w = a.rem_euclid(2.0 * std::f64::consts::PI);
-    if w > std::f64::consts::PI { w - 2.0 * std::f64::consts::PI } else { w }
+    if w > std::f64::consts::PI {
+        w - 2.0 * std::f64::consts::PI
+    } else {
+        w
+    }
 }
 
-/// Paper frame (x, y, z up) to MAVLink NED (x north, y east, z down). The paper's x and y are
-/// taken as north and east; only z flips, and the mirror is absorbed by flipping y too so the
-/// frame stays right-handed: (x, y, z) ↦ (x, −y, −z).
+/// The one place where the paper's frames meet MAVLink's.
+///
+/// In hover the vehicle's "forward" (where a pilot behind it looks) is −x_B, its right is +y_B
+/// (rotor 1 and aileron R of `PHYSICS.md` §1, so the paper's R/L names are right and left as a
+/// pilot sees them) and its down is −z_B. That is a rotation of π about y: FRD = (−x, y, −z).
+/// The same rotation maps the inertial frame (z up) to NED, so a level vehicle heading north
+/// reports roll = pitch = yaw = 0. Being a half-turn, the map is its own inverse.
 #[must_use]
 pub fn paper_to_ned(v: &Vector3<f64>) -> Vector3<f64> {
-    Vector3::new(v[0], -v[1], -v[2])
+    Vector3::new(-v[0], v[1], -v[2])
 }
 
 /// Inverse of [`paper_to_ned`] (the map is its own inverse).
 #[must_use]
 pub fn ned_to_paper(v: &Vector3<f64>) -> Vector3<f64> {
     paper_to_ned(v)
+}
+
+/// MAVLink attitude (roll, pitch, yaw) in NED/FRD from the paper's angles. Conjugating
+/// Rz(ψ)·Ry(θ)·Rx(φ) by the half-turn about y gives Rz(−ψ)·Ry(θ)·Rx(−φ), so roll = −φ,
+/// pitch = θ, yaw = −ψ.
+#[must_use]
+pub fn euler_to_ned_rpy(e: &Euler) -> [f64; 3] {
+    [-e.phi, e.theta, wrap_pi(-e.psi)]
+}
+
+/// A body-frame vector (rates, torques, specific force) in FRD: (−x, y, −z). Its own inverse,
+/// so it also maps FRD vectors back to the paper's body frame.
+#[must_use]
+pub fn body_rates_to_frd(omega: &Vector3<f64>) -> [f64; 3] {
+    [-omega[0], omega[1], -omega[2]]
 }
 
 #[cfg(test)]
@@ -164,17 +190,21 @@ mod tests {
         assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
         assert!((r.determinant() - 1.0).abs() < 1e-12);
     }
-}
 
-/// MAVLink attitude (roll, pitch, yaw) in NED/FRD from the paper's angles: the body frame
-/// (x_B, y_B, z_B up) maps to FRD as (x, −y, −z), so roll = φ, pitch = −θ, yaw = −ψ.
-#[must_use]
-pub fn euler_to_ned_rpy(e: &Euler) -> [f64; 3] {
-    [e.phi, -e.theta, wrap_pi(-e.psi)]
-}
-
-/// Body rates (p, q, r) in the paper's body frame to FRD body rates.
-#[must_use]
-pub fn body_rates_to_frd(omega: &Vector3<f64>) -> [f64; 3] {
-    [omega[0], -omega[1], -omega[2]]
+    #[test]
+    fn mavlink_attitude_matches_the_rotated_frames() {
+        // R_ned = T R T with T the half-turn about y must equal the matrix of the reported
+        // roll/pitch/yaw in the ZYX convention.
+        let e = Euler::new(0.7, -0.3, 0.4);
+        let t = Matrix3::new(-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0);
+        let r_ned = t * e.rotation_body_to_inertial() * t;
+        let [roll, pitch, yaw] = euler_to_ned_rpy(&e);
+        let r_rpy = Euler::new(yaw, pitch, roll).rotation_body_to_inertial();
+        assert!((r_ned - r_rpy).norm() < 1e-12);
+        // Rates: Ω_frd = T Ω.
+        let w = Vector3::new(0.1, 0.2, 0.3);
+        assert_eq!(body_rates_to_frd(&w), [-0.1, 0.2, -0.3]);
+        // Up is −down, rotor 1 (+y_B) is on the right.
+        assert_eq!(paper_to_ned(&Vector3::new(0.0, 1.0, 2.0)), Vector3::new(0.0, 1.0, -2.0));
+    }
 }

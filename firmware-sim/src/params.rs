@@ -19,7 +19,8 @@
 //! `SIM_WIND_TURB` the gust intensity.
 //!
 //! Servo outputs (the `SERVOn_FUNCTION` values use ArduPilot's `SRV_Channel` function numbers):
-//! SERVO1 = ESC of rotor 1 (`ThrottleLeft`, 73), SERVO2 = ESC of rotor 2 (`ThrottleRight`, 74),
+//! SERVO1 = ESC of rotor 1, the right rotor (`ThrottleRight`, 74), SERVO2 = ESC of rotor 2, the
+//! left rotor (`ThrottleLeft`, 73) — right and left as `frames` defines them for FRD —
 //! SERVO3 = left aileron and SERVO4 = right aileron (both `Aileron`, 4, as ArduPilot does for a
 //! pair of ailerons; left and right are told apart by the output number), SERVO5 = elevator
 //! (`Elevator`, 19). The mixer is fixed, so these are read-only.
@@ -166,8 +167,8 @@ pub static TABLE: &[ParamDef] = &[
     def("SR0_POSITION", I16, "Hz", (-1.0, 50.0), -1.0, RW, "LOCAL_POSITION_NED rate; -1 = default"),
     def("SR0_EXTRA1", I16, "Hz", (-1.0, 50.0), -1.0, RW, "ATTITUDE rate; -1 = default"),
     def("SR0_EXTRA3", I16, "Hz", (-1.0, 50.0), -1.0, RW, "SYSTEM_TIME rate; -1 = default"),
-    def("SERVO1_FUNCTION", I16, "", (0.0, 200.0), 73.0, RO, "SERVO1 = ESC of rotor 1 (ThrottleLeft)"),
-    def("SERVO2_FUNCTION", I16, "", (0.0, 200.0), 74.0, RO, "SERVO2 = ESC of rotor 2 (ThrottleRight)"),
+    def("SERVO1_FUNCTION", I16, "", (0.0, 200.0), 74.0, RO, "SERVO1 = ESC of rotor 1, the right rotor (ThrottleRight)"),
+    def("SERVO2_FUNCTION", I16, "", (0.0, 200.0), 73.0, RO, "SERVO2 = ESC of rotor 2, the left rotor (ThrottleLeft)"),
     def("SERVO3_FUNCTION", I16, "", (0.0, 200.0), 4.0, RO, "SERVO3 = left aileron (Aileron)"),
     def("SERVO4_FUNCTION", I16, "", (0.0, 200.0), 4.0, RO, "SERVO4 = right aileron (Aileron)"),
     def("SERVO5_FUNCTION", I16, "", (0.0, 200.0), 19.0, RO, "SERVO5 = elevator (Elevator)"),
