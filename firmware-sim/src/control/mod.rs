@@ -87,6 +87,10 @@ pub struct SaturationLevels {
     pub d: f64,
 }
 
+/// Relative margin by which a saturation level must exceed the sum it is compared with: a few
+/// float32 rounding steps (2⁻²³ ≈ 1.2e-7).
+pub const LEVEL_MARGIN: f64 = 1e-6;
+
 impl SaturationLevels {
     /// The defaults of `PHYSICS.md` §0.
     pub const DEFAULT: Self = Self {
@@ -116,16 +120,20 @@ impl SaturationLevels {
         if ![a, b, c, d].iter().all(|v| v.is_finite()) {
             return fail("all levels finite");
         }
-        if d <= 0.0 {
+        // The levels travel as float32 parameters, so a sum that equals a level in exact
+        // arithmetic can land a rounding step either side of it. "Greater" therefore means
+        // greater by more than float32 rounding: b = c + d is refused however it was typed.
+        let greater = |lhs: f64, rhs: f64| lhs > rhs + LEVEL_MARGIN * rhs.abs().max(1.0);
+        if !greater(d, 0.0) {
             return fail("d > 0");
         }
-        if c <= d {
+        if !greater(c, d) {
             return fail("c > d");
         }
-        if b <= c + d {
+        if !greater(b, c + d) {
             return fail("b > c + d");
         }
-        if a <= b + c + d {
+        if !greater(a, b + c + d) {
             return fail("a > b + c + d");
         }
         Ok(())
