@@ -305,11 +305,12 @@ impl Default for Params {
 }
 
 impl Params {
-    /// Every parameter at its default.
+    /// Every parameter at its default, stored as its type holds it (float32 for REAL32), so the
+    /// constraint checks see exactly the values a ground station reads back.
     #[must_use]
     pub fn new() -> Self {
         Self {
-            values: TABLE.iter().map(|d| d.default).collect(),
+            values: TABLE.iter().map(|d| d.ty.cast(d.default)).collect(),
         }
     }
 

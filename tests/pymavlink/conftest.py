@@ -1,0 +1,481 @@
+"""Shared fixtures for the pymavlink / MAVProxy suite.
+
+Every test talks to the real twin (`firmware-sim serve`) over real sockets or pseudo-terminals.
+The twin is started with port-0 listeners; the bound addresses are read from its stdout
+(`listening <scheme>:<host>:<port>`, one line per listener).
+
+Waiting is always "until the event, with a deadline as the upper bound" (`Gcs.recv`), never a
+sleep.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import select
+import signal
+import struct
+import subprocess
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+# Scripts in this suite speak MAVLink 2 from their first frame. This must be set before pymavlink
+# is imported (PROTOCOL.md C.2). test_connect runs its MAVLink-1 client in a clean subprocess.
+os.environ["MAVLINK20"] = "1"
+
+import pytest  # noqa: E402
+from pymavlink import mavutil  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+TWIN_BIN = Path(os.environ.get("FIRMWARE_SIM_BIN", ROOT / "target" / "debug" / "firmware-sim"))
+
+VEHICLE_SYSID = 1
+VEHICLE_COMPID = 1
+GCS_SYSID = 255
+GCS_COMPID = 190
+
+MAV_TYPE_GCS = 6
+MAV_TYPE_VTOL_DUOROTOR = 19
+MAV_AUTOPILOT_GENERIC = 0
+MAV_AUTOPILOT_INVALID = 8
+FLAG_CUSTOM_MODE = 1
+FLAG_ARMED = 128
+MAV_STATE_STANDBY = 3
+
+MODES = {"QSTABILIZE": 17, "QHOVER": 18, "QLOITER": 19, "QLAND": 20}
+
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_UNSUPPORTED = 3
+
+MSG_ATTITUDE = 30
+MSG_LOCAL_POSITION_NED = 32
+MSG_SERVO_OUTPUT_RAW = 36
+
+LISTEN_RE = re.compile(r"^listening\s+(?P<scheme>[a-z]+):(?P<addr>\S+)\s*$")
+
+
+def f32(x: float) -> float:
+    """The float32 nearest to x, as a Python float (what PARAM_VALUE carries)."""
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+# --------------------------------------------------------------------------------------------
+# The twin as a subprocess
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Twin:
+    proc: subprocess.Popen
+    listeners: list[tuple[str, str]]  # (scheme, address) as printed
+    workdir: Path
+    param_file: Path
+    stderr_path: Path
+    stdout_lines: list[str] = field(default_factory=list)
+    _drain: threading.Thread | None = None
+
+    def addr(self, scheme: str, nth: int = 0) -> str:
+        found = [a for (s, a) in self.listeners if s == scheme]
+        assert len(found) > nth, f"no {scheme} listener #{nth} in {self.listeners}"
+        return found[nth]
+
+    def host_port(self, scheme: str, nth: int = 0) -> tuple[str, int]:
+        host, port = self.addr(scheme, nth).rsplit(":", 1)
+        return host, int(port)
+
+    @property
+    def tcp(self) -> str:
+        """pymavlink URL of the first TCP listener."""
+        return "tcp:" + self.addr("tcpin")
+
+    @property
+    def udp(self) -> str:
+        """pymavlink URL of the first UDP listener."""
+        return "udpout:" + self.addr("udpin")
+
+    def stderr(self) -> str:
+        try:
+            return self.stderr_path.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> int:
+        """Ctrl-C the twin and return its exit code (killed → negative)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5)
+                raise AssertionError("twin did not exit within 15 s of SIGINT\n" + self.stderr()[-3000:])
+        if self._drain is not None:
+            self._drain.join(timeout=5)
+        return self.proc.returncode
+
+    def assert_clean_exit(self) -> None:
+        rc = self.stop()
+        err = self.stderr()
+        assert rc == 0, f"twin exited with {rc}\nstderr tail:\n{err[-3000:]}"
+        assert "panicked" not in err, f"twin panicked:\n{err[-3000:]}"
+
+
+def start_twin(
+    workdir: Path,
+    listen: Iterable[str] = ("tcpin:127.0.0.1:0", "udpin:127.0.0.1:0"),
+    speed: float | None = None,
+    seed: int = 1,
+    param_file: Path | None = None,
+    extra: Iterable[str] = (),
+    startup_timeout: float = 30.0,
+) -> Twin:
+    assert TWIN_BIN.exists(), f"{TWIN_BIN} missing: build it with `cargo build -p firmware-sim`"
+    workdir.mkdir(parents=True, exist_ok=True)
+    listen = list(listen)
+    param_file = param_file or workdir / "params.parm"
+    args = [str(TWIN_BIN), "serve"]
+    for url in listen:
+        args += ["--listen", url]
+    if speed is not None:
+        args += ["--speed", f"{speed:g}"]
+    args += ["--seed", str(seed), "--param-file", str(param_file), *extra]
+    stderr_path = workdir / f"twin-{time.monotonic_ns()}.stderr"
+    err = open(stderr_path, "wb")
+    env = dict(os.environ)
+    env.setdefault("RUST_LOG", "info")
+    env.setdefault("RUST_BACKTRACE", "1")
+    proc = subprocess.Popen(
+        args, cwd=workdir, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=err, env=env
+    )
+    err.close()
+    twin = Twin(proc, [], workdir, param_file, stderr_path)
+    deadline = time.monotonic() + startup_timeout
+    buf = b""
+    fd = proc.stdout.fileno()
+    try:
+        while len(twin.listeners) < len(listen):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(
+                    f"twin printed {len(twin.listeners)}/{len(listen)} listener lines in "
+                    f"{startup_timeout} s; stdout so far: {twin.stdout_lines}\nstderr:\n{twin.stderr()[-3000:]}"
+                )
+            ready, _, _ = select.select([fd], [], [], min(left, 0.5))
+            if not ready:
+                continue
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                proc.wait(timeout=5)
+                raise AssertionError(
+                    f"twin exited ({proc.returncode}) before listening; args {args}\n"
+                    f"stdout: {twin.stdout_lines}\nstderr:\n{twin.stderr()[-3000:]}"
+                )
+            buf += chunk
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                text = line.decode(errors="replace").strip()
+                twin.stdout_lines.append(text)
+                m = LISTEN_RE.match(text)
+                if m:
+                    twin.listeners.append((m["scheme"], m["addr"]))
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+
+    def drain() -> None:
+        rest = buf
+        while True:
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                break
+            rest += chunk
+        twin.stdout_lines.extend(rest.decode(errors="replace").splitlines())
+
+    twin._drain = threading.Thread(target=drain, daemon=True)
+    twin._drain.start()
+    # Port-0 listeners must come back with a real port.
+    for scheme, addr in twin.listeners:
+        if scheme in ("tcpin", "udpin"):
+            assert int(addr.rsplit(":", 1)[1]) > 0, twin.listeners
+    return twin
+
+
+class TwinFactory:
+    """Starts twins on demand; stops every one of them (checking a clean exit) at teardown."""
+
+    def __init__(self, base: Path):
+        self.base = base
+        self.twins: list[Twin] = []
+        self.n = 0
+
+    def __call__(self, **kw) -> Twin:
+        self.n += 1
+        workdir = kw.pop("workdir", None) or self.base / f"twin{self.n}"
+        twin = start_twin(workdir, **kw)
+        self.twins.append(twin)
+        return twin
+
+    def stop(self, twin: Twin) -> None:
+        self.twins.remove(twin)
+        twin.assert_clean_exit()
+
+    def close(self) -> None:
+        errors = []
+        for twin in self.twins:
+            try:
+                twin.assert_clean_exit()
+            except AssertionError as e:  # keep stopping the others
+                errors.append(str(e))
+        self.twins.clear()
+        assert not errors, "\n".join(errors)
+
+
+@pytest.fixture
+def twin_factory(tmp_path):
+    f = TwinFactory(tmp_path)
+    yield f
+    f.close()
+
+
+@pytest.fixture(scope="module")
+def module_twin_factory(tmp_path_factory):
+    f = TwinFactory(tmp_path_factory.mktemp("twin"))
+    yield f
+    f.close()
+
+
+@pytest.fixture(scope="module")
+def twin(module_twin_factory):
+    """One twin for a whole module, at 4x speed (for tests that do not measure timing)."""
+    return module_twin_factory(speed=4)
+
+
+# --------------------------------------------------------------------------------------------
+# A pymavlink GCS with deadline-bounded waits
+# --------------------------------------------------------------------------------------------
+
+
+class Timeout(AssertionError):
+    pass
+
+
+class Gcs:
+    """A pymavlink connection acting as a GCS (sysid 255).
+
+    It sends a GCS HEARTBEAT at 1 Hz while it waits, as a real GCS does; on UDP this is also how
+    the twin learns our address.
+    """
+
+    def __init__(self, url: str, **kw):
+        kw.setdefault("source_system", GCS_SYSID)
+        kw.setdefault("source_component", GCS_COMPID)
+        self.url = url
+        self.m = mavutil.mavlink_connection(url, **kw)
+        self._last_beat = 0.0
+        self.beat(force=True)
+
+    def close(self) -> None:
+        self.m.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    @property
+    def mav(self):
+        return self.m.mav
+
+    def beat(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if force or now - self._last_beat >= 1.0:
+            self._last_beat = now
+            self.m.mav.heartbeat_send(MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def drain(self) -> int:
+        """Drops whatever already arrived (e.g. echoes broadcast for another client's write), so
+        that the next wait sees only replies to what we send next."""
+        n = 0
+        while self.m.recv_match(blocking=False) is not None:
+            n += 1
+        return n
+
+    def recv(
+        self,
+        types: str | list[str],
+        pred: Callable | None = None,
+        timeout: float = 10.0,
+        sysid: int | None = VEHICLE_SYSID,
+        what: str = "",
+    ):
+        """First message of `types` from `sysid` for which pred(msg) holds; AssertionError after
+        `timeout` seconds."""
+        types_l = [types] if isinstance(types, str) else list(types)
+        deadline = time.monotonic() + timeout
+        last = None
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise Timeout(
+                    f"no {types_l} {what} within {timeout} s on {self.url} (last of type: {last})"
+                )
+            self.beat()
+            msg = self.m.recv_match(type=types_l, blocking=True, timeout=min(left, 0.25))
+            if msg is None:
+                continue
+            if sysid is not None and msg.get_srcSystem() != sysid:
+                continue
+            last = msg
+            if pred is None or pred(msg):
+                return msg
+
+    def collect(self, types, until: Callable[[list], bool], timeout: float, pred=None) -> list:
+        """Messages of `types` (from the vehicle) until until(list) is true; AssertionError on
+        timeout."""
+        out: list = []
+        deadline = time.monotonic() + timeout
+        while not until(out):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise Timeout(f"collect {types}: condition not met in {timeout} s ({len(out)} msgs)")
+            msg = self.recv(types, pred=pred, timeout=left)
+            out.append(msg)
+        return out
+
+    # -- vehicle ------------------------------------------------------------------------------
+
+    def wait_vehicle_heartbeat(self, timeout: float = 15.0, pred=None):
+        """The vehicle's heartbeat (never a GCS one: PROTOCOL.md C.3)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise Timeout(f"no vehicle HEARTBEAT within {timeout} s on {self.url}")
+            self.beat()
+            msg = self.m.recv_match(
+                type="HEARTBEAT", condition="HEARTBEAT.type!=6", blocking=True, timeout=min(left, 0.25)
+            )
+            if msg is None or msg.get_srcSystem() != VEHICLE_SYSID:
+                continue
+            if pred is None or pred(msg):
+                return msg
+
+    def wait_ready(self, timeout: float = 30.0):
+        """Heartbeat with system_status STANDBY: calibration done, ready to arm."""
+        return self.wait_vehicle_heartbeat(timeout, pred=lambda h: h.system_status == MAV_STATE_STANDBY)
+
+    def command(self, cmd: int, *params: float, timeout: float = 10.0):
+        p = list(params) + [0.0] * (7 - len(params))
+        self.drain()
+        self.m.mav.command_long_send(VEHICLE_SYSID, VEHICLE_COMPID, cmd, 0, *p)
+        return self.recv("COMMAND_ACK", lambda a: a.command == cmd, timeout, what=f"for command {cmd}")
+
+    def set_interval(self, msg_id: int, hz: float):
+        ack = self.command(MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        assert ack.result == MAV_RESULT_ACCEPTED, f"SET_MESSAGE_INTERVAL({msg_id}) → {ack}"
+        return ack
+
+    def arm(self):
+        ack = self.command(MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MAV_RESULT_ACCEPTED, f"arm refused: {ack}"
+        return ack
+
+    def set_mode(self, name: str):
+        ack = self.command(MAV_CMD_DO_SET_MODE, FLAG_CUSTOM_MODE, MODES[name])
+        assert ack.result == MAV_RESULT_ACCEPTED, f"mode {name} refused: {ack}"
+        return ack
+
+    # -- parameters ---------------------------------------------------------------------------
+
+    def param_get(self, name: str, timeout: float = 10.0):
+        self.drain()
+        self.m.mav.param_request_read_send(VEHICLE_SYSID, VEHICLE_COMPID, name.encode(), -1)
+        return self.recv("PARAM_VALUE", lambda p: p.param_id == name, timeout, what=name)
+
+    def param_set(self, name: str, value: float, timeout: float = 10.0):
+        """PARAM_SET of an acceptable value and its PARAM_VALUE echo (the only acknowledgement),
+        recognised by name and the stored value (float32, or rounded for integer types): an echo
+        broadcast earlier for another client's write may still be on its way."""
+        self.drain()
+        self.m.param_set_send(name, value)
+
+        def is_echo(p):
+            if p.param_id != name:
+                return False
+            return p.param_value == (f32(value) if p.param_type == 9 else float(round(value)))
+
+        return self.recv("PARAM_VALUE", is_echo, timeout, what=f"echo of {name}={value}")
+
+
+@pytest.fixture
+def gcs_factory():
+    conns: list[Gcs] = []
+
+    def make(url: str, **kw) -> Gcs:
+        g = Gcs(url, **kw)
+        conns.append(g)
+        return g
+
+    yield make
+    for g in conns:
+        g.close()
+
+
+# --------------------------------------------------------------------------------------------
+# Flight helpers
+# --------------------------------------------------------------------------------------------
+
+
+def wait_hover(gcs: Gcs, alt: float, tol: float = 0.05, settle_s: float = 2.0, window_s: float = 5.0,
+               timeout: float = 90.0):
+    """Wait until LOCAL_POSITION_NED has stayed within alt ± tol for `settle_s` seconds of vehicle
+    time (time_boot_ms), then return the samples of the following `window_s` seconds, which the
+    caller checks strictly."""
+    run: list = []
+    deadline = time.monotonic() + timeout
+    last = None
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise Timeout(f"not within {alt} ± {tol} m for {settle_s} s after {timeout} s; last sample {last}")
+        p = gcs.recv("LOCAL_POSITION_NED", timeout=left)
+        last = p
+        if abs(-p.z - alt) > tol:
+            run = []
+            continue
+        run.append(p)
+        if run[-1].time_boot_ms - run[0].time_boot_ms >= settle_s * 1000:
+            break
+    window = [gcs.recv("LOCAL_POSITION_NED")]
+    while window[-1].time_boot_ms - window[0].time_boot_ms < window_s * 1000:
+        window.append(gcs.recv("LOCAL_POSITION_NED"))
+    return window
+
+
+def take_off(gcs: Gcs, alt: float | None = None, pos_hz: float = 20.0):
+    """Arm, QHOVER, wait for a steady hover at HOVER_ALT. Returns the hover window."""
+    if alt is None:
+        alt = gcs.param_get("HOVER_ALT").param_value
+    gcs.set_interval(MSG_LOCAL_POSITION_NED, pos_hz)
+    gcs.wait_ready()
+    gcs.arm()
+    gcs.set_mode("QHOVER")
+    window = wait_hover(gcs, alt)
+    assert all(abs(-p.z - alt) <= 0.05 for p in window), [round(-p.z, 3) for p in window]
+    return window
+
+
+def is_finite(x: float) -> bool:
+    return not (math.isnan(x) or math.isinf(x))
