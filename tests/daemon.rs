@@ -40,7 +40,10 @@ impl Daemon {
         let deadline = Instant::now() + Duration::from_secs(20);
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
-            let line = self.lines.recv_timeout(left).unwrap_or_else(|_| panic!("no '{prefix}' line"));
+            let line = self
+                .lines
+                .recv_timeout(left)
+                .unwrap_or_else(|_| panic!("no '{prefix}' line"));
             if let Some(rest) = line.strip_prefix(prefix) {
                 return rest.trim().to_owned();
             }
@@ -59,11 +62,19 @@ impl Drop for Daemon {
 fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
     let dir = tempfile::tempdir().unwrap();
     let log_dir = dir.path().to_str().unwrap();
-    let mut d = Daemon::start(&["run", "--serve", "tcpin:127.0.0.1:0", "--log-dir", log_dir, "--headless"]);
+    let mut d = Daemon::start(&[
+        "run",
+        "--serve",
+        "tcpin:127.0.0.1:0",
+        "--log-dir",
+        log_dir,
+        "--headless",
+    ]);
     let serving = d.line_starting("serving tcpin:");
     let tlog = d.line_starting("logging ");
     let mut sock = TcpStream::connect(serving.as_str()).expect("connect to the serve port");
-    sock.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
     // Read until a vehicle heartbeat (system 1, not the daemon's own 255) arrives.
     let mut dec = FrameDecoder::new();
     let mut buf = [0u8; 4096];
@@ -76,9 +87,13 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
         vehicle_frames += dec.frames().filter(|f| f.system_id() == 1).count();
     }
     assert!(vehicle_frames >= 20, "only {vehicle_frames} vehicle frames");
-    sock.write_all(b"\xfe\x00garbage that is not mavlink").unwrap();
+    sock.write_all(b"\xfe\x00garbage that is not mavlink")
+        .unwrap();
 
-    let status = Command::new("kill").args(["-TERM", &d.child.id().to_string()]).status().unwrap();
+    let status = Command::new("kill")
+        .args(["-TERM", &d.child.id().to_string()])
+        .status()
+        .unwrap();
     assert!(status.success());
     let deadline = Instant::now() + Duration::from_secs(20);
     let exit = loop {
@@ -91,9 +106,22 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
     assert!(exit.success(), "exit status {exit}");
     let mut reader = TlogReader::open(std::path::Path::new(&tlog)).unwrap();
     let records: Vec<_> = reader.by_ref().collect();
-    assert_eq!(reader.skipped_bytes, 0, "a clean shutdown leaves no torn record");
-    assert!(records.iter().any(|(t, f)| t & 3 == 0 && f.system_id() == 1), "vehicle frames logged");
-    assert!(records.iter().any(|(t, f)| t & 3 == 3 && f.system_id() == 255), "own heartbeat logged");
+    assert_eq!(
+        reader.skipped_bytes, 0,
+        "a clean shutdown leaves no torn record"
+    );
+    assert!(
+        records
+            .iter()
+            .any(|(t, f)| t & 3 == 0 && f.system_id() == 1),
+        "vehicle frames logged"
+    );
+    assert!(
+        records
+            .iter()
+            .any(|(t, f)| t & 3 == 3 && f.system_id() == 255),
+        "own heartbeat logged"
+    );
 }
 
 #[test]
@@ -107,5 +135,8 @@ fn a_broken_config_file_is_one_clear_error() {
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("invalid config") && err.contains("bad.toml"), "{err}");
+    assert!(
+        err.contains("invalid config") && err.contains("bad.toml"),
+        "{err}"
+    );
 }

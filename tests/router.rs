@@ -213,14 +213,23 @@ async fn a_slow_client_loses_frames_counted_while_the_others_get_everything() {
         let mut bytes = Vec::new();
         for i in 0..500u32 {
             seq = seq.wrapping_add(1);
-            bytes.extend_from_slice(Frame::encode_v2(1, 1, seq, &statustext((i % 250) as u8)).as_bytes());
+            bytes.extend_from_slice(
+                Frame::encode_v2(1, 1, seq, &statustext((i % 250) as u8)).as_bytes(),
+            );
         }
         h.vehicle.write_all(&bytes).await.unwrap();
         let got = read_frames(&mut h.clients[0], 500, Duration::from_secs(20)).await;
         assert_eq!(got.len(), 500, "the reading client must get every frame");
     }
     let links = h.handle.links.borrow().clone();
-    let dropped: Vec<u64> = links.iter().map(|l| l.stats.snapshot().tx_dropped_queue_full).collect();
-    assert_eq!(dropped.iter().filter(|d| **d > 0).count(), 1, "only the slow client drops: {dropped:?}");
+    let dropped: Vec<u64> = links
+        .iter()
+        .map(|l| l.stats.snapshot().tx_dropped_queue_full)
+        .collect();
+    assert_eq!(
+        dropped.iter().filter(|d| **d > 0).count(),
+        1,
+        "only the slow client drops: {dropped:?}"
+    );
     finish(h).await;
 }

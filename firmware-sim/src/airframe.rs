@@ -111,7 +111,9 @@ impl std::str::FromStr for ModelMode {
         match s {
             "paper" => Ok(Self::Paper),
             "physical" => Ok(Self::Physical),
-            other => Err(format!("unknown model '{other}' (expected paper or physical)")),
+            other => Err(format!(
+                "unknown model '{other}' (expected paper or physical)"
+            )),
         }
     }
 }

@@ -205,6 +205,9 @@ mod tests {
         let w = Vector3::new(0.1, 0.2, 0.3);
         assert_eq!(body_rates_to_frd(&w), [-0.1, 0.2, -0.3]);
         // Up is −down, rotor 1 (+y_B) is on the right.
-        assert_eq!(paper_to_ned(&Vector3::new(0.0, 1.0, 2.0)), Vector3::new(0.0, 1.0, -2.0));
+        assert_eq!(
+            paper_to_ned(&Vector3::new(0.0, 1.0, 2.0)),
+            Vector3::new(0.0, 1.0, -2.0)
+        );
     }
 }

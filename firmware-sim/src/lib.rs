@@ -4,9 +4,18 @@
 //! it.
 
 pub mod airframe;
+pub mod clock;
 pub mod control;
+pub mod endpoint;
+pub mod estimator;
 pub mod frames;
+pub mod integrator;
 pub mod mode;
+pub mod params;
+pub mod plant;
+pub mod sensors;
+pub mod serve;
+pub mod simulate;
 pub mod vehicle;
 
 pub use airframe::{Airframe, ModelMode};

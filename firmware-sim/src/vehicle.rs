@@ -1,16 +1,51 @@
 //! `Vehicle::step(dt)`: one physics step of the whole twin — sensors → estimator → controller →
 //! actuators → plant — synchronous, deterministic (seeded RNG, no wall clock) and free of
 //! allocation. The MAVLink endpoint and the offline `simulate` command both drive it.
+//!
+//! Frames are the paper's (inertial z up, body thrust along +z_B). The plant is integrated with
+//! RK4 at [`PHYSICS_DT_S`]; sensors, estimator and controller run every control period
+//! (100 Hz by default) and their outputs are held in between, as the firmware's PWM is. In
+//! `paper` mode the controller sees the true state and drives the plant directly ([I17], [I18]);
+//! in `physical` mode it sees the estimator and the position sensor and drives PWM through the
+//! actuator models.
 
 use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 
 use crate::airframe::{Airframe, ModelMode};
-use crate::control::{ControlOutput, Gains, GainError, PwmOutputs};
+use crate::control::{
+    ActuatorCommand, ControlInput, ControlOutput, Controller, GainError, Gains, PilotInput,
+    PwmOutputs,
+};
+use crate::estimator::Estimator;
 use crate::frames::Euler;
+use crate::integrator::rk4_step;
 use crate::mode::FlightMode;
+use crate::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
+use crate::plant::rigid_body::EulerTrig;
+use crate::plant::{self, PlantInput, PlantState, ground};
+use crate::sensors::{self, Sensors};
 
 /// The physics step: the plant is integrated at 1 kHz.
 pub const PHYSICS_DT_S: f64 = 0.001;
+/// The physics step in µs (the simulation clock counts whole steps).
+const PHYSICS_DT_US: u64 = 1000;
+/// Tilt beyond which the vehicle is considered tipped over (crash), rad.
+pub const CRASH_TILT_RAD: f64 = std::f64::consts::FRAC_PI_3;
+/// cos([`CRASH_TILT_RAD`]), compared with cos θ cos φ every step.
+const CRASH_COS_TILT: f64 = 0.5;
+/// Sink rate at touchdown above which the landing is a crash, m/s.
+pub const CRASH_SINK_RATE_M_S: f64 = 3.0;
+/// Time on the ground after which QLAND disarms, s.
+pub const LAND_DISARM_DELAY_S: f64 = 0.5;
+/// Largest estimated tilt at which arming is allowed, rad.
+pub const ARM_MAX_TILT_RAD: f64 = 0.2;
+/// Correlation time of the gust model (first-order Gauss–Markov per axis), s.
+pub const GUST_TIME_CONSTANT_S: f64 = 1.0;
+/// Seed offset of the wind RNG, so that turning wind on leaves the sensor noise unchanged.
+const WIND_SEED_SALT: u64 = 0x5749_4e44;
 
 /// Rigid-body state in the paper's frames (z up). See `plant` for the equations.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -128,36 +163,360 @@ pub struct Telemetry {
     pub state: SystemState,
 }
 
+/// Steady wind plus a seeded first-order Gauss–Markov gust (inertial frame).
+#[derive(Debug, Clone)]
+struct Wind {
+    mean_m_s: Vector3<f64>,
+    gust_sigma_m_s: f64,
+    gust_m_s: Vector3<f64>,
+    keep: f64,
+    rng: ChaCha8Rng,
+}
+
+impl Wind {
+    fn new(seed: u64) -> Self {
+        Self {
+            mean_m_s: Vector3::zeros(),
+            gust_sigma_m_s: 0.0,
+            gust_m_s: Vector3::zeros(),
+            keep: (-PHYSICS_DT_S / GUST_TIME_CONSTANT_S).exp(),
+            rng: ChaCha8Rng::seed_from_u64(seed ^ WIND_SEED_SALT),
+        }
+    }
+
+    /// Advances the gust one physics step and returns the wind, m/s, or `None` when the wind
+    /// perturbation is off (the paper's drag-free model).
+    fn step(&mut self) -> Option<Vector3<f64>> {
+        if self.gust_sigma_m_s == 0.0 && self.mean_m_s == Vector3::zeros() {
+            return None;
+        }
+        if self.gust_sigma_m_s > 0.0 {
+            let drive = self.gust_sigma_m_s * (1.0 - self.keep * self.keep).sqrt();
+            for i in 0..3 {
+                let n: f64 = self.rng.sample(StandardNormal);
+                self.gust_m_s[i] = self.keep * self.gust_m_s[i] + drive * n;
+            }
+        }
+        Some(self.mean_m_s + self.gust_m_s)
+    }
+}
+
 /// The twin.
 #[derive(Debug, Clone)]
 pub struct Vehicle {
     config: VehicleConfig,
+    plant: PlantState,
+    /// Sines and cosines of `plant.euler`, kept with the state (computed once per step).
+    plant_trig: EulerTrig,
+    actuators: ActuatorModel,
+    /// What the plant is driven with during the current step.
+    input: PlantInput,
+    sensors: Sensors,
+    estimator: Estimator,
+    controller: Controller,
+    setpoint_m: Vector3<f64>,
+    on_ground: bool,
+    landed_time_s: f64,
+    steps: u64,
+    control_every_steps: u64,
+    control_dt_s: f64,
+    push_torque_body_nm: Vector3<f64>,
+    push_steps_left: u64,
+    wind: Wind,
     telemetry: Telemetry,
 }
 
 impl Vehicle {
-    /// A vehicle at rest at `config.initial`.
+    /// A vehicle at rest at `config.initial`. With `initial.pos_m.z ≤ 0` it stands on the
+    /// ground (level, at z = 0). A vehicle configured `armed` starts calibrated and, if it
+    /// starts in the air, with its rotors at hover speed (it was launched from a hover).
     #[must_use]
     pub fn new(config: VehicleConfig) -> Self {
-        Self {
+        let af = &config.airframe;
+        let control_every_steps =
+            ((1.0 / (config.control_rate_hz.max(1.0) * PHYSICS_DT_S)).round() as u64).max(1);
+        let control_dt_s = control_every_steps as f64 * PHYSICS_DT_S;
+        let mut plant = PlantState::at_rest(config.initial.pos_m, config.initial.euler);
+        let on_ground = plant.pos_m.z <= 0.0;
+        if on_ground {
+            plant = ground::resting(&plant);
+        }
+        let mut sensors = Sensors::new(config.ideal_sensors, config.seed, control_dt_s);
+        let mut estimator = Estimator::new(plant.euler, control_dt_s, af.gravity_m_s2);
+        let mut actuators = ActuatorModel::new(af, PHYSICS_DT_S);
+        let mut state = SystemState::Calibrating;
+        if config.model == ModelMode::Paper || config.ideal_sensors {
+            estimator.skip_calibration();
+            state = SystemState::Standby;
+        } else if config.armed {
+            // Launched armed: the gyros were calibrated at rest before, with the same sensors.
+            let rest = Vector3::new(0.0, 0.0, af.gravity_m_s2);
+            while !estimator.calibrate(&sensors.sample_imu(&Vector3::zeros(), &rest)) {}
+            state = SystemState::Standby;
+        }
+        if config.armed {
+            state = SystemState::Active;
+            if !on_ground {
+                let w = af.hover_rotor_speed_rad_s();
+                actuators.state.rotor_speed_rad_s = [w, w];
+            }
+        }
+        let mut v = Self {
+            plant,
+            plant_trig: EulerTrig::new(&plant.euler),
+            actuators,
+            input: PlantInput::default(),
+            sensors,
+            estimator,
+            controller: Controller::new(config.airframe.clone(), config.model),
+            setpoint_m: Vector3::new(0.0, 0.0, config.gains.hover_alt_m),
+            on_ground,
+            landed_time_s: 0.0,
+            steps: 0,
+            control_every_steps,
+            control_dt_s,
+            push_torque_body_nm: Vector3::zeros(),
+            push_steps_left: 0,
+            wind: Wind::new(config.seed),
             telemetry: Telemetry {
                 mode: config.mode,
                 armed: config.armed,
+                state,
+                euler_est: plant.euler,
+                pwm_us: DISARMED_PWM_US,
+                control: ControlOutput {
+                    pwm_us: DISARMED_PWM_US,
+                    ..ControlOutput::default()
+                },
                 ..Telemetry::default()
             },
             config,
-        }
+        };
+        v.input.actuators = v.actuators.state;
+        v.refresh_truth();
+        v
     }
 
     /// Advances the twin by one physics step of [`PHYSICS_DT_S`].
     pub fn step(&mut self) {
-        self.telemetry.t_us += 1000;
+        if self.steps.is_multiple_of(self.control_every_steps) {
+            self.control_tick();
+        }
+        let af = &self.config.airframe;
+        let model = self.config.model;
+
+        // Actuators: hold the controller's outputs between control ticks.
+        match model {
+            ModelMode::Physical => self.actuators.step(af, &self.telemetry.pwm_us),
+            ModelMode::Paper => {
+                self.actuators.state = if self.telemetry.armed {
+                    self.telemetry.control.actuators
+                } else {
+                    ActuatorCommand::default()
+                };
+            }
+        }
+        self.input.actuators = self.actuators.state;
+        self.input.fx_paper_n = match model {
+            ModelMode::Paper if self.telemetry.armed => self.telemetry.control.fx_n,
+            _ => 0.0,
+        };
+        self.input.disturbance_torque_body_nm = if self.push_steps_left > 0 {
+            self.push_steps_left -= 1;
+            self.push_torque_body_nm
+        } else {
+            Vector3::zeros()
+        };
+        self.input.wind_m_s = self.wind.step();
+
+        if self.on_ground {
+            let trig = EulerTrig::new(&self.plant.euler);
+            let loads = plant::loads(af, model, &trig, &self.plant, &self.input);
+            let vertical = (trig.rotation_body_to_inertial() * loads.force_body_n).z;
+            if ground::lifts_off(vertical, af.weight_n()) {
+                self.on_ground = false;
+            }
+        }
+        if !self.on_ground {
+            let input = self.input;
+            let start = self.plant.euler;
+            let start_trig = self.plant_trig;
+            self.plant = rk4_step(&self.plant, PHYSICS_DT_S, |s| {
+                let trig = start_trig.shifted(&start, &s.euler);
+                plant::derivative_with_trig(af, model, s, &input, &trig)
+            });
+            let touchdown = ground::touchdown(&mut self.plant);
+            self.plant_trig = EulerTrig::new(&self.plant.euler);
+            if let Some(td) = touchdown {
+                self.on_ground = true;
+                if td.sink_rate_m_s > CRASH_SINK_RATE_M_S || td.tilt_rad > CRASH_TILT_RAD {
+                    self.crash();
+                }
+            } else if self.plant_trig.cos_tilt() < CRASH_COS_TILT {
+                self.crash();
+            }
+        }
+
+        // Landed bookkeeping and QLAND's automatic disarm.
+        if self.on_ground {
+            self.landed_time_s += PHYSICS_DT_S;
+            if self.telemetry.armed
+                && self.telemetry.mode == FlightMode::QLand
+                && self.landed_time_s >= LAND_DISARM_DELAY_S
+            {
+                self.set_disarmed();
+            }
+        } else {
+            self.landed_time_s = 0.0;
+        }
+
+        self.steps += 1;
+        self.telemetry.t_us += PHYSICS_DT_US;
+        self.refresh_truth();
+    }
+
+    /// Sensors → estimator → controller, once per control period.
+    fn control_tick(&mut self) {
+        let af = &self.config.airframe;
+        let model = self.config.model;
+        // What the accelerometer feels: on the ground the gear cancels gravity's pull.
+        let specific_force = if self.on_ground {
+            self.plant
+                .euler
+                .rotation_body_to_inertial()
+                .tr_mul(&Vector3::new(0.0, 0.0, af.gravity_m_s2))
+        } else {
+            plant::specific_force_body_m_s2(af, model, &self.plant, &self.input)
+        };
+        let imu = self
+            .sensors
+            .sample_imu(&self.plant.omega_body_rad_s, &specific_force);
+        let fix = self.sensors.sample_position(&self.plant.pos_m);
+        let rc = self.telemetry.rc_us;
+        let pilot: PilotInput = sensors::rc_to_pilot(&rc);
+
+        if self.telemetry.state == SystemState::Calibrating {
+            if self.estimator.calibrate(&imu) {
+                self.telemetry.state = SystemState::Standby;
+            }
+        } else if model == ModelMode::Physical {
+            self.estimator.update(&imu, Some(&fix.pos_m));
+        }
+
+        let truth_vel = self.telemetry.vel_m_s;
+        let input = match model {
+            ModelMode::Paper => ControlInput {
+                dt_s: self.control_dt_s,
+                mode: self.telemetry.mode,
+                euler: self.plant.euler,
+                omega_body_rad_s: self.plant.omega_body_rad_s,
+                pos_m: self.plant.pos_m,
+                vel_m_s: truth_vel,
+                setpoint_m: self.setpoint_m,
+                yaw_setpoint_rad: 0.0,
+                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
+                pilot,
+            },
+            ModelMode::Physical => ControlInput {
+                dt_s: self.control_dt_s,
+                mode: self.telemetry.mode,
+                euler: self.estimator.euler(),
+                omega_body_rad_s: self.estimator.omega_rad_s(),
+                pos_m: fix.pos_m,
+                vel_m_s: fix.vel_m_s,
+                setpoint_m: self.setpoint_m,
+                yaw_setpoint_rad: 0.0,
+                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
+                pilot,
+            },
+        };
+
+        let out = if self.telemetry.armed {
+            self.controller.update(&input, &self.config.gains)
+        } else {
+            ControlOutput {
+                pwm_us: DISARMED_PWM_US,
+                ..ControlOutput::default()
+            }
+        };
+        self.telemetry.control = out;
+        self.telemetry.pwm_us = out.pwm_us;
+        self.telemetry.gyro_rad_s = imu.gyro_rad_s.into();
+        self.telemetry.accel_m_s2 = imu.accel_m_s2;
+        self.telemetry.adc_counts = imu.adc_counts;
+        self.telemetry.euler_est = input.euler;
+        self.telemetry.omega_est_rad_s = input.omega_body_rad_s;
+        if self.telemetry.armed && self.telemetry.state != SystemState::Emergency {
+            // Failsafe: flying on pilot throttle with no receiver signal.
+            let rc_lost = !sensors::rc_has_signal(&rc);
+            self.telemetry.state = if rc_lost && self.telemetry.mode == FlightMode::QStabilize {
+                SystemState::Critical
+            } else {
+                SystemState::Active
+            };
+        }
+    }
+
+    /// Copies the true state into the telemetry.
+    fn refresh_truth(&mut self) {
+        let t = &mut self.telemetry;
+        t.pos_m = self.plant.pos_m;
+        t.vel_m_s = self.plant_trig.rotation_body_to_inertial() * self.plant.vel_body_m_s;
+        t.euler = self.plant.euler;
+        t.omega_body_rad_s = self.plant.omega_body_rad_s;
+        t.rotor_speed_rad_s = self.actuators.state.rotor_speed_rad_s;
+        t.landed = self.on_ground;
+    }
+
+    fn crash(&mut self) {
+        self.set_disarmed();
+        self.telemetry.state = SystemState::Emergency;
+    }
+
+    fn set_disarmed(&mut self) {
+        self.telemetry.armed = false;
+        self.telemetry.pwm_us = DISARMED_PWM_US;
+        self.telemetry.control = ControlOutput {
+            pwm_us: DISARMED_PWM_US,
+            ..ControlOutput::default()
+        };
+        if self.telemetry.state != SystemState::Emergency {
+            self.telemetry.state = if self.estimator.is_calibrated() {
+                SystemState::Standby
+            } else {
+                SystemState::Calibrating
+            };
+        }
     }
 
     /// Current snapshot.
     #[must_use]
     pub fn telemetry(&self) -> &Telemetry {
         &self.telemetry
+    }
+
+    /// The true rigid-body state (paper frames).
+    #[must_use]
+    pub fn plant_state(&self) -> &PlantState {
+        &self.plant
+    }
+
+    /// The configuration the vehicle was built with (gains as currently set).
+    #[must_use]
+    pub fn config(&self) -> &VehicleConfig {
+        &self.config
+    }
+
+    /// Simulation time, s.
+    #[must_use]
+    pub fn time_s(&self) -> f64 {
+        self.telemetry.t_us as f64 * 1e-6
+    }
+
+    /// The position setpoint in use (paper frame, z up), m.
+    #[must_use]
+    pub fn position_setpoint(&self) -> Vector3<f64> {
+        self.setpoint_m
     }
 
     /// Current gains.
@@ -181,9 +540,35 @@ impl Vehicle {
     /// # Errors
     /// [`ArmError::PreArm`] saying which check failed.
     pub fn arm(&mut self, force: bool) -> Result<(), ArmError> {
-        let _ = force;
+        if self.telemetry.armed {
+            return Ok(());
+        }
+        if !force {
+            if self.telemetry.state == SystemState::Emergency {
+                return Err(ArmError::PreArm("vehicle crashed"));
+            }
+            if !self.estimator.is_calibrated() {
+                return Err(ArmError::PreArm("gyro calibration in progress"));
+            }
+            if !self.on_ground {
+                return Err(ArmError::PreArm("not landed"));
+            }
+            let e = self.estimator_or_truth_euler();
+            if tilt_rad(&e) > ARM_MAX_TILT_RAD {
+                return Err(ArmError::PreArm("not level"));
+            }
+        }
+        self.controller.reset();
         self.telemetry.armed = true;
+        self.telemetry.state = SystemState::Active;
         Ok(())
+    }
+
+    fn estimator_or_truth_euler(&self) -> Euler {
+        match self.config.model {
+            ModelMode::Paper => self.plant.euler,
+            ModelMode::Physical => self.estimator.euler(),
+        }
     }
 
     /// Disarms. In flight only with `force`.
@@ -191,13 +576,18 @@ impl Vehicle {
     /// # Errors
     /// [`ArmError::InFlight`].
     pub fn disarm(&mut self, force: bool) -> Result<(), ArmError> {
-        let _ = force;
-        self.telemetry.armed = false;
+        if self.telemetry.armed && !self.on_ground && !force {
+            return Err(ArmError::InFlight);
+        }
+        self.set_disarmed();
         Ok(())
     }
 
     /// Changes the flight mode.
     pub fn set_mode(&mut self, mode: FlightMode) {
+        if mode != self.telemetry.mode {
+            self.controller.reset();
+        }
         self.telemetry.mode = mode;
     }
 
@@ -209,16 +599,29 @@ impl Vehicle {
 
     /// Moves the hover point (paper frame, z up) used by QLOITER.
     pub fn set_position_setpoint(&mut self, pos_m: Vector3<f64>) {
-        let _ = pos_m;
+        self.setpoint_m = pos_m;
     }
 
     /// Applies a body torque (N·m) for `duration_s`: the paper's push on an axis.
     pub fn push(&mut self, torque_body_nm: Vector3<f64>, duration_s: f64) {
-        let _ = (torque_body_nm, duration_s);
+        self.push_torque_body_nm = torque_body_nm;
+        self.push_steps_left = (duration_s.max(0.0) / PHYSICS_DT_S).round() as u64;
     }
 
     /// Sets a steady wind (inertial, m/s) and a gust intensity (m/s, standard deviation).
     pub fn set_wind(&mut self, wind_m_s: Vector3<f64>, gust_m_s: f64) {
-        let _ = (wind_m_s, gust_m_s);
+        self.wind.mean_m_s = wind_m_s;
+        self.wind.gust_sigma_m_s = gust_m_s.max(0.0);
+        if self.wind.gust_sigma_m_s == 0.0 {
+            self.wind.gust_m_s = Vector3::zeros();
+        }
     }
 }
+
+/// Angle between z_B and the vertical, rad.
+fn tilt_rad(e: &Euler) -> f64 {
+    (e.theta.cos() * e.phi.cos()).clamp(-1.0, 1.0).acos()
+}
+
+#[cfg(test)]
+mod tests;

@@ -766,9 +766,25 @@ fn physical_converges_to_an_offset_setpoint_from_a_yawed_start() {
 fn a_boundary_set_that_equals_in_exact_arithmetic_is_refused_in_float32() {
     // b = c + d typed as float32 parameters (0.22 + 0.18 = 0.4) must not slip through rounding.
     let f = |v: f32| f64::from(v);
-    let levels = SaturationLevels { a: 1.2, b: f(0.4), c: f(0.22), d: f(0.18) };
+    let levels = SaturationLevels {
+        a: 1.2,
+        b: f(0.4),
+        c: f(0.22),
+        d: f(0.18),
+    };
     let err = levels.validate("LAT_SAT").unwrap_err();
     assert!(err.to_string().contains("b > c + d"), "{err}");
-    let levels = SaturationLevels { a: f(1.0), b: f(0.55), c: f(0.25), d: f(0.2) };
-    assert!(levels.validate("LON_SAT").unwrap_err().to_string().contains("a > b + c + d"));
+    let levels = SaturationLevels {
+        a: f(1.0),
+        b: f(0.55),
+        c: f(0.25),
+        d: f(0.2),
+    };
+    assert!(
+        levels
+            .validate("LON_SAT")
+            .unwrap_err()
+            .to_string()
+            .contains("a > b + c + d")
+    );
 }

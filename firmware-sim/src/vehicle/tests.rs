@@ -1,0 +1,184 @@
+//! Vehicle state machine: calibration, arming rules, disarmed outputs, ground contact, crash
+//! detection, perturbations and determinism.
+
+use nalgebra::Vector3;
+
+use super::*;
+
+fn run(v: &mut Vehicle, seconds: f64) {
+    for _ in 0..(seconds / PHYSICS_DT_S).round() as u64 {
+        v.step();
+    }
+}
+
+fn on_ground() -> VehicleConfig {
+    VehicleConfig {
+        mode: FlightMode::QHover,
+        ..VehicleConfig::default()
+    }
+}
+
+#[test]
+fn calibrates_then_arms_only_when_checks_pass() {
+    let mut v = Vehicle::new(on_ground());
+    assert_eq!(v.telemetry().state, SystemState::Calibrating);
+    assert!(v.telemetry().landed);
+    assert_eq!(
+        v.arm(false),
+        Err(ArmError::PreArm("gyro calibration in progress"))
+    );
+    run(&mut v, 1.1);
+    assert_eq!(v.telemetry().state, SystemState::Standby);
+    // Disarmed: motors idle, surfaces neutral, rotors stopped, still on the ground.
+    assert_eq!(v.telemetry().pwm_us, DISARMED_PWM_US);
+    assert_eq!(v.telemetry().rotor_speed_rad_s, [0.0, 0.0]);
+    assert_eq!(v.telemetry().pos_m.z, 0.0);
+    v.arm(false).expect("pre-arm checks pass on level ground");
+    assert_eq!(v.telemetry().state, SystemState::Active);
+    run(&mut v, 3.0);
+    assert!(!v.telemetry().landed, "QHOVER climbs");
+    assert_eq!(v.disarm(false), Err(ArmError::InFlight));
+    assert!(v.telemetry().armed);
+    v.disarm(true).expect("forced disarm");
+    assert!(!v.telemetry().armed);
+    assert_eq!(v.telemetry().pwm_us, DISARMED_PWM_US);
+}
+
+#[test]
+fn refuses_to_arm_in_the_air() {
+    let cfg = VehicleConfig {
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 5.0),
+            ..Default::default()
+        },
+        ideal_sensors: true,
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    assert_eq!(v.arm(false), Err(ArmError::PreArm("not landed")));
+    assert!(v.arm(true).is_ok());
+}
+
+#[test]
+fn disarmed_drop_is_a_crash_and_does_not_fall_through() {
+    let cfg = VehicleConfig {
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 2.0),
+            ..Default::default()
+        },
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    run(&mut v, 1.0);
+    // 2 m free fall: contact at 6.3 m/s, beyond the crash threshold.
+    let t = v.telemetry();
+    assert!(t.landed && t.pos_m.z == 0.0 && t.vel_m_s.norm() == 0.0);
+    assert_eq!(t.state, SystemState::Emergency);
+    assert_eq!(v.arm(false), Err(ArmError::PreArm("vehicle crashed")));
+}
+
+#[test]
+fn tipping_over_is_a_crash() {
+    let cfg = VehicleConfig {
+        model: ModelMode::Paper,
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 10.0),
+            ..Default::default()
+        },
+        armed: true,
+        mode: FlightMode::QLoiter,
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    v.push(Vector3::new(3.0, 0.0, 0.0), 0.5);
+    run(&mut v, 1.0);
+    assert_eq!(v.telemetry().state, SystemState::Emergency);
+    assert!(!v.telemetry().armed);
+}
+
+#[test]
+fn a_push_rolls_the_vehicle_and_it_recovers() {
+    let cfg = VehicleConfig {
+        model: ModelMode::Paper,
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 1.0),
+            ..Default::default()
+        },
+        armed: true,
+        mode: FlightMode::QLoiter,
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    v.push(Vector3::new(0.05, 0.0, 0.0), 0.2);
+    run(&mut v, 0.2);
+    assert!(
+        v.telemetry().omega_body_rad_s.x > 0.1,
+        "{:?}",
+        v.telemetry().omega_body_rad_s
+    );
+    run(&mut v, 30.0);
+    assert!(v.telemetry().euler.phi.abs() < 1e-3 && v.telemetry().state == SystemState::Active);
+}
+
+#[test]
+fn steady_wind_drifts_a_vehicle_downwind() {
+    // QSTABILIZE at hover throttle with no position hold: the wind's drag carries it along +y.
+    let cfg = VehicleConfig {
+        model: ModelMode::Paper,
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 5.0),
+            ..Default::default()
+        },
+        armed: true,
+        mode: FlightMode::QStabilize,
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    v.set_rc_input([1500, 1500, 1462, 1500, 0, 0, 0, 0]);
+    v.set_wind(Vector3::new(0.0, 3.0, 0.0), 0.5);
+    run(&mut v, 2.0);
+    assert!(v.telemetry().vel_m_s.y > 0.1, "{:?}", v.telemetry().vel_m_s);
+}
+
+#[test]
+fn same_seed_same_flight() {
+    let cfg = VehicleConfig {
+        initial: InitialState {
+            pos_m: Vector3::new(0.1, 0.1, 0.1),
+            euler: Euler::new(1.0, 0.1, 0.1),
+        },
+        armed: true,
+        mode: FlightMode::QLoiter,
+        seed: 42,
+        ..VehicleConfig::default()
+    };
+    let mut a = Vehicle::new(cfg.clone());
+    let mut b = Vehicle::new(cfg.clone());
+    let mut c = Vehicle::new(VehicleConfig { seed: 43, ..cfg });
+    for v in [&mut a, &mut b, &mut c] {
+        v.set_wind(Vector3::new(1.0, 0.0, 0.0), 0.3);
+        run(v, 3.0);
+    }
+    assert_eq!(a.telemetry(), b.telemetry());
+    assert_ne!(a.telemetry().pos_m, c.telemetry().pos_m);
+}
+
+#[test]
+fn rc_loss_in_qstabilize_is_critical() {
+    let cfg = VehicleConfig {
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, 1.0),
+            ..Default::default()
+        },
+        armed: true,
+        ideal_sensors: true,
+        ..VehicleConfig::default()
+    };
+    let mut v = Vehicle::new(cfg);
+    v.set_rc_input([1500, 1500, 1500, 1500, 0, 0, 0, 0]);
+    run(&mut v, 0.05);
+    assert_eq!(v.telemetry().state, SystemState::Active);
+    v.set_rc_input([0; 8]);
+    run(&mut v, 0.05);
+    assert_eq!(v.telemetry().state, SystemState::Critical);
+}

@@ -1,0 +1,202 @@
+//! Closed-loop flights of the whole twin (plant, sensors, estimator, controller) and the
+//! `simulate` command line. Seeded and in fast time: no sleeps.
+
+use firmware_sim::vehicle::{InitialState, PHYSICS_DT_S, SystemState, Telemetry};
+use firmware_sim::{Euler, FlightMode, ModelMode, Vehicle, VehicleConfig};
+use nalgebra::Vector3;
+
+/// The initial conditions of Section IV ([I10]).
+fn paper_initial() -> InitialState {
+    InitialState {
+        pos_m: Vector3::new(0.1, 0.1, 0.1),
+        euler: Euler::new(1.0, 0.1, 0.1),
+    }
+}
+
+fn flying(model: ModelMode, seed: u64) -> Vehicle {
+    let mut v = Vehicle::new(VehicleConfig {
+        model,
+        seed,
+        initial: paper_initial(),
+        mode: FlightMode::QLoiter,
+        armed: true,
+        ..VehicleConfig::default()
+    });
+    v.set_position_setpoint(Vector3::new(0.0, 0.0, 1.0));
+    v
+}
+
+/// Steps until `t_s`, calling `each` after every step.
+fn fly_until(v: &mut Vehicle, t_s: f64, mut each: impl FnMut(&Telemetry)) {
+    while v.time_s() < t_s - 0.5 * PHYSICS_DT_S {
+        v.step();
+        each(v.telemetry());
+    }
+}
+
+/// ψ(t) of ψ̈ = −5ψ̇ − 5ψ, ψ(0) = 1, ψ̇(0) = 0 (the yaw law (45) with a_ψ1 = a_ψ2 = 5).
+fn psi_closed_form(t: f64) -> f64 {
+    let r1 = (-5.0 + 5.0_f64.sqrt()) / 2.0;
+    let r2 = (-5.0 - 5.0_f64.sqrt()) / 2.0;
+    (r2 * (r1 * t).exp() - r1 * (r2 * t).exp()) / (r2 - r1)
+}
+
+#[test]
+fn paper_mode_reproduces_section_iv() {
+    let mut v = flying(ModelMode::Paper, 1);
+    let mut worst_psi = 0.0_f64;
+    fly_until(&mut v, 25.0, |t| {
+        let time = t.t_us as f64 * 1e-6;
+        worst_psi = worst_psi.max((t.euler.psi - psi_closed_form(time)).abs());
+    });
+    let t = v.telemetry();
+    let err = (t.pos_m - Vector3::new(0.0, 0.0, 1.0)).norm();
+    assert!(
+        err < 0.01,
+        "position error at 25 s: {err} m ({:?})",
+        t.pos_m
+    );
+    // The controller runs at 100 Hz with a zero-order hold, the closed form is continuous.
+    assert!(
+        worst_psi < 5e-3,
+        "ψ departs from the closed form by {worst_psi} rad"
+    );
+    assert_eq!(t.state, SystemState::Active);
+}
+
+#[test]
+fn physical_mode_with_noise_converges_then_holds() {
+    let mut v = flying(ModelMode::Physical, 1);
+    fly_until(&mut v, 25.0, |_| {});
+    let (mut pos, mut tilt, mut psi) = (0.0_f64, 0.0_f64, 0.0_f64);
+    fly_until(&mut v, 60.0, |t| {
+        pos = pos.max((t.pos_m - Vector3::new(0.0, 0.0, 1.0)).amax());
+        tilt = tilt.max(t.euler.phi.abs()).max(t.euler.theta.abs());
+        psi = psi.max(t.euler.psi.abs());
+    });
+    assert!(pos < 0.03, "position band ±{pos} m over 25–60 s");
+    assert!(
+        tilt < 1f64.to_radians(),
+        "tilt band ±{}°",
+        tilt.to_degrees()
+    );
+    // Yaw has no absolute reference (gyro only): it may drift by the calibration residual.
+    assert!(
+        psi < 5f64.to_radians(),
+        "heading drift {}°",
+        psi.to_degrees()
+    );
+}
+
+#[test]
+fn takes_off_in_qhover_and_holds_hover_alt() {
+    let mut v = Vehicle::new(VehicleConfig {
+        mode: FlightMode::QHover,
+        ..VehicleConfig::default()
+    });
+    fly_until(&mut v, 1.2, |_| {});
+    assert!(v.telemetry().landed);
+    v.arm(false).expect("arms after calibration");
+    fly_until(&mut v, 10.0, |_| {});
+    let hover = v.gains().hover_alt_m;
+    let mut band = 0.0_f64;
+    fly_until(&mut v, 20.0, |t| band = band.max((t.pos_m.z - hover).abs()));
+    assert!(band < 0.03, "altitude band ±{band} m");
+    assert!(!v.telemetry().landed && v.telemetry().armed);
+}
+
+#[test]
+fn qland_lands_comes_to_rest_and_disarms() {
+    let mut v = flying(ModelMode::Physical, 3);
+    fly_until(&mut v, 15.0, |_| {});
+    v.set_mode(FlightMode::QLand);
+    let mut max_sink = 0.0_f64;
+    fly_until(&mut v, 25.0, |t| max_sink = max_sink.max(-t.vel_m_s.z));
+    let t = v.telemetry();
+    assert!(t.landed && t.pos_m.z == 0.0, "{:?}", t.pos_m);
+    assert!(!t.armed, "QLAND disarms after touchdown");
+    assert_eq!(t.state, SystemState::Standby, "a landing, not a crash");
+    assert!(max_sink < 1.0, "descent at {max_sink} m/s");
+    assert_eq!(t.pwm_us, [1000, 1000, 1500, 1500, 1500]);
+    assert_eq!(t.vel_m_s, Vector3::zeros());
+}
+
+mod cli {
+    use std::process::Command;
+
+    fn bin() -> Command {
+        Command::new(env!("CARGO_BIN_EXE_firmware-sim"))
+    }
+
+    #[test]
+    fn simulate_writes_the_csv() {
+        let out = bin()
+            .args([
+                "simulate",
+                "--duration",
+                "2",
+                "--model",
+                "paper",
+                "--csv",
+                "-",
+            ])
+            .args([
+                "--initial",
+                "phi=0.1,theta=0.1,psi=1,x=0.1,y=0.1,z=0.1",
+                "--rate",
+                "50",
+            ])
+            .output()
+            .expect("runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8(out.stdout).expect("utf-8");
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+        let want = "t,x,y,z,vx,vy,vz,phi,theta,psi,p,q,r,tau_phi,tau_theta,tau_psi,fz,\
+pwm1,pwm2,pwm3,pwm4,pwm5";
+        for (i, name) in want.split(',').enumerate() {
+            assert_eq!(header[i], name);
+        }
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|f| f.parse().expect("number")).collect())
+            .collect();
+        assert_eq!(rows.len(), 101, "2 s at 50 rows/s plus t = 0");
+        assert!(rows.iter().all(|r| r.len() == header.len()));
+        assert_eq!(rows[0][0], 0.0);
+        assert!((rows[0][9] - 1.0).abs() < 1e-9, "ψ0 = 1 rad");
+        assert!((rows[100][0] - 2.0).abs() < 1e-9);
+        assert!(rows[100][9] < 0.5, "yaw law pulls ψ toward 0");
+    }
+
+    #[test]
+    fn bad_flags_exit_nonzero_with_one_line() {
+        for args in [
+            vec!["simulate", "--model", "wrong"],
+            vec!["simulate", "--initial", "roll=1"],
+            vec!["simulate", "--param", "NOPE=1"],
+            vec!["simulate", "--param", "LAT_SAT_D=0.5"],
+            vec!["simulate", "--duration", "-3"],
+            vec!["simulate", "--bogus"],
+        ] {
+            let out = bin().args(&args).output().expect("runs");
+            assert!(!out.status.success(), "{args:?} should fail");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+            assert!(out.stdout.is_empty());
+        }
+    }
+
+    #[test]
+    fn summary_without_csv() {
+        let out = bin()
+            .args(["simulate", "--duration", "1", "--model", "paper"])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        assert!(String::from_utf8_lossy(&out.stdout).starts_with("t=1.000s"));
+    }
+}
