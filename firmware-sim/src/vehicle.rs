@@ -346,7 +346,15 @@ impl Vehicle {
                 plant::derivative_with_trig(af, model, s, &input, &trig)
             });
             let touchdown = ground::touchdown(&mut self.plant);
-            self.plant_trig = EulerTrig::new(&self.plant.euler);
+            // The step moves the angles by a few mrad, so the next step's trig comes from this
+            // one by angle addition; it is recomputed exactly once per control period so
+            // rounding never accumulates, and after a touchdown (which may reset the attitude).
+            self.plant_trig =
+                if touchdown.is_some() || self.steps.is_multiple_of(self.control_every_steps) {
+                    EulerTrig::new(&self.plant.euler)
+                } else {
+                    start_trig.shifted(&start, &self.plant.euler)
+                };
             if let Some(td) = touchdown {
                 self.on_ground = true;
                 if td.sink_rate_m_s > CRASH_SINK_RATE_M_S || td.tilt_rad > CRASH_TILT_RAD {
