@@ -9,6 +9,10 @@ use vtol_link::{Frame, LinkId};
 
 use crate::router::Side;
 
+const MSG_HEARTBEAT: u32 = 0;
+/// ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT: the messages the view holds.
+const TRACKED: [u32; 4] = [30, 32, 36, 253];
+
 /// How many status texts a vehicle keeps.
 pub const STATUS_TEXTS_KEPT: usize = 32;
 /// A link with no traffic for this long is shown as lost (MAVProxy's default timeout).
@@ -166,6 +170,18 @@ impl VehicleState {
     pub fn apply(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
         self.account(link, side, frame, now);
         let key = (frame.system_id(), frame.component_id());
+        // Decode only what the view uses, and only from known vehicles (or their heartbeat):
+        // the tracker sees every routed frame, and a full decode of each would cost more than
+        // routing it.
+        let id = frame.message_id();
+        let wanted = if id == MSG_HEARTBEAT {
+            true
+        } else {
+            TRACKED.contains(&id) && self.vehicles.contains_key(&key)
+        };
+        if !wanted {
+            return;
+        }
         let Ok(msg) = frame.decode() else { return };
         if let MavMessage::HEARTBEAT(hb) = &msg {
             if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {

@@ -397,6 +397,12 @@ pub(crate) async fn emit(
     event: LinkEvent,
     cancel: &CancellationToken,
 ) -> bool {
+    // The common case, room in the queue, needs no future and no select.
+    let event = match events.try_send(event) {
+        Ok(()) => return true,
+        Err(mpsc::error::TrySendError::Closed(_)) => return false,
+        Err(mpsc::error::TrySendError::Full(event)) => event,
+    };
     tokio::select! {
         biased;
         _ = cancel.cancelled() => false,

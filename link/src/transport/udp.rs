@@ -69,6 +69,9 @@ fn local_addr(url: &LinkUrl, sock: &UdpSocket) -> Result<SocketAddr, LinkError> 
     })
 }
 
+/// Most frames a UDP writer takes from its queue per wake-up.
+const WRITE_BATCH: usize = 64;
+
 /// Writes one link's queue to `dest`, one datagram per frame, until cancelled.
 async fn udp_writer(
     sock: Arc<UdpSocket>,
@@ -77,23 +80,35 @@ async fn udp_writer(
     stats: Arc<LinkStats>,
     cancel: CancellationToken,
 ) {
+    // Frames are taken from the queue a run at a time: under load one wake-up sends many
+    // datagrams (still one datagram per frame, as pymavlink expects).
+    let mut batch: Vec<Frame> = Vec::with_capacity(WRITE_BATCH);
     loop {
-        let frame = tokio::select! {
+        let n = tokio::select! {
             _ = cancel.cancelled() => return,
-            f = rx.recv() => f,
+            n = rx.recv_many(&mut batch, WRITE_BATCH) => n,
         };
-        let Some(frame) = frame else {
+        if n == 0 {
             // Owner dropped the sender: nothing more to send, wait for the end.
             cancel.cancelled().await;
             return;
-        };
-        match sock.send_to(frame.as_bytes(), dest).await {
-            Ok(n) => stats.add_tx(1, n),
-            Err(e) => {
-                // A datagram lost to e.g. ENOBUFS or an unreachable route; UDP has no link to
-                // tear down, so count it and go on.
-                tracing::debug!(%dest, "udp send error: {e}");
-                stats.add_tx_error();
+        }
+        for frame in batch.drain(..) {
+            // Try without waiting first; only a full socket buffer needs the readiness await.
+            let sent = match sock.try_send_to(frame.as_bytes(), dest) {
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                    sock.send_to(frame.as_bytes(), dest).await
+                }
+                r => r,
+            };
+            match sent {
+                Ok(n) => stats.add_tx(1, n),
+                Err(e) => {
+                    // A datagram lost to e.g. ENOBUFS or an unreachable route; UDP has no link
+                    // to tear down, so count it and go on.
+                    tracing::debug!(%dest, "udp send error: {e}");
+                    stats.add_tx_error();
+                }
             }
         }
     }
