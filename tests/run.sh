@@ -33,5 +33,7 @@ cargo test --workspace
 cargo build --workspace --bins
 
 # --- pymavlink / MAVProxy against the real binaries ------------------------------------------
-export FIRMWARE_SIM_BIN="$PWD/target/debug/firmware-sim"
+BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
+export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
+export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
 "$VENV/bin/python" -m pytest tests/pymavlink

@@ -40,20 +40,7 @@ impl Euler {
     /// R_B→I = Rz(ψ)·Ry(θ)·Rx(φ), as printed in the paper.
     #[must_use]
     pub fn rotation_body_to_inertial(&self) -> Matrix3<f64> {
-        let (sps, cps) = self.psi.sin_cos();
-        let (sth, cth) = self.theta.sin_cos();
-        let (sph, cph) = self.phi.sin_cos();
-        Matrix3::new(
-            cth * cps,
-            sph * sth * cps - cph * sps,
-            cph * sth * cps + sph * sps,
-            cth * sps,
-            sph * sth * sps + cph * cps,
-            cph * sth * sps - sph * cps,
-            -sth,
-            sph * cth,
-            cph * cth,
-        )
+        rotation_from_sin_cos(self.psi.sin_cos(), self.theta.sin_cos(), self.phi.sin_cos())
     }
 
     /// W_n of (3): Ω = W_n η̇ with η̇ = (ψ̇, θ̇, φ̇).
@@ -117,6 +104,27 @@ impl Euler {
             ..self
         }
     }
+}
+
+/// R_B→I = Rz(ψ)·Ry(θ)·Rx(φ) from the (sin, cos) pairs of ψ, θ and φ: the one place the
+/// matrix is written, for callers that already hold the trigonometry.
+#[must_use]
+pub fn rotation_from_sin_cos(
+    (sps, cps): (f64, f64),
+    (sth, cth): (f64, f64),
+    (sph, cph): (f64, f64),
+) -> Matrix3<f64> {
+    Matrix3::new(
+        cth * cps,
+        sph * sth * cps - cph * sps,
+        cph * sth * cps + sph * sps,
+        cth * sps,
+        sph * sth * sps + cph * cps,
+        cph * sth * sps - sph * cps,
+        -sth,
+        sph * cth,
+        cph * cth,
+    )
 }
 
 /// Wraps an angle into (−π, π].

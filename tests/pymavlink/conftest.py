@@ -2,7 +2,8 @@
 
 Every test talks to the real twin (`firmware-sim serve`) over real sockets or pseudo-terminals.
 The twin is started with port-0 listeners; the bound addresses are read from its stdout
-(`listening <scheme>:<host>:<port>`, one line per listener).
+(`listening <scheme>:<host>:<port>`, one line per listener). The process mechanics (start lines,
+stdout drain, clean-exit checks) are procs.py's, shared with the daemon (daemon_support.py).
 
 Waiting is always "until the event, with a deadline as the upper bound" (`Gcs.recv`), never a
 sleep.
@@ -13,13 +14,9 @@ from __future__ import annotations
 import math
 import os
 import re
-import select
-import signal
 import struct
-import subprocess
-import threading
 import time
-from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -29,6 +26,8 @@ os.environ["MAVLINK20"] = "1"
 
 import pytest  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
+
+from procs import ManagedProcess, ProcessFactory, factory_fixtures  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 TWIN_BIN = Path(os.environ.get("FIRMWARE_SIM_BIN", ROOT / "target" / "debug" / "firmware-sim"))
@@ -71,63 +70,18 @@ def f32(x: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass
-class Twin:
-    proc: subprocess.Popen
-    listeners: list[tuple[str, str]]  # (scheme, address) as printed
-    workdir: Path
+class Twin(ManagedProcess):
+    """`firmware-sim serve`: one `listening <scheme>:<addr>` line per --listen."""
+
+    KIND = "twin"
+    ENDPOINT_RE = LISTEN_RE
+    ENDPOINT_WORD = "listener"
     param_file: Path
-    stderr_path: Path
-    stdout_lines: list[str] = field(default_factory=list)
-    _drain: threading.Thread | None = None
-
-    def addr(self, scheme: str, nth: int = 0) -> str:
-        found = [a for (s, a) in self.listeners if s == scheme]
-        assert len(found) > nth, f"no {scheme} listener #{nth} in {self.listeners}"
-        return found[nth]
-
-    def host_port(self, scheme: str, nth: int = 0) -> tuple[str, int]:
-        host, port = self.addr(scheme, nth).rsplit(":", 1)
-        return host, int(port)
 
     @property
-    def tcp(self) -> str:
-        """pymavlink URL of the first TCP listener."""
-        return "tcp:" + self.addr("tcpin")
-
-    @property
-    def udp(self) -> str:
-        """pymavlink URL of the first UDP listener."""
-        return "udpout:" + self.addr("udpin")
-
-    def stderr(self) -> str:
-        try:
-            return self.stderr_path.read_text(errors="replace")
-        except OSError:
-            return ""
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def stop(self) -> int:
-        """Ctrl-C the twin and return its exit code (killed → negative)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=5)
-                raise AssertionError("twin did not exit within 15 s of SIGINT\n" + self.stderr()[-3000:])
-        if self._drain is not None:
-            self._drain.join(timeout=5)
-        return self.proc.returncode
-
-    def assert_clean_exit(self) -> None:
-        rc = self.stop()
-        err = self.stderr()
-        assert rc == 0, f"twin exited with {rc}\nstderr tail:\n{err[-3000:]}"
-        assert "panicked" not in err, f"twin panicked:\n{err[-3000:]}"
+    def listeners(self) -> list[tuple[str, str]]:
+        """(scheme, address) as printed."""
+        return self.endpoints
 
 
 def start_twin(
@@ -140,7 +94,6 @@ def start_twin(
     startup_timeout: float = 30.0,
 ) -> Twin:
     assert TWIN_BIN.exists(), f"{TWIN_BIN} missing: build it with `cargo build -p firmware-sim`"
-    workdir.mkdir(parents=True, exist_ok=True)
     listen = list(listen)
     param_file = param_file or workdir / "params.parm"
     args = [str(TWIN_BIN), "serve"]
@@ -149,110 +102,12 @@ def start_twin(
     if speed is not None:
         args += ["--speed", f"{speed:g}"]
     args += ["--seed", str(seed), "--param-file", str(param_file), *extra]
-    stderr_path = workdir / f"twin-{time.monotonic_ns()}.stderr"
-    err = open(stderr_path, "wb")
-    env = dict(os.environ)
-    env.setdefault("RUST_LOG", "info")
-    env.setdefault("RUST_BACKTRACE", "1")
-    proc = subprocess.Popen(
-        args, cwd=workdir, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=err, env=env
-    )
-    err.close()
-    twin = Twin(proc, [], workdir, param_file, stderr_path)
-    deadline = time.monotonic() + startup_timeout
-    buf = b""
-    fd = proc.stdout.fileno()
-    try:
-        while len(twin.listeners) < len(listen):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise AssertionError(
-                    f"twin printed {len(twin.listeners)}/{len(listen)} listener lines in "
-                    f"{startup_timeout} s; stdout so far: {twin.stdout_lines}\nstderr:\n{twin.stderr()[-3000:]}"
-                )
-            ready, _, _ = select.select([fd], [], [], min(left, 0.5))
-            if not ready:
-                continue
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                proc.wait(timeout=5)
-                raise AssertionError(
-                    f"twin exited ({proc.returncode}) before listening; args {args}\n"
-                    f"stdout: {twin.stdout_lines}\nstderr:\n{twin.stderr()[-3000:]}"
-                )
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                text = line.decode(errors="replace").strip()
-                twin.stdout_lines.append(text)
-                m = LISTEN_RE.match(text)
-                if m:
-                    twin.listeners.append((m["scheme"], m["addr"]))
-    except BaseException:
-        proc.kill()
-        proc.wait()
-        raise
-
-    def drain() -> None:
-        rest = buf
-        while True:
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                break
-            rest += chunk
-        twin.stdout_lines.extend(rest.decode(errors="replace").splitlines())
-
-    twin._drain = threading.Thread(target=drain, daemon=True)
-    twin._drain.start()
-    # Port-0 listeners must come back with a real port.
-    for scheme, addr in twin.listeners:
-        if scheme in ("tcpin", "udpin"):
-            assert int(addr.rsplit(":", 1)[1]) > 0, twin.listeners
-    return twin
+    return Twin.spawn(args, workdir, len(listen), startup_timeout, param_file=param_file)
 
 
-class TwinFactory:
-    """Starts twins on demand; stops every one of them (checking a clean exit) at teardown."""
-
-    def __init__(self, base: Path):
-        self.base = base
-        self.twins: list[Twin] = []
-        self.n = 0
-
-    def __call__(self, **kw) -> Twin:
-        self.n += 1
-        workdir = kw.pop("workdir", None) or self.base / f"twin{self.n}"
-        twin = start_twin(workdir, **kw)
-        self.twins.append(twin)
-        return twin
-
-    def stop(self, twin: Twin) -> None:
-        self.twins.remove(twin)
-        twin.assert_clean_exit()
-
-    def close(self) -> None:
-        errors = []
-        for twin in self.twins:
-            try:
-                twin.assert_clean_exit()
-            except AssertionError as e:  # keep stopping the others
-                errors.append(str(e))
-        self.twins.clear()
-        assert not errors, "\n".join(errors)
-
-
-@pytest.fixture
-def twin_factory(tmp_path):
-    f = TwinFactory(tmp_path)
-    yield f
-    f.close()
-
-
-@pytest.fixture(scope="module")
-def module_twin_factory(tmp_path_factory):
-    f = TwinFactory(tmp_path_factory.mktemp("twin"))
-    yield f
-    f.close()
+# Starts twins on demand (`TwinFactory(base)`); the fixtures stop every one (checking a clean exit).
+TwinFactory = partial(ProcessFactory, start=start_twin, prefix="twin")
+twin_factory, module_twin_factory = factory_fixtures(start_twin, "twin")
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,9 @@
 """The `vtol-gcs` daemon as a subprocess, for the test_daemon_* modules.
 
-Started like the twin in conftest.py: port-0 endpoints, the real addresses read from its stdout
-(`vehicle …`, `serving <scheme>:<host>:<port>` per --serve, `logging <path>.tlog`), then its
-status lines are drained by a thread. Every wait has a deadline as its upper bound.
+Started like the twin in conftest.py, by the same code (procs.py): port-0 endpoints, the real
+addresses read from its stdout (`vehicle …`, `serving <scheme>:<host>:<port>` per --serve,
+`logging <path>.tlog`), then its status lines are drained by a thread. Every wait has a deadline
+as its upper bound.
 """
 
 from __future__ import annotations
@@ -11,18 +12,15 @@ import os
 import re
 import select
 import shutil
-import signal
 import struct
 import subprocess
-import threading
 import time
-from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Iterable
 
-import pytest
-
 from conftest import ROOT, VEHICLE_COMPID, VEHICLE_SYSID, Gcs
+from procs import ManagedProcess, ProcessFactory, factory_fixtures
 
 DAEMON_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs"))
 
@@ -35,71 +33,31 @@ SCRIPT_SYSID = 255
 SCRIPT_COMPID = 0
 
 
-@dataclass
-class Daemon:
-    proc: subprocess.Popen
-    args: list[str]
-    workdir: Path
-    stderr_path: Path
-    serving: list[tuple[str, str]] = field(default_factory=list)
+class Daemon(ManagedProcess):
+    """`vtol-gcs run --headless`: `vehicle …`, one `serving <scheme>:<addr>` line per --serve and,
+    when logging, `logging <path>.tlog`."""
+
+    KIND = "daemon"
+    ENDPOINT_RE = SERVING_RE
     tlog: Path | None = None
     vehicle: str = ""
-    stdout_lines: list[str] = field(default_factory=list)
-    _drain: threading.Thread | None = None
-
-    def addr(self, scheme: str, nth: int = 0) -> str:
-        found = [a for (s, a) in self.serving if s == scheme]
-        assert len(found) > nth, f"no {scheme} endpoint #{nth} in {self.serving}"
-        return found[nth]
+    log: bool = True
 
     @property
-    def tcp(self) -> str:
-        """pymavlink URL of the first tcpin endpoint."""
-        return "tcp:" + self.addr("tcpin")
+    def serving(self) -> list[tuple[str, str]]:
+        """(scheme, address) as printed."""
+        return self.endpoints
 
-    @property
-    def udp(self) -> str:
-        """pymavlink URL of the first udpin endpoint."""
-        return "udpout:" + self.addr("udpin")
+    def on_line(self, text: str) -> None:
+        if m := LOGGING_RE.match(text):
+            self.tlog = Path(m["path"])
+            if not self.tlog.is_absolute():
+                self.tlog = self.workdir / self.tlog
+        elif m := VEHICLE_RE.match(text):
+            self.vehicle = m["what"]
 
-    def stderr(self) -> str:
-        try:
-            return self.stderr_path.read_text(errors="replace")
-        except OSError:
-            return ""
-
-    def tail(self) -> str:
-        return f"stdout tail: {self.stdout_lines[-5:]}\nstderr tail:\n{self.stderr()[-3000:]}"
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def kill9(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGKILL)
-        self.proc.wait(timeout=10)
-        if self._drain is not None:
-            self._drain.join(timeout=5)
-
-    def stop(self) -> int:
-        """Ctrl-C the daemon and return its exit code (killed → negative)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=5)
-                raise AssertionError("daemon did not exit within 15 s of SIGINT\n" + self.tail())
-        if self._drain is not None:
-            self._drain.join(timeout=5)
-        return self.proc.returncode
-
-    def assert_clean_exit(self) -> None:
-        rc = self.stop()
-        err = self.stderr()
-        assert rc == 0, f"daemon exited with {rc}\n{self.tail()}"
-        assert "panicked" not in err, f"daemon panicked:\n{err[-3000:]}"
+    def started(self) -> bool:
+        return super().started() and bool(self.vehicle) and (self.tlog is not None or not self.log)
 
 
 def start_daemon(
@@ -111,123 +69,18 @@ def start_daemon(
     startup_timeout: float = 30.0,
 ) -> Daemon:
     assert DAEMON_BIN.exists(), f"{DAEMON_BIN} missing: build it with `cargo build --workspace`"
-    workdir.mkdir(parents=True, exist_ok=True)
     serve = list(serve)
     args = [str(DAEMON_BIN), "run", "--vehicle", vehicle, "--headless"]
     for url in serve:
         args += ["--serve", url]
     args += ["--log-dir", str(workdir / "logs")] if log else ["--no-log"]
     args += list(extra)
-    stderr_path = workdir / f"daemon-{time.monotonic_ns()}.stderr"
-    err = open(stderr_path, "wb")
-    env = dict(os.environ)
-    env.setdefault("RUST_LOG", "info")
-    env.setdefault("RUST_BACKTRACE", "1")
-    proc = subprocess.Popen(args, cwd=workdir, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                            stderr=err, env=env)
-    err.close()
-    d = Daemon(proc, args, workdir, stderr_path)
-    deadline = time.monotonic() + startup_timeout
-    buf = b""
-    fd = proc.stdout.fileno()
-
-    def started() -> bool:
-        return bool(d.vehicle) and len(d.serving) >= len(serve) and (d.tlog is not None or not log)
-
-    try:
-        while not started():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise AssertionError(f"daemon did not print its start lines in {startup_timeout} s; "
-                                     f"args {args}\n{d.tail()}")
-            ready, _, _ = select.select([fd], [], [], min(left, 0.5))
-            if not ready:
-                continue
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                proc.wait(timeout=5)
-                raise AssertionError(f"daemon exited ({proc.returncode}) at start; args {args}\n{d.tail()}")
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                text = line.decode(errors="replace").strip()
-                d.stdout_lines.append(text)
-                if m := SERVING_RE.match(text):
-                    d.serving.append((m["scheme"], m["addr"]))
-                elif m := LOGGING_RE.match(text):
-                    d.tlog = Path(m["path"])
-                    if not d.tlog.is_absolute():
-                        d.tlog = workdir / d.tlog
-                elif m := VEHICLE_RE.match(text):
-                    d.vehicle = m["what"]
-    except BaseException:
-        proc.kill()
-        proc.wait()
-        raise
-
-    def drain() -> None:
-        rest = buf
-        while True:
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                break
-            rest += chunk
-            *lines, rest = rest.split(b"\n")
-            d.stdout_lines.extend(x.decode(errors="replace") for x in lines)
-            del d.stdout_lines[:-200]  # only the tail matters (status lines, 1 a second)
-        if rest:
-            d.stdout_lines.append(rest.decode(errors="replace"))
-
-    d._drain = threading.Thread(target=drain, daemon=True)
-    d._drain.start()
-    for scheme, addr in d.serving:
-        if scheme in ("tcpin", "udpin"):
-            assert int(addr.rsplit(":", 1)[1]) > 0, d.serving
-    return d
+    return Daemon.spawn(args, workdir, len(serve), startup_timeout, log=log)
 
 
-class DaemonFactory:
-    """Starts daemons on demand; stops every one of them (checking a clean exit) at teardown."""
-
-    def __init__(self, base: Path):
-        self.base = base
-        self.daemons: list[Daemon] = []
-        self.n = 0
-
-    def __call__(self, **kw) -> Daemon:
-        self.n += 1
-        workdir = kw.pop("workdir", None) or self.base / f"daemon{self.n}"
-        d = start_daemon(workdir, **kw)
-        self.daemons.append(d)
-        return d
-
-    def forget(self, d: Daemon) -> None:
-        """For a daemon the test killed itself."""
-        self.daemons.remove(d)
-
-    def close(self) -> None:
-        errors = []
-        for d in self.daemons:
-            try:
-                d.assert_clean_exit()
-            except AssertionError as e:
-                errors.append(str(e))
-        self.daemons.clear()
-        assert not errors, "\n".join(errors)
-
-
-@pytest.fixture
-def daemon_factory(tmp_path):
-    f = DaemonFactory(tmp_path)
-    yield f
-    f.close()
-
-
-@pytest.fixture(scope="module")
-def module_daemon_factory(tmp_path_factory):
-    f = DaemonFactory(tmp_path_factory.mktemp("daemon"))
-    yield f
-    f.close()
+# Starts daemons on demand (`DaemonFactory(base)`); the fixtures stop every one (checking a clean exit).
+DaemonFactory = partial(ProcessFactory, start=start_daemon, prefix="daemon")
+daemon_factory, module_daemon_factory = factory_fixtures(start_daemon, "daemon")
 
 
 def script(url: str) -> Gcs:

@@ -9,20 +9,14 @@ is refused before STANDBY, and `mode QHOVER` needs the vehicle's type from its h
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
-import signal
-import sys
 import time
-from pathlib import Path
 
 import pexpect
 
 from conftest import FLAG_ARMED, MODES
 from daemon_support import daemon_factory, script  # noqa: F401 (fixture)
-
-MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
+from procs import mavproxy
 
 
 def test_mavproxy_through_daemon(daemon_factory, tmp_path):  # noqa: F811
@@ -32,28 +26,9 @@ def test_mavproxy_through_daemon(daemon_factory, tmp_path):  # noqa: F811
     first = observer.wait_vehicle_heartbeat()
     assert not first.base_mode & FLAG_ARMED and first.custom_mode != MODES["QHOVER"], first
 
-    home = tmp_path / "home"
-    home.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MAVLINK20")}
-    env.update(HOME=str(home), TERM="dumb", PYTHONUNBUFFERED="1")
-    exe = str(MAVPROXY) if MAVPROXY.exists() else shutil.which("mavproxy.py")
-    assert exe, "mavproxy.py not installed in the venv"
     state = tmp_path / "state"
-    args = [
-        exe,
-        "--master", daemon.tcp,
-        "--non-interactive",
-        "--streamrate=-1",
-        "--state-basedir", str(state),
-        "--aircraft", "twin",
-        "--default-modules", "log,signing,ftp,param,arm,mode,cmdlong,misc",
-        "--cmd", "repeat add 1 arm throttle; repeat add 1 mode QHOVER",
-    ]
-    out = open(tmp_path / "mavproxy.out", "w")
-    child = pexpect.spawn(sys.executable, args, cwd=str(tmp_path), env=env, encoding="utf-8",
-                          timeout=60, codec_errors="replace")
-    child.logfile_read = out
-    try:
+    with observer, mavproxy(daemon.tcp, tmp_path, interactive=False,
+                            cmd="repeat add 1 arm throttle; repeat add 1 mode QHOVER") as child:
         # MAVProxy's own view, in whatever order it comes: the download, the armed vehicle, the
         # mode it learnt from the vehicle's heartbeat (not from the daemon's GCS heartbeat)
         patterns = {"params": r"Received (\d+) parameters", "armed": r"(?<!DIS)ARMED", "mode": r"Mode QHOVER"}
@@ -82,13 +57,3 @@ def test_mavproxy_through_daemon(daemon_factory, tmp_path):  # noqa: F811
         observer.wait_vehicle_heartbeat(timeout=30, pred=lambda h: h.custom_mode == MODES["QHOVER"])
         assert child.isalive()
         assert daemon.alive(), daemon.tail()
-    finally:
-        observer.close()
-        if child.isalive():
-            child.kill(signal.SIGTERM)  # MAVProxy's quit handler; the non-interactive loop exits
-            try:
-                child.expect(pexpect.EOF, timeout=15)
-            except (pexpect.TIMEOUT, pexpect.EOF):
-                pass
-        child.close(force=True)
-        out.close()

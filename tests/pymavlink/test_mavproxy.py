@@ -1,54 +1,19 @@
 """MAVProxy 1.8.75 driven through its console (pexpect): it downloads every parameter, sets one,
 arms and changes mode; the effects are checked through our own pymavlink connection."""
 
-import os
 import re
-import shutil
-import signal
-import sys
-from pathlib import Path
 
-import pexpect
 import pytest
 
 from conftest import FLAG_ARMED, MODES, Gcs, f32
-
-MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
+from procs import mavproxy as launch_mavproxy
 
 
 @pytest.fixture
 def mavproxy(twin_factory, tmp_path):
     twin = twin_factory(speed=2)
-    home = tmp_path / "home"
-    home.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MAVLINK20")}
-    env.update(HOME=str(home), TERM="dumb", PYTHONUNBUFFERED="1")
-    exe = str(MAVPROXY) if MAVPROXY.exists() else shutil.which("mavproxy.py")
-    assert exe, "mavproxy.py not installed in the venv"
-    args = [
-        exe,
-        "--master", twin.tcp,
-        "--streamrate=-1",
-        "--state-basedir", str(tmp_path / "state"),
-        "--aircraft", "twin",
-        "--default-modules", "log,signing,ftp,param,arm,mode,cmdlong,misc",
-    ]
-    log = open(tmp_path / "mavproxy.out", "w")
-    child = pexpect.spawn(sys.executable, args, cwd=str(tmp_path), env=env, encoding="utf-8",
-                          timeout=60, codec_errors="replace")
-    child.logfile_read = log
-    try:
+    with launch_mavproxy(twin.tcp, tmp_path) as child:
         yield twin, child, tmp_path
-    finally:
-        if child.isalive():
-            child.kill(signal.SIGTERM)  # MAVProxy's quit handler sets its stop event…
-            child.sendline("")  # …which its console loop checks after the next line
-            try:
-                child.expect(pexpect.EOF, timeout=15)
-            except (pexpect.TIMEOUT, pexpect.EOF):
-                pass
-        child.close(force=True)
-        log.close()
 
 
 def test_mavproxy_params_arm_mode(mavproxy, gcs_factory):

@@ -60,24 +60,10 @@ impl EulerTrig {
     /// R_B→I = Rz(ψ)·Ry(θ)·Rx(φ), identical to [`Euler::rotation_body_to_inertial`].
     #[must_use]
     pub fn rotation_body_to_inertial(&self) -> Matrix3<f64> {
-        let Self {
-            sps,
-            cps,
-            sth,
-            cth,
-            sph,
-            cph,
-        } = *self;
-        Matrix3::new(
-            cth * cps,
-            sph * sth * cps - cph * sps,
-            cph * sth * cps + sph * sps,
-            cth * sps,
-            sph * sth * sps + cph * cps,
-            cph * sth * sps - sph * cps,
-            -sth,
-            sph * cth,
-            cph * cth,
+        crate::frames::rotation_from_sin_cos(
+            (self.sps, self.cps),
+            (self.sth, self.cth),
+            (self.sph, self.cph),
         )
     }
 
