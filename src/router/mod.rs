@@ -103,6 +103,8 @@ pub struct Router {
     tlog: Option<TlogHandle>,
     /// Records of the current run, handed to the tlog writer after the run is forwarded.
     pending_log: Vec<Record>,
+    /// Whether the run being routed is a lone frame (see [`Router::route`]).
+    send_inline: bool,
     tap: Option<mpsc::Sender<Tapped>>,
 }
 
@@ -132,6 +134,7 @@ impl Router {
             links_tx,
             tlog,
             pending_log: Vec::with_capacity(BATCH),
+            send_inline: true,
             tap,
         };
         (router, RouterHandle { stats, links })
@@ -153,12 +156,14 @@ impl Router {
                 () = cancel.cancelled() => break,
                 n = vehicle.recv_many(&mut from_vehicle, BATCH), if vehicle_open => {
                     vehicle_open = n > 0;
+                    self.send_inline = n == 1;
                     for ev in from_vehicle.drain(..) {
                         self.apply(Side::Vehicle, ev);
                     }
                 }
                 n = clients.recv_many(&mut from_clients, BATCH), if clients_open => {
                     clients_open = n > 0;
+                    self.send_inline = n == 1;
                     for ev in from_clients.drain(..) {
                         self.apply(Side::Client, ev);
                     }
@@ -261,7 +266,15 @@ impl Router {
             let Some(e) = self.egress.get(link) else {
                 continue;
             };
-            match e.tx.try_send(frame.clone()) {
+            // A lone frame (an idle router) goes out from here when the link allows it, which
+            // saves a task hop of latency; a run of frames (load) goes through the queues, so
+            // each link's writer does its own sends in parallel.
+            let sent = if self.send_inline {
+                e.tx.try_send(frame.clone())
+            } else {
+                e.tx.try_send_queued(frame.clone())
+            };
+            match sent {
                 Ok(()) => {
                     self.stats.frames_out.fetch_add(1, Ordering::Relaxed);
                 }

@@ -16,9 +16,10 @@ use std::fmt;
 use std::io;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
+use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
@@ -179,31 +180,121 @@ pub enum SendError {
 pub struct LinkSender {
     tx: mpsc::Sender<Frame>,
     stats: Arc<LinkStats>,
+    direct: Option<Arc<DirectUdp>>,
+}
+
+/// A UDP peer a producer may send to itself while nothing is queued for the peer's writer:
+/// a datagram then leaves without waking the writer task, which costs a task hop per frame.
+/// Frames queued while the writer is busy keep their order, because the producer only goes
+/// direct once the writer has sent everything it was given.
+#[derive(Debug)]
+pub(crate) struct DirectUdp {
+    pub(crate) sock: Arc<UdpSocket>,
+    pub(crate) dest: SocketAddr,
+    /// Frames handed to the writer's queue and not yet sent by it.
+    pub(crate) queued: AtomicUsize,
+}
+
+impl DirectUdp {
+    /// Sends one datagram now if the socket has room: `None` when it would block.
+    pub(crate) fn try_send_now(&self, frame: &Frame, stats: &LinkStats) -> Option<()> {
+        match self.sock.try_send_to(frame.as_bytes(), self.dest) {
+            Ok(n) => stats.add_tx(1, n),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => return None,
+            Err(e) => {
+                // Lost like any UDP datagram (e.g. ENOBUFS): counted, the link goes on.
+                tracing::debug!(dest = %self.dest, "udp send error: {e}");
+                stats.add_tx_error();
+            }
+        }
+        Some(())
+    }
 }
 
 impl LinkSender {
     pub(crate) fn new(tx: mpsc::Sender<Frame>, stats: Arc<LinkStats>) -> Self {
-        LinkSender { tx, stats }
+        LinkSender {
+            tx,
+            stats,
+            direct: None,
+        }
     }
 
-    /// Queues a frame without waiting; a full queue drops it (counted).
+    pub(crate) fn with_direct_udp(
+        tx: mpsc::Sender<Frame>,
+        stats: Arc<LinkStats>,
+        direct: Arc<DirectUdp>,
+    ) -> Self {
+        LinkSender {
+            tx,
+            stats,
+            direct: Some(direct),
+        }
+    }
+
+    /// Sends straight to a UDP peer when its writer has nothing queued; `Err(frame)` when the
+    /// frame must go through the queue.
+    fn try_direct(&self, frame: Frame) -> Result<(), Frame> {
+        match &self.direct {
+            Some(d) if d.queued.load(Ordering::Acquire) == 0 && !self.tx.is_closed() => {
+                d.try_send_now(&frame, &self.stats).ok_or(frame)
+            }
+            _ => Err(frame),
+        }
+    }
+
+    fn note_queued(&self, delta: isize) {
+        if let Some(d) = &self.direct {
+            if delta > 0 {
+                d.queued.fetch_add(1, Ordering::AcqRel);
+            } else {
+                d.queued.fetch_sub(1, Ordering::AcqRel);
+            }
+        }
+    }
+
+    /// Queues a frame without waiting; a full queue drops it (counted). A UDP peer whose
+    /// writer is idle gets the datagram at once, from the caller's task.
     pub fn try_send(&self, frame: Frame) -> Result<(), SendError> {
+        match self.try_direct(frame) {
+            Ok(()) => Ok(()),
+            Err(frame) => self.try_send_queued(frame),
+        }
+    }
+
+    /// Like [`LinkSender::try_send`] but always through the queue, so the link's own writer
+    /// task does the I/O: for a producer under load, which should spread the sends over the
+    /// writers rather than make them itself.
+    pub fn try_send_queued(&self, frame: Frame) -> Result<(), SendError> {
+        self.note_queued(1);
         match self.tx.try_send(frame) {
             Ok(()) => Ok(()),
             Err(mpsc::error::TrySendError::Full(_)) => {
+                self.note_queued(-1);
                 self.stats
                     .tx_dropped_queue_full
                     .fetch_add(1, Ordering::Relaxed);
                 Err(SendError::Full)
             }
-            Err(mpsc::error::TrySendError::Closed(_)) => Err(SendError::Closed),
+            Err(mpsc::error::TrySendError::Closed(_)) => {
+                self.note_queued(-1);
+                Err(SendError::Closed)
+            }
         }
     }
 
     /// Queues a frame, waiting for room (for traffic that must not be dropped, e.g. a
     /// vehicle's replies on an in-memory link). Errors only if the link is down.
     pub async fn send(&self, frame: Frame) -> Result<(), SendError> {
-        self.tx.send(frame).await.map_err(|_| SendError::Closed)
+        let Err(frame) = self.try_direct(frame) else {
+            return Ok(());
+        };
+        self.note_queued(1);
+        let r = self.tx.send(frame).await.map_err(|_| SendError::Closed);
+        if r.is_err() {
+            self.note_queued(-1);
+        }
+        r
     }
 
     /// True once the link is down.

@@ -15,6 +15,7 @@ use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use tokio::net::UdpSocket;
@@ -25,8 +26,8 @@ use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
 use super::{
-    LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down, resolve,
-    sleep_or_cancel,
+    DirectUdp, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
+    resolve, sleep_or_cancel,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
@@ -74,8 +75,7 @@ const WRITE_BATCH: usize = 64;
 
 /// Writes one link's queue to `dest`, one datagram per frame, until cancelled.
 async fn udp_writer(
-    sock: Arc<UdpSocket>,
-    dest: SocketAddr,
+    direct: Arc<DirectUdp>,
     mut rx: mpsc::Receiver<Frame>,
     stats: Arc<LinkStats>,
     cancel: CancellationToken,
@@ -95,23 +95,40 @@ async fn udp_writer(
         }
         for frame in batch.drain(..) {
             // Try without waiting first; only a full socket buffer needs the readiness await.
-            let sent = match sock.try_send_to(frame.as_bytes(), dest) {
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                    sock.send_to(frame.as_bytes(), dest).await
-                }
-                r => r,
-            };
-            match sent {
-                Ok(n) => stats.add_tx(1, n),
-                Err(e) => {
-                    // A datagram lost to e.g. ENOBUFS or an unreachable route; UDP has no link
-                    // to tear down, so count it and go on.
-                    tracing::debug!(%dest, "udp send error: {e}");
-                    stats.add_tx_error();
+            if direct.try_send_now(&frame, &stats).is_none() {
+                match direct.sock.send_to(frame.as_bytes(), direct.dest).await {
+                    Ok(n) => stats.add_tx(1, n),
+                    Err(e) => {
+                        tracing::debug!(dest = %direct.dest, "udp send error: {e}");
+                        stats.add_tx_error();
+                    }
                 }
             }
+            // Only now may producers send directly again: this frame is out, in order.
+            direct.queued.fetch_sub(1, Ordering::AcqRel);
         }
     }
+}
+
+/// The writer of one UDP peer and the sender the router uses for it.
+fn udp_link(
+    sock: &Arc<UdpSocket>,
+    dest: SocketAddr,
+    stats: &Arc<LinkStats>,
+    queue_len: usize,
+    cancel: CancellationToken,
+) -> (
+    LinkSender,
+    impl std::future::Future<Output = ()> + Send + 'static,
+) {
+    let (tx, rx) = mpsc::channel(queue_len.max(1));
+    let direct = Arc::new(DirectUdp {
+        sock: sock.clone(),
+        dest,
+        queued: AtomicUsize::new(0),
+    });
+    let sender = LinkSender::with_direct_udp(tx, stats.clone(), direct.clone());
+    (sender, udp_writer(direct, rx, stats.clone(), cancel))
 }
 
 /// Creates the state of a newly heard peer, spawns its writer and returns its `Up` event.
@@ -124,20 +141,14 @@ fn new_peer(
 ) -> (Peer, LinkEvent) {
     let id = LinkId::next();
     let stats = Arc::new(LinkStats::default());
-    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
     let writer_cancel = cancel.child_token();
-    writers.spawn(udp_writer(
-        sock.clone(),
-        addr,
-        rx,
-        stats.clone(),
-        writer_cancel.clone(),
-    ));
+    let (tx, writer) = udp_link(sock, addr, &stats, opts.queue_len, writer_cancel.clone());
+    writers.spawn(writer);
     tracing::debug!(%id, %addr, "udp peer up");
     let up = LinkEvent::Up {
         id,
         peer: format!("udp {addr}"),
-        tx: LinkSender::new(tx, stats.clone()),
+        tx,
     };
     let peer = Peer {
         id,
@@ -274,19 +285,13 @@ async fn udpout_task(
     cancel: CancellationToken,
 ) {
     let stats = Arc::new(LinkStats::default());
-    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
     let writer_cancel = cancel.child_token();
-    let writer = tokio::spawn(udp_writer(
-        sock.clone(),
-        dest,
-        rx,
-        stats.clone(),
-        writer_cancel.clone(),
-    ));
+    let (tx, writer) = udp_link(&sock, dest, &stats, opts.queue_len, writer_cancel.clone());
+    let writer = tokio::spawn(writer);
     let up = LinkEvent::Up {
         id,
         peer: format!("udp {dest}"),
-        tx: LinkSender::new(tx, stats.clone()),
+        tx,
     };
     let mut reason = "shutdown".to_string();
     if emit(&events, up, &cancel).await {
