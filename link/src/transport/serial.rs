@@ -2,15 +2,13 @@
 //! when the device errors or vanishes (USB radio unplugged, pty closed). The [`LinkId`] stays
 //! the same across reopenings.
 
-use std::sync::Arc;
-
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
-use tokio::time::Instant;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, SerialStream, StopBits};
 use tokio_util::sync::CancellationToken;
 
-use super::{Backoff, LinkEvent, LinkId, LinkOptions, LinkStats, run_stream_link, sleep_or_cancel};
+use super::stream::run_reconnecting;
+use super::{LinkEvent, LinkId, LinkOptions};
 
 /// Spawns a serial link that keeps reopening the device.
 pub(super) fn spawn_serial(
@@ -45,46 +43,11 @@ async fn serial_task(
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {
-    let stats = Arc::new(LinkStats::default());
-    let mut backoff = Backoff::new(&opts);
-    let mut failures: u32 = 0;
-    loop {
-        if cancel.is_cancelled() {
-            return;
-        }
-        match open(&device, baud) {
-            Ok(port) => {
-                failures = 0;
-                let started = Instant::now();
-                let reason = run_stream_link(
-                    id,
-                    format!("serial {device}@{baud}"),
-                    port,
-                    stats.clone(),
-                    &events,
-                    &opts,
-                    &cancel,
-                )
-                .await;
-                if cancel.is_cancelled() || events.is_closed() {
-                    return;
-                }
-                tracing::info!(%id, "serial {device} lost ({reason}), reopening");
-                if started.elapsed() >= backoff.max() {
-                    backoff.reset();
-                }
-            }
-            Err(e) => {
-                failures += 1;
-                if failures == 1 {
-                    tracing::warn!(%id, "cannot open serial {device}: {e}; retrying");
-                } else {
-                    tracing::debug!(%id, failures, "cannot open serial {device}: {e}");
-                }
-            }
-        }
-        if !sleep_or_cancel(backoff.next_delay(), &cancel).await {
-            return;
-        }
-    }
+    let what = format!("serial {device}@{baud}");
+    let peer = what.clone();
+    let open_port = || {
+        let r = open(&device, baud).map(|port| (port, peer.clone()));
+        std::future::ready(r)
+    };
+    run_reconnecting(id, &what, open_port, events, opts, cancel).await;
 }

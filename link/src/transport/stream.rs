@@ -4,6 +4,8 @@
 //! queue, batching whatever is queued into one `write_all` (streams have no datagram
 //! boundaries to preserve, and fewer syscalls matter at high telemetry rates).
 
+use std::fmt::Display;
+use std::future::Future;
 use std::sync::Arc;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -11,7 +13,10 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
-use super::{LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down};
+use super::{
+    Backoff, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
+    sleep_or_cancel,
+};
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
 
@@ -145,5 +150,61 @@ async fn write_loop<W: AsyncWrite>(
             return format!("write error: {e}");
         }
         stats.add_tx(frames, batch.len());
+    }
+}
+
+/// Keeps one stream link alive for as long as `cancel` allows: `open` makes the connection
+/// (returning the stream and a peer description), the link runs until it ends, then `open` is
+/// tried again with capped back-off. A connection that lasted resets the back-off; one that
+/// dies at once (a server that accepts and closes) keeps doubling it, so an EOF can never turn
+/// into a spin. The [`LinkId`] and the counters stay the same across reconnections. Used by the
+/// TCP client and the serial port; `what` names the target in logs.
+pub(crate) async fn run_reconnecting<S, E, F, Fut>(
+    id: LinkId,
+    what: &str,
+    mut open: F,
+    events: mpsc::Sender<LinkEvent>,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+) where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+    E: Display,
+    F: FnMut() -> Fut,
+    Fut: Future<Output = Result<(S, String), E>>,
+{
+    let stats = Arc::new(LinkStats::default());
+    let mut backoff = Backoff::new(&opts);
+    let mut failures: u32 = 0;
+    loop {
+        let attempt = tokio::select! {
+            _ = cancel.cancelled() => return,
+            r = open() => r,
+        };
+        match attempt {
+            Ok((stream, peer)) => {
+                failures = 0;
+                let started = tokio::time::Instant::now();
+                let reason =
+                    run_stream_link(id, peer, stream, stats.clone(), &events, &opts, &cancel).await;
+                if cancel.is_cancelled() || events.is_closed() {
+                    return;
+                }
+                tracing::info!(%id, "{what} lost ({reason}), reconnecting");
+                if started.elapsed() >= backoff.max() {
+                    backoff.reset();
+                }
+            }
+            Err(e) => {
+                failures += 1;
+                if failures == 1 {
+                    tracing::warn!(%id, "{what}: {e}; retrying");
+                } else {
+                    tracing::debug!(%id, failures, "{what}: {e}");
+                }
+            }
+        }
+        if !sleep_or_cancel(backoff.next_delay(), &cancel).await {
+            return;
+        }
     }
 }

@@ -12,13 +12,12 @@ use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
-use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
+use super::stream::run_reconnecting;
 use super::{
-    Backoff, LinkError, LinkEvent, LinkId, LinkOptions, LinkStats, resolve, run_stream_link,
-    sleep_or_cancel,
+    LinkError, LinkEvent, LinkId, LinkOptions, LinkStats, resolve, run_stream_link, sleep_or_cancel,
 };
 use crate::url::LinkUrl;
 
@@ -150,45 +149,14 @@ async fn tcp_client_task(
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {
-    let stats = Arc::new(LinkStats::default());
-    let mut backoff = Backoff::new(&opts);
-    let mut failures: u32 = 0;
-    loop {
-        let attempt = tokio::select! {
-            _ = cancel.cancelled() => return,
-            r = connect(&host, port) => r,
-        };
-        match attempt {
-            Ok(stream) => {
-                failures = 0;
-                let _ = stream.set_nodelay(true);
-                let peer = stream
-                    .peer_addr()
-                    .map_or_else(|_| format!("tcp {host}:{port}"), |a| format!("tcp {a}"));
-                let started = Instant::now();
-                let reason =
-                    run_stream_link(id, peer, stream, stats.clone(), &events, &opts, &cancel).await;
-                if cancel.is_cancelled() || events.is_closed() {
-                    return;
-                }
-                tracing::info!(%id, "tcp {host}:{port} lost ({reason}), reconnecting");
-                // A connection that lasted resets the back-off; one that died at once (server
-                // accepting then closing) keeps doubling, so EOF can never become a spin.
-                if started.elapsed() >= backoff.max() {
-                    backoff.reset();
-                }
-            }
-            Err(e) => {
-                failures += 1;
-                if failures == 1 {
-                    tracing::warn!(%id, "tcp {host}:{port}: {e}; retrying");
-                } else {
-                    tracing::debug!(%id, failures, "tcp {host}:{port}: {e}");
-                }
-            }
-        }
-        if !sleep_or_cancel(backoff.next_delay(), &cancel).await {
-            return;
-        }
-    }
+    let what = format!("tcp {host}:{port}");
+    let open = || async {
+        let stream = connect(&host, port).await?;
+        let _ = stream.set_nodelay(true);
+        let peer = stream
+            .peer_addr()
+            .map_or_else(|_| format!("tcp {host}:{port}"), |a| format!("tcp {a}"));
+        Ok::<_, String>((stream, peer))
+    };
+    run_reconnecting(id, &what, open, events, opts, cancel).await;
 }
