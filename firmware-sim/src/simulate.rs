@@ -42,7 +42,7 @@ pub const PARAM_NAMES: [&str; 15] = [
 #[derive(Debug, thiserror::Error)]
 pub enum SimulateError {
     /// The gain set breaks a constraint (e.g. the saturation conditions).
-    #[error("invalid parameters: {0}")]
+    #[error("invalid parameters")]
     Gains(#[from] GainError),
     /// A flag value is out of range.
     #[error("{0}")]
@@ -387,6 +387,9 @@ mod tests {
         apply_params(&mut g, &mut rate, &[p("ALT_KP=4"), p("lat_sat_d=0.1")]).unwrap();
         assert_eq!((g.alt_kp, g.lateral.d), (4.0, 0.1));
         let err = apply_params(&mut g, &mut rate, &[p("LAT_SAT_D=0.5")]).unwrap_err();
-        assert!(err.to_string().contains("c > d"), "{err}");
+        let chain = std::error::Error::source(&err)
+            .map(ToString::to_string)
+            .unwrap_or_default();
+        assert!(chain.contains("c > d"), "{err}: {chain}");
     }
 }

@@ -89,6 +89,26 @@ fn physical_mode_with_noise_converges_then_holds() {
 }
 
 #[test]
+fn physical_mode_with_ideal_sensors_settles_without_a_limit_cycle() {
+    // Servo PWM comes in 1 µs steps (≈ 1 mrad of elevator). Rounded plainly, that step kept
+    // the x chain in a ±9 cm limit cycle; the firmware dithers the rounding error instead.
+    let mut v = Vehicle::new(VehicleConfig {
+        ideal_sensors: true,
+        ..flying(ModelMode::Physical, 1).config().clone()
+    });
+    v.set_position_setpoint(Vector3::new(0.0, 0.0, 1.0));
+    fly_until(&mut v, 30.0, |_| {});
+    let mut pos = 0.0_f64;
+    fly_until(&mut v, 60.0, |t| {
+        pos = pos.max((t.pos_m - Vector3::new(0.0, 0.0, 1.0)).amax());
+    });
+    assert!(
+        pos < 0.005,
+        "position band ±{pos} m over 30–60 s with ideal sensors"
+    );
+}
+
+#[test]
 fn takes_off_in_qhover_and_holds_hover_alt() {
     let mut v = Vehicle::new(VehicleConfig {
         mode: FlightMode::QHover,

@@ -99,15 +99,13 @@ pub fn mix(
 /// ESC = 1000 + 1000 ω/ω_max, servo = 1500 + 500 δ/throw; rounded and clamped to 1000–2000.
 #[must_use]
 pub fn pwm_us(airframe: &Airframe, cmd: &ActuatorCommand) -> PwmOutputs {
-    let to_us = |v: f64| -> u16 {
-        if v.is_nan() {
-            return 1000;
-        }
-        // Exact after rounding and clamping to 1000..=2000.
-        v.round().clamp(1000.0, 2000.0) as u16
-    };
-    let esc = |w: f64| to_us(1000.0 + 1000.0 * w / airframe.rotor_speed_max_rad_s);
-    let servo = |d: f64| to_us(1500.0 + 500.0 * d / airframe.servo_throw_rad);
+    pwm_us_dithered(airframe, cmd, &mut [0.0; 5])
+}
+
+/// Exact (unrounded) pulse widths, µs, in the order of [`pwm_us`].
+fn pwm_exact_us(airframe: &Airframe, cmd: &ActuatorCommand) -> [f64; 5] {
+    let esc = |w: f64| 1000.0 + 1000.0 * w / airframe.rotor_speed_max_rad_s;
+    let servo = |d: f64| 1500.0 + 500.0 * d / airframe.servo_throw_rad;
     [
         esc(cmd.rotor_speed_rad_s[0]),
         esc(cmd.rotor_speed_rad_s[1]),
@@ -115,6 +113,33 @@ pub fn pwm_us(airframe: &Airframe, cmd: &ActuatorCommand) -> PwmOutputs {
         servo(cmd.aileron_right_rad),
         servo(cmd.elevator_rad),
     ]
+}
+
+/// [`pwm_us`] with error diffusion: each channel's rounding error is carried into the next
+/// tick through `residual_us`, so the average pulse equals the exact command. One microsecond
+/// of elevator is about 1 mrad, ≈ 0.04 rad/s² of pitch: rounded plainly, that step holds the
+/// x chain in a ±9 cm limit cycle with ideal sensors; dithered, the servo lag averages it out.
+#[must_use]
+pub fn pwm_us_dithered(
+    airframe: &Airframe,
+    cmd: &ActuatorCommand,
+    residual_us: &mut [f64; 5],
+) -> PwmOutputs {
+    let exact = pwm_exact_us(airframe, cmd);
+    let mut out = [1000u16; 5];
+    for ((o, e), r) in out.iter_mut().zip(exact).zip(residual_us.iter_mut()) {
+        if !e.is_finite() {
+            *r = 0.0;
+            continue;
+        }
+        let wanted = e + *r;
+        let us = wanted.round().clamp(1000.0, 2000.0);
+        // At the range limits the error cannot be paid back; keep it bounded.
+        *r = (wanted - us).clamp(-0.5, 0.5);
+        // Exact: a whole number within 1000..=2000.
+        *o = us as u16;
+    }
+    out
 }
 
 /// What an [`ActuatorCommand`] produces on the plant, by the §5 force and torque model (drag

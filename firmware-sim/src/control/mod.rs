@@ -322,6 +322,8 @@ pub struct Controller {
     yaw_offset_rad: f64,
     /// ψ_d used on the last tick.
     yaw_target_rad: f64,
+    /// PWM rounding error carried to the next tick, µs ([`mixer::pwm_us_dithered`]).
+    pwm_residual_us: [f64; 5],
 }
 
 impl Controller {
@@ -335,6 +337,7 @@ impl Controller {
             land_hold_xy_m: None,
             yaw_offset_rad: 0.0,
             yaw_target_rad: 0.0,
+            pwm_residual_us: [0.0; 5],
         }
     }
 
@@ -344,6 +347,7 @@ impl Controller {
         self.land_hold_xy_m = None;
         self.yaw_offset_rad = 0.0;
         self.yaw_target_rad = 0.0;
+        self.pwm_residual_us = [0.0; 5];
     }
 
     /// The model mode this controller was built for.
@@ -535,7 +539,7 @@ impl Controller {
 
         // 5. Mixer and PWM (§5).
         let actuators = mixer::mix(a, model, fz, &torque);
-        let pwm_us = mixer::pwm_us(a, &actuators);
+        let pwm_us = mixer::pwm_us_dithered(a, &actuators, &mut self.pwm_residual_us);
         ControlOutput {
             tau_tilde,
             torque_body_nm: torque,
