@@ -12,8 +12,8 @@
 //! Γg and Γq depend on the rotor speeds, which depend on Γc,x through the mixer: the loop is
 //! solved by fixed-point iteration from the measured speeds [I19]. The map's gain is about
 //! 2 I_r |q| · ∂ω/∂Γx ≈ 0.036·|q| per iteration at hover. PHYSICS.md's six iterations reach
-//! rounding at the paper's rates; at the gyros' full scale they do not, so the loop runs on
-//! (bounded, no allocation) until the speeds stop moving.
+//! rounding at the paper's rates; at the gyros' full scale they do not, and near hover two or
+//! three suffice, so the loop runs (bounded, no allocation) until the speeds stop moving.
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -21,13 +21,11 @@ use super::mixer::rotor_speeds_rad_s;
 use crate::airframe::{Airframe, ModelMode};
 use crate::frames::Euler;
 
-/// Fixed-point iterations of [I19] at least performed.
-pub const INPUT_CHANGE_ITERATIONS: usize = 6;
-
-/// Upper bound on the iterations: beyond [`INPUT_CHANGE_ITERATIONS`] the loop continues only
-/// while the speeds still move by more than [`INPUT_CHANGE_TOLERANCE_RAD_S`]. The contraction
-/// factor is ≈ 0.036 |q| (q in rad/s): six iterations are at rounding for the paper's rates
-/// (|q| ≲ 0.5 rad/s) but leave ~1e-7 of the initial speed error at the gyros' 2.6 rad/s.
+/// Upper bound on the fixed-point iterations of [I19]. The loop stops as soon as the speeds
+/// move by no more than [`INPUT_CHANGE_TOLERANCE_RAD_S`]: the contraction factor is
+/// ≈ 0.036 |q| (q in rad/s), so near hover two or three passes reach it, PHYSICS.md's six are
+/// at rounding for the paper's rates (|q| ≲ 0.5 rad/s), and the gyros' 2.6 rad/s needs about
+/// ten. Iterating to a tolerance instead of a fixed count is as exact and cheaper in hover.
 pub const INPUT_CHANGE_MAX_ITERATIONS: usize = 16;
 
 /// Speed change below which the fixed point is considered reached, rad/s.
@@ -87,7 +85,7 @@ pub fn input_change_nm(
 
 /// Solves (33) together with the mixer's rotor speeds [I19]: returns Γc and the rotor speeds
 /// Γg and Γq were last evaluated at (which the mixer reproduces from Γc once converged).
-/// At least [`INPUT_CHANGE_ITERATIONS`], at most [`INPUT_CHANGE_MAX_ITERATIONS`] iterations.
+/// Iterates to [`INPUT_CHANGE_TOLERANCE_RAD_S`], at most [`INPUT_CHANGE_MAX_ITERATIONS`] times.
 ///
 /// `rotor_speed_start_rad_s` is the first guess (the measured speeds).
 #[allow(clippy::too_many_arguments)]
@@ -118,12 +116,12 @@ pub fn solve_input_change(
     };
     let mut w = rotor_speed_start_rad_s;
     let mut torque = torque_at(w);
-    for k in 0..INPUT_CHANGE_MAX_ITERATIONS {
+    for _ in 0..INPUT_CHANGE_MAX_ITERATIONS {
         let next = rotor_speeds_rad_s(airframe, model, fz_n, torque.x);
         let moved = (next[0] - w[0]).abs().max((next[1] - w[1]).abs());
         w = next;
         torque = torque_at(w);
-        if k + 1 >= INPUT_CHANGE_ITERATIONS && moved <= INPUT_CHANGE_TOLERANCE_RAD_S {
+        if moved <= INPUT_CHANGE_TOLERANCE_RAD_S {
             break;
         }
     }
