@@ -7,20 +7,6 @@ use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
 use vtol_link::Frame;
-use vtol_link::dialect::{self, MavMessage};
-
-/// Builds the daemon's heartbeat, field by field (the dialect's `Default` reports ARMED).
-#[must_use]
-pub fn heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: dialect::MavType::MAV_TYPE_GCS,
-        autopilot: dialect::MavAutopilot::MAV_AUTOPILOT_INVALID,
-        base_mode: dialect::MavModeFlag::empty(),
-        system_status: dialect::MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    })
-}
 
 /// Sends the heartbeat every second on `stream` until `cancel` fires. What arrives is read
 /// and discarded, so the link never backs up.
@@ -33,7 +19,7 @@ pub async fn run(stream: DuplexStream, system_id: u8, component_id: u8, cancel: 
         tokio::select! {
             () = cancel.cancelled() => return,
             _ = tick.tick() => {
-                let frame = Frame::encode_v2(system_id, component_id, seq, &heartbeat());
+                let frame = Frame::encode_v2(system_id, component_id, seq, &vtol_link::gcs_heartbeat());
                 seq = seq.wrapping_add(1);
                 if wr.write_all(frame.as_bytes()).await.is_err() {
                     return;

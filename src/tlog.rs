@@ -385,15 +385,7 @@ mod tests {
     use vtol_link::dialect::{self, MavMessage};
 
     fn heartbeat(seq: u8) -> Frame {
-        let msg = MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-            custom_mode: 17,
-            mavtype: dialect::MavType::MAV_TYPE_GCS,
-            autopilot: dialect::MavAutopilot::MAV_AUTOPILOT_INVALID,
-            base_mode: dialect::MavModeFlag::empty(),
-            system_status: dialect::MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        });
-        Frame::encode_v2(255, 190, seq, &msg)
+        Frame::encode_v2(255, 190, seq, &vtol_link::gcs_heartbeat())
     }
 
     #[test]

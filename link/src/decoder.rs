@@ -272,22 +272,9 @@ fn known_frame_inside(buf: &[u8], span: usize) -> Inside {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dialect::{self as apm, MavMessage};
 
     fn hb(seq: u8) -> Frame {
-        Frame::encode_v2(
-            1,
-            1,
-            seq,
-            &MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: apm::MavType::MAV_TYPE_GCS,
-                autopilot: apm::MavAutopilot::MAV_AUTOPILOT_INVALID,
-                base_mode: apm::MavModeFlag::empty(),
-                system_status: apm::MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            }),
-        )
+        Frame::encode_v2(1, 1, seq, &crate::frame::gcs_heartbeat())
     }
 
     fn unknown_frame(seq: u8, payload: &[u8]) -> Frame {

@@ -643,6 +643,22 @@ impl RawCommandAck {
     }
 }
 
+/// A ground station's HEARTBEAT (type GCS, autopilot INVALID, no mode, active), built field by
+/// field: the dialect's `Default` would report ARMED. What the daemon sends as its identity, and
+/// what tests use to speak as a ground station.
+#[must_use]
+pub fn gcs_heartbeat() -> MavMessage {
+    use crate::dialect::{HEARTBEAT_DATA, MavAutopilot, MavModeFlag, MavState, MavType};
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_GCS,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

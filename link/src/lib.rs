@@ -23,6 +23,7 @@ pub use mavlink::dialects::ardupilotmega as dialect;
 pub use decoder::{DecodeStats, FrameDecoder};
 pub use frame::{
     Frame, FrameError, RawCommand, RawCommandAck, RawCommandKind, frame_len_from_prefix,
+    gcs_heartbeat,
 };
 pub use transport::{
     EndpointHandle, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats,

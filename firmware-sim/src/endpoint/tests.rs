@@ -566,14 +566,7 @@ fn rc_override_only_from_gcs_and_expires() {
 fn gcs_failsafe_switches_to_qland_when_enabled() {
     let mut ep = endpoint();
     ep.set_param("FS_GCS_ENABL", 1.0).unwrap();
-    let hb = apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: apm::MavType::MAV_TYPE_GCS,
-        autopilot: apm::MavAutopilot::MAV_AUTOPILOT_INVALID,
-        base_mode: apm::MavModeFlag::empty(),
-        system_status: apm::MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    });
+    let hb = vtol_link::gcs_heartbeat();
     run_until(&mut ep, 1_500_000);
     ep.handle(GCS, &v2(&hb));
     ep.vehicle.arm(true).unwrap();

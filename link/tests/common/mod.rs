@@ -5,7 +5,6 @@
 use std::time::Duration;
 
 use tokio::sync::mpsc;
-use vtol_link::dialect as apm;
 use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
 
 /// Upper bound for any single wait; tests never sleep to wait for state.
@@ -13,19 +12,7 @@ pub const WAIT: Duration = Duration::from_secs(5);
 
 /// A GCS heartbeat from `sys` with sequence `seq`.
 pub fn hb(sys: u8, seq: u8) -> Frame {
-    Frame::encode_v2(
-        sys,
-        190,
-        seq,
-        &apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: apm::MavType::MAV_TYPE_GCS,
-            autopilot: apm::MavAutopilot::MAV_AUTOPILOT_INVALID,
-            base_mode: apm::MavModeFlag::empty(),
-            system_status: apm::MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        }),
-    )
+    Frame::encode_v2(sys, 190, seq, &vtol_link::gcs_heartbeat())
 }
 
 /// Waits for the first event matching `pred`, skipping others.
