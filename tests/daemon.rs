@@ -140,3 +140,27 @@ fn a_broken_config_file_is_one_clear_error() {
         "{err}"
     );
 }
+
+#[test]
+fn a_serve_port_in_use_is_one_clear_line() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
+        .args([
+            "run",
+            "--no-log",
+            "--serve",
+            &format!("tcpin:127.0.0.1:{port}"),
+        ])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].starts_with("error: cannot open tcpin:") && lines[0].contains("in use"),
+        "{err}"
+    );
+}

@@ -30,3 +30,34 @@ pub use transport::{
     LinkStatsSnapshot, SendError, run_stream_link, spawn_endpoint, spawn_stream_link,
 };
 pub use url::{LinkUrl, UrlError};
+
+/// An error and its causes on one line, `outer: cause: root`, leaving out a cause whose text
+/// the line already holds (many error messages quote their source). Both binaries report a
+/// failure to start this way: one clear line.
+#[must_use]
+pub fn error_line(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut line = err.to_string();
+    let mut cause = err.source();
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !line.contains(&text) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+        cause = c.source();
+    }
+    line
+}
+
+#[cfg(test)]
+mod error_line_tests {
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot open link: {0}")]
+    struct Outer(#[source] std::io::Error);
+
+    #[test]
+    fn causes_already_quoted_are_not_repeated() {
+        let e = Outer(std::io::Error::other("address in use"));
+        assert_eq!(super::error_line(&e), "cannot open link: address in use");
+    }
+}
