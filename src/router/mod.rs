@@ -262,14 +262,15 @@ impl Router {
         if route == Route::Unroutable {
             self.stats.unroutable.fetch_add(1, Ordering::Relaxed);
         }
+        let single = self.out.len() == 1;
         for link in &self.out {
             let Some(e) = self.egress.get(link) else {
                 continue;
             };
-            // A lone frame (an idle router) goes out from here when the link allows it, which
-            // saves a task hop of latency; a run of frames (load) goes through the queues, so
-            // each link's writer does its own sends in parallel.
-            let sent = if self.send_inline {
+            // A lone frame (an idle router), or a frame for one link only, goes out from here
+            // when the link allows it, which saves a task hop; a run of frames fanned out to
+            // several links goes through the queues, so each link's writer sends in parallel.
+            let sent = if self.send_inline || single {
                 e.tx.try_send(frame.clone())
             } else {
                 e.tx.try_send_queued(frame.clone())
