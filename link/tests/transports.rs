@@ -232,25 +232,38 @@ async fn tcpin_serves_many_clients_and_a_reconnecting_one() {
     let _ = tx2;
 }
 
-#[tokio::test]
-async fn tcp_client_reconnects_after_server_restart_with_same_id() {
+/// A TCP listener on port 0 and a reconnecting `tcp:` client endpoint aimed at it, with the
+/// given event queue length and back-off bounds in ms.
+async fn tcp_client_to_listener(
+    queue: usize,
+    backoff_min_ms: u64,
+    backoff_max_ms: u64,
+) -> (
+    TcpListener,
+    std::net::SocketAddr,
+    mpsc::Receiver<LinkEvent>,
+    CancellationToken,
+    vtol_link::EndpointHandle,
+) {
     let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    let (ev_tx, mut ev) = mpsc::channel(64);
+    let (ev_tx, ev) = mpsc::channel(queue);
     let cancel = CancellationToken::new();
     let opts = LinkOptions {
-        reconnect_min: Duration::from_millis(20),
-        reconnect_max: Duration::from_millis(200),
+        reconnect_min: Duration::from_millis(backoff_min_ms),
+        reconnect_max: Duration::from_millis(backoff_max_ms),
         ..Default::default()
     };
-    let ep = spawn_endpoint(
-        &url(&format!("tcp:127.0.0.1:{}", addr.port())),
-        ev_tx,
-        opts,
-        cancel.clone(),
-    )
-    .await
-    .unwrap();
+    let url = url(&format!("tcp:127.0.0.1:{}", addr.port()));
+    let ep = spawn_endpoint(&url, ev_tx, opts, cancel.clone())
+        .await
+        .unwrap();
+    (listener, addr, ev, cancel, ep)
+}
+
+#[tokio::test]
+async fn tcp_client_reconnects_after_server_restart_with_same_id() {
+    let (listener, addr, mut ev, cancel, ep) = tcp_client_to_listener(64, 20, 200).await;
     let id = ep.link_id().unwrap();
     assert!(ep.local_addr().is_none());
 
@@ -285,23 +298,7 @@ async fn tcp_client_reconnects_after_server_restart_with_same_id() {
 #[tokio::test]
 async fn tcp_client_backs_off_on_immediate_eof() {
     // A server that accepts and closes at once must not make the client spin.
-    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let (ev_tx, mut ev) = mpsc::channel(1024);
-    let cancel = CancellationToken::new();
-    let opts = LinkOptions {
-        reconnect_min: Duration::from_millis(50),
-        reconnect_max: Duration::from_millis(400),
-        ..Default::default()
-    };
-    let ep = spawn_endpoint(
-        &url(&format!("tcp:127.0.0.1:{}", addr.port())),
-        ev_tx,
-        opts,
-        cancel.clone(),
-    )
-    .await
-    .unwrap();
+    let (listener, _addr, mut ev, cancel, ep) = tcp_client_to_listener(1024, 50, 400).await;
     // Back-off 50, 100, 200, 400, 400 ms: about five connections in 800 ms, never hundreds.
     let window = Duration::from_millis(800);
     let deadline = tokio::time::Instant::now() + window;
