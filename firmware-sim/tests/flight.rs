@@ -64,6 +64,63 @@ fn paper_mode_reproduces_section_iv() {
     assert_eq!(t.state, SystemState::Active);
 }
 
+/// The paper's flight with a physics step of `dt_us`: the trajectory sampled every 10 ms.
+fn paper_trajectory(dt_us: u64) -> Vec<Vector3<f64>> {
+    let mut v = Vehicle::new(VehicleConfig {
+        physics_dt_us: dt_us,
+        ..flying(ModelMode::Paper, 1).config().clone()
+    });
+    v.set_position_setpoint(Vector3::new(0.0, 0.0, 1.0));
+    let mut out = vec![v.telemetry().pos_m];
+    let every = 10_000 / dt_us;
+    let mut k = 0;
+    fly_until(&mut v, 25.0, |t| {
+        k += 1;
+        if k % every == 0 {
+            out.push(t.pos_m);
+        }
+    });
+    out
+}
+
+#[test]
+fn paper_mode_is_continuous_time_halving_the_step_moves_it_less_than_a_millimetre() {
+    let a = paper_trajectory(1000);
+    let b = paper_trajectory(500);
+    assert_eq!(a.len(), b.len());
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0_f64, f64::max);
+    assert!(worst < 1e-3, "25 s trajectories differ by up to {worst} m");
+}
+
+#[test]
+fn paper_mode_first_row_carries_the_controllers_output_at_t0() {
+    use firmware_sim::control::{ControlInput, Controller, Gains};
+    let v = flying(ModelMode::Paper, 1);
+    let t = v.telemetry();
+    let mut c = Controller::new(firmware_sim::Airframe::default(), ModelMode::Paper);
+    let expect = c.update(
+        &ControlInput {
+            dt_s: v.physics_dt_s(),
+            mode: FlightMode::QLoiter,
+            euler: paper_initial().euler,
+            pos_m: paper_initial().pos_m,
+            setpoint_m: Vector3::new(0.0, 0.0, 1.0),
+            ..ControlInput::default()
+        },
+        &Gains::default(),
+    );
+    assert_eq!(t.t_us, 0);
+    assert_eq!(t.control.tau_tilde, expect.tau_tilde);
+    assert_eq!(t.control.fz_n, expect.fz_n);
+    // τ̃ψ(0) = −a_ψ2 ψ0 = −5 (45): the row is not the idle output.
+    assert!((t.control.tau_tilde[0] + 5.0).abs() < 1e-12);
+    assert!(t.pwm_us[0] > 1000);
+}
+
 #[test]
 fn physical_mode_with_noise_converges_then_holds() {
     let mut v = flying(ModelMode::Physical, 1);
