@@ -94,6 +94,12 @@ pub struct VehicleConfig {
     pub mode: FlightMode,
     /// Start armed (the offline `simulate` command flies from t = 0).
     pub armed: bool,
+    /// QLOITER's position setpoint at start (paper frame, z up), m; `None` = (0, 0,
+    /// `HOVER_ALT`). Given here rather than set after construction because the controller's
+    /// output at t = 0 is computed at construction.
+    pub position_setpoint_m: Option<Vector3<f64>>,
+    /// RC receiver pulse widths at start, µs (0 = no signal), as [`Vehicle::set_rc_input`].
+    pub rc_us: [u16; 8],
 }
 
 impl Default for VehicleConfig {
@@ -111,6 +117,8 @@ impl Default for VehicleConfig {
             gains: Gains::default(),
             mode: FlightMode::QStabilize,
             armed: false,
+            position_setpoint_m: None,
+            rc_us: [0; 8],
         }
     }
 }
@@ -303,7 +311,9 @@ impl Vehicle {
             sensors,
             estimator,
             controller: Controller::new(config.airframe.clone(), config.model),
-            setpoint_m: Vector3::new(0.0, 0.0, config.gains.hover_alt_m),
+            setpoint_m: config
+                .position_setpoint_m
+                .unwrap_or_else(|| Vector3::new(0.0, 0.0, config.gains.hover_alt_m)),
             on_ground,
             landed_time_s: 0.0,
             steps: 0,
@@ -319,6 +329,7 @@ impl Vehicle {
             telemetry: Telemetry {
                 mode: config.mode,
                 armed: config.armed,
+                rc_us: config.rc_us,
                 state,
                 euler_est: plant.euler,
                 pwm_us: DISARMED_PWM_US,
