@@ -71,6 +71,8 @@ pub struct Estimator {
     pos_m: Vector3<f64>,
     vel_m_s: Vector3<f64>,
     pos_history_m: [Vector3<f64>; NAV_HISTORY],
+    /// Specific thrust along z_B the firmware commands, m/s² (`None`: assume hover).
+    thrust_accel_m_s2: Option<f64>,
     /// ψ̂ of the last updates, indexed like `pos_history_m` (for the heading fix's latency).
     psi_history_rad: [f64; NAV_HISTORY],
     history_head: usize,
@@ -99,6 +101,7 @@ impl Estimator {
             vel_m_s: Vector3::zeros(),
             pos_history_m: [Vector3::zeros(); NAV_HISTORY],
             psi_history_rad: [initial.psi; NAV_HISTORY],
+            thrust_accel_m_s2: None,
             history_head: 0,
             delay_samples: ((POSITION_LATENCY_S / dt_s).round() as usize).min(NAV_HISTORY - 1),
         }
@@ -244,8 +247,14 @@ impl Estimator {
         let r = p - self.pos_history_m[idx];
 
         let trig = EulerTrig::new(e);
-        let tilt_cos = (e.theta.cos() * e.phi.cos()).max(0.5);
-        let f_body = Vector3::new(f_x, f_y, g / tilt_cos);
+        // The accelerometer has no z axis: the thrust is the firmware's own command when it
+        // flies (what the altitude law asked for, tilt compensation and climb included), else
+        // the hover assumption.
+        let f_z = self.thrust_accel_m_s2.unwrap_or_else(|| {
+            let tilt_cos = (e.theta.cos() * e.phi.cos()).max(0.5);
+            g / tilt_cos
+        });
+        let f_body = Vector3::new(f_x, f_y, f_z);
         let accel = trig.rotation_body_to_inertial() * f_body - Vector3::new(0.0, 0.0, g);
         self.pos_m += (self.vel_m_s + k1 * r) * dt;
         self.vel_m_s += (accel + k2 * r) * dt;
@@ -273,6 +282,12 @@ impl Estimator {
     #[must_use]
     pub fn euler(&self) -> Euler {
         self.euler
+    }
+
+    /// The specific thrust f_z/m the firmware is commanding, m/s², used in place of the
+    /// accelerometer's missing z axis; `None` assumes hover thrust g/(cos φ cos θ).
+    pub fn set_thrust_accel(&mut self, thrust_accel_m_s2: Option<f64>) {
+        self.thrust_accel_m_s2 = thrust_accel_m_s2;
     }
 
     /// Position of the position-aided filter (latency compensated; inertial, z up), m, once a

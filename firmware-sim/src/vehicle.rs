@@ -488,6 +488,11 @@ impl Vehicle {
             let heading = (self.config.heading_sensor
                 && self.telemetry.mode != FlightMode::QStabilize)
                 .then_some(fix.heading_rad);
+            // The thrust the firmware commanded last tick stands in for the missing z axis of
+            // the accelerometer (the motors lag it by their 40 ms time constant).
+            let thrust = (self.telemetry.armed && !self.on_ground)
+                .then(|| self.telemetry.control.fz_n / af.mass_kg);
+            self.estimator.set_thrust_accel(thrust);
             self.estimator.update(&imu, Some(&fix.pos_m), heading);
         }
 

@@ -182,3 +182,31 @@ fn qloiter_converges_and_holds_with_a_constant_30_degree_heading_error() {
         assert!(band.tilt_rad < 1f64.to_radians(), "seed {seed}: tilt");
     }
 }
+
+#[test]
+fn the_estimator_tracks_a_start_at_0_8_rad() {
+    // Noiseless sensors, the firmware flying on its estimator (not the true state).
+    for mode in [FlightMode::QLoiter, FlightMode::QHover] {
+        let mut v = Vehicle::new(VehicleConfig {
+            ideal_sensors: true,
+            perfect_state: false,
+            initial: InitialState {
+                pos_m: Vector3::new(0.1, 0.1, 1.0),
+                euler: Euler::new(1.0, 0.8, 0.1),
+            },
+            ..paper_start(1, mode).config().clone()
+        });
+        v.set_position_setpoint(TARGET);
+        let mut worst = 0.0_f64;
+        fly_until(&mut v, 20.0, |v| {
+            let t = v.telemetry();
+            let (e, h) = (t.euler, t.euler_est);
+            worst = worst
+                .max((e.theta - h.theta).abs())
+                .max((e.phi - h.phi).abs())
+                .max(v.heading_error_rad().abs());
+        });
+        assert!(v.telemetry().armed, "{mode}: still flying");
+        assert!(worst < 0.05, "{mode}: estimation error up to {worst} rad");
+    }
+}
