@@ -38,9 +38,9 @@ pub const ACCEL_CORRECTION_TIME_S: f64 = 1.0;
 /// Bandwidth of the position-aided filter: its four error poles sit at −ω, rad/s. With the
 /// chains' gains 1 mrad of tilt error holds the vehicle about 6 cm off, and below the filter's
 /// bandwidth the tilt error is gyro noise shaped by ~6s/ω²: at 4 rad/s that alone wandered
-/// ±3 cm in ten minutes, at 8 rad/s the hold is about ±2 cm (the 1 mm position noise it lets in
-/// instead is the smaller term).
-pub const NAV_BANDWIDTH_RAD_S: f64 = 8.0;
+/// ±3 cm in ten minutes, at 6 rad/s the hold is about ±2 cm. 8 rad/s is no better, and at
+/// 10 rad/s the filter, sampled at 100 Hz behind the fix's 10 ms latency, goes unstable.
+pub const NAV_BANDWIDTH_RAD_S: f64 = 6.0;
 /// Bandwidth of the heading filter: both error poles at −ω, rad/s. Slow enough that the 0.1°
 /// heading noise stays below 0.05°, fast enough to track the gyro-bias drift.
 pub const HEADING_BANDWIDTH_RAD_S: f64 = 1.0;
