@@ -223,3 +223,29 @@ fn two_daemons_sharing_a_log_dir_keep_two_whole_logs() {
         }
     }
 }
+
+#[test]
+fn a_serial_vehicle_that_does_not_exist_is_one_clear_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let device = dir.path().join("ttyUSB-missing");
+    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
+        .args([
+            "run",
+            "--no-log",
+            "--serve",
+            "tcpin:127.0.0.1:0",
+            "--vehicle",
+            &format!("serial:{}:57600", device.display()),
+        ])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].contains("ttyUSB-missing") && lines[0].contains("does not exist"),
+        "{err}"
+    );
+}
