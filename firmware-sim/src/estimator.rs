@@ -73,8 +73,12 @@ pub struct Estimator {
     pos_history_m: [Vector3<f64>; NAV_HISTORY],
     /// Specific thrust along z_B the firmware commands, m/s² (`None`: assume hover).
     thrust_accel_m_s2: Option<f64>,
-    /// ψ̂ of the last updates, indexed like `pos_history_m` (for the heading fix's latency).
+    /// ψ̂ of the last updates minus `psi_shift_rad` at the time of writing, indexed like
+    /// `pos_history_m` (for the heading fix's latency). Unwrapped: only differences are used.
     psi_history_rad: [f64; NAV_HISTORY],
+    /// Sum of the heading corrections so far: every stored ψ̂ moves with each correction, and
+    /// keeping the sum apart makes that O(1) instead of a pass over the history.
+    psi_shift_rad: f64,
     history_head: usize,
     delay_samples: usize,
 }
@@ -101,6 +105,7 @@ impl Estimator {
             vel_m_s: Vector3::zeros(),
             pos_history_m: [Vector3::zeros(); NAV_HISTORY],
             psi_history_rad: [initial.psi; NAV_HISTORY],
+            psi_shift_rad: 0.0,
             thrust_accel_m_s2: None,
             history_head: 0,
             delay_samples: ((POSITION_LATENCY_S / dt_s).round() as usize).min(NAV_HISTORY - 1),
@@ -206,7 +211,7 @@ impl Estimator {
         if pos_m.is_none() {
             self.history_head = (self.history_head + 1) % NAV_HISTORY;
         }
-        self.psi_history_rad[self.history_head] = e.psi;
+        self.psi_history_rad[self.history_head] = e.psi - self.psi_shift_rad;
         self.euler = e;
     }
 
@@ -219,13 +224,11 @@ impl Estimator {
         // The fix is `delay_samples` old: compare it with ψ̂ of that instant (the slots are
         // indexed as the position history's; the current update's slot is written after).
         let idx = (self.history_head + NAV_HISTORY - self.delay_samples) % NAV_HISTORY;
-        let r = wrap_pi(heading_rad - self.psi_history_rad[idx]);
+        let r = wrap_pi(heading_rad - (self.psi_history_rad[idx] + self.psi_shift_rad));
         let d = (k1 * r * dt).clamp(-MAX_CORRECTION_RAD, MAX_CORRECTION_RAD);
         e.psi += d;
-        // Shift the history by the same correction so that it stays consistent.
-        for p in &mut self.psi_history_rad {
-            *p = wrap_pi(*p + d);
-        }
+        // The whole history moves by the same correction, so that it stays consistent.
+        self.psi_shift_rad += d;
         self.gyro_bias_rad_s.z -= k2 * r * dt;
     }
 
