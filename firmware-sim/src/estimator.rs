@@ -173,13 +173,17 @@ impl Estimator {
         self.omega_rad_s = imu.gyro_rad_s - self.gyro_bias_rad_s;
         // Midpoint rule on η̇ = W_n⁻¹(η) Ω: W_n⁻¹ changes fast at large tilt, and a plain Euler
         // step there leaves an error of order Ω²Δt per update that never comes back.
-        let rates0 = EulerTrig::new(&self.euler).euler_rates(&self.omega_rad_s);
+        let trig0 = EulerTrig::new(&self.euler);
+        let rates0 = trig0.euler_rates(&self.omega_rad_s);
         let half = Euler::new(
             self.euler.psi + 0.5 * rates0[0] * dt,
             self.euler.theta + 0.5 * rates0[1] * dt,
             self.euler.phi + 0.5 * rates0[2] * dt,
         );
-        let rates = EulerTrig::new(&half).euler_rates(&self.omega_rad_s);
+        // The half step moves the angles by a few mrad: angle addition, not three sin_cos.
+        let rates = trig0
+            .shifted(&self.euler, &half)
+            .euler_rates(&self.omega_rad_s);
         let mut e = Euler::new(
             self.euler.psi + rates[0] * dt,
             self.euler.theta + rates[1] * dt,
