@@ -391,30 +391,37 @@ impl Vehicle {
             let start = self.plant.euler;
             let start_trig = self.plant_trig;
             // `paper`: the controller is part of the vector field. The first stage is the
-            // step's start, where the last tick already evaluated it on the same state.
-            let continuous = model == ModelMode::Paper && self.telemetry.armed;
-            let (controller, gains) = (&self.controller, &self.config.gains);
-            let template = self.last_control_input;
-            let mut first_stage = true;
-            self.plant = rk4_step(&self.plant, dt, |s| {
-                let trig = start_trig.shifted(&start, &s.euler);
-                let mut u = input;
-                if continuous && !first_stage {
-                    let ci = ControlInput {
-                        euler: s.euler,
-                        omega_body_rad_s: s.omega_body_rad_s,
-                        pos_m: s.pos_m,
-                        vel_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
-                        ..template
-                    };
-                    // A copy: the stages are trial points, only the tick updates the state.
-                    let out = controller.clone().update(&ci, gains);
-                    u.actuators = out.actuators;
-                    u.fx_paper_n = out.fx_n;
-                }
-                first_stage = false;
-                plant::derivative_with_trig(af, model, s, &u, &trig)
-            });
+            // step's start, where the last tick already evaluated it on the same state. The
+            // sampled path keeps its own closure: copying the input per stage costs ~10 %.
+            if model == ModelMode::Paper && self.telemetry.armed {
+                let (controller, gains) = (&self.controller, &self.config.gains);
+                let template = self.last_control_input;
+                let mut first_stage = true;
+                self.plant = rk4_step(&self.plant, dt, |s| {
+                    let trig = start_trig.shifted(&start, &s.euler);
+                    let mut u = input;
+                    if !first_stage {
+                        let ci = ControlInput {
+                            euler: s.euler,
+                            omega_body_rad_s: s.omega_body_rad_s,
+                            pos_m: s.pos_m,
+                            vel_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
+                            ..template
+                        };
+                        // A copy: the stages are trial points, only the tick updates the state.
+                        let out = controller.clone().update(&ci, gains);
+                        u.actuators = out.actuators;
+                        u.fx_paper_n = out.fx_n;
+                    }
+                    first_stage = false;
+                    plant::derivative_with_trig(af, model, s, &u, &trig)
+                });
+            } else {
+                self.plant = rk4_step(&self.plant, dt, |s| {
+                    let trig = start_trig.shifted(&start, &s.euler);
+                    plant::derivative_with_trig(af, model, s, &input, &trig)
+                });
+            }
             let touchdown = ground::touchdown(&mut self.plant);
             // The step moves the angles by a few mrad, so the next step's trig comes from this
             // one by angle addition; it is recomputed exactly once per control period so
