@@ -1,5 +1,8 @@
 //! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the daemon until
-//! Ctrl-C or SIGTERM.
+//! Ctrl-C or SIGTERM, or one client command (`params`, `arm`, `disarm`, `mode`). It owns the
+//! terminal: the start-up and status lines are printed here, never by the library.
+
+mod client_cli;
 
 use std::path::PathBuf;
 
@@ -21,6 +24,14 @@ struct Cli {
 enum Command {
     /// Run the daemon: vehicle link, client endpoints, router, tlog, status.
     Run(RunArgs),
+    /// Parameters: pull, push, get, set, diff, save.
+    Params(client_cli::ParamsArgs),
+    /// Arm the vehicle.
+    Arm(client_cli::ArmArgs),
+    /// Disarm the vehicle.
+    Disarm(client_cli::ArmArgs),
+    /// Change the flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND, ...).
+    Mode(client_cli::ModeArgs),
 }
 
 #[derive(Debug, Args, Default)]
@@ -70,7 +81,33 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
 }
 
 fn main() -> std::process::ExitCode {
-    match run() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            let _ = e.print();
+            return std::process::ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            // Usage errors exit 2, like every other link or usage error of the client commands.
+            let _ = e.print();
+            return std::process::ExitCode::from(client_cli::EXIT_USAGE);
+        }
+    };
+    let result = match cli.command {
+        Some(Command::Params(a)) => return client_cli::params(a),
+        Some(Command::Arm(a)) => return client_cli::arm(a, true),
+        Some(Command::Disarm(a)) => return client_cli::arm(a, false),
+        Some(Command::Mode(a)) => return client_cli::mode(a),
+        Some(Command::Run(args)) => run(args),
+        None => run(RunArgs::default()),
+    };
+    match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", vtol_link::error_line(e.as_ref()));
@@ -79,18 +116,7 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn run() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-    let cli = Cli::parse();
-    let args = match cli.command {
-        Some(Command::Run(args)) => args,
-        None => RunArgs::default(),
-    };
+fn run(args: RunArgs) -> anyhow::Result<()> {
     let config = build_config(args)?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async move {
@@ -100,10 +126,50 @@ fn run() -> anyhow::Result<()> {
             wait_for_shutdown_signal().await;
             signal_cancel.cancel();
         });
-        vtol_gcs::daemon::run(config, cancel)
-            .await
-            .map_err(anyhow::Error::from)
+        run_daemon(config, cancel).await
     })
+}
+
+/// The daemon with status lines. Headless or not, status lines are what the binary shows
+/// until the terminal UI takes the non-headless path.
+async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
+    let mut tasks = tokio::task::JoinSet::new();
+    let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
+    println!("vehicle {}", config.vehicle);
+    for (url, addr) in &running.serving {
+        println!("serving {}", vtol_gcs::daemon::describe(url, *addr));
+    }
+    if let Some(p) = &running.tlog_path {
+        println!("logging {}", p.display());
+    }
+    // The terminal UI replaces this when not headless; until it exists both print status lines.
+    print_status_lines(&running, config.status_interval, &cancel).await;
+    while tasks.join_next().await.is_some() {}
+    Ok(())
+}
+
+/// One status line per `interval` until `cancel` fires.
+async fn print_status_lines(
+    running: &vtol_gcs::daemon::Running,
+    interval: std::time::Duration,
+    cancel: &CancellationToken,
+) {
+    let mut tick = tokio::time::interval(interval);
+    tick.tick().await;
+    loop {
+        tokio::select! {
+            () = cancel.cancelled() => return,
+            _ = tick.tick() => {
+                let state = running.state.borrow().clone();
+                let links = running.router.links.borrow().clone();
+                let records = running
+                    .tlog_stats
+                    .as_ref()
+                    .map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
+                println!("{}", vtol_gcs::status::line(&state, &links, records, std::time::Instant::now()));
+            }
+        }
+    }
 }
 
 async fn wait_for_shutdown_signal() {
