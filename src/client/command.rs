@@ -198,6 +198,10 @@ impl Machine for CommandMachine {
     fn result(&mut self) -> Option<Self::Output> {
         self.result.take()
     }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        self.first_try_rtt.take().into_iter().collect()
+    }
 }
 
 #[cfg(test)]

@@ -32,6 +32,11 @@ pub trait Machine {
     fn deadline(&self) -> Instant;
     /// The result, once finished (taken once).
     fn result(&mut self) -> Option<Self::Output>;
+    /// Round trips measured since the last call, from exchanges answered on their first send
+    /// only (Karn's rule).
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        Vec::new()
+    }
 }
 
 /// Smoothed round-trip time and its variation (RFC 6298), from exchanges answered on their

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
 
-use super::machine::{Inbound, Machine};
+use super::machine::{Inbound, Machine, Rtt};
 use crate::params::{Param, ParamSet, stored_value};
 
 /// Index re-requests outstanding at once during a download.
@@ -43,11 +43,18 @@ pub struct PullStalled {
 #[derive(Debug)]
 pub struct PullMachine {
     target: (u8, u8),
+    /// The client's estimate, refined by this download's own samples.
+    rtt: Rtt,
     rto: Duration,
     count: Option<u16>,
     values: BTreeMap<u16, (String, Param)>,
     by_name: HashMap<String, u16>,
-    outstanding: BTreeMap<u16, Instant>,
+    /// Re-requested index -> (answer due, sent at, first send?).
+    outstanding: BTreeMap<u16, (Instant, Instant, bool)>,
+    /// Indices already asked once: a later answer may be to any send (Karn's rule).
+    asked: std::collections::HashSet<u16>,
+    samples: Vec<Duration>,
+    started: Instant,
     last_rx: Instant,
     deadline: Instant,
     stalls: u32,
@@ -58,17 +65,21 @@ pub struct PullMachine {
 }
 
 impl PullMachine {
-    /// A download from `target` with retransmission timeout `rto`.
+    /// A download from `target`, starting from the client's round-trip estimate.
     #[must_use]
-    pub fn new(target: (u8, u8), rto: Duration) -> Self {
+    pub fn new(target: (u8, u8), rtt: Rtt) -> Self {
         let now = Instant::now();
         Self {
             target,
-            rto,
+            rtt,
+            rto: rtt.rto(),
             count: None,
             values: BTreeMap::new(),
             by_name: HashMap::new(),
             outstanding: BTreeMap::new(),
+            asked: std::collections::HashSet::new(),
+            samples: Vec::new(),
+            started: now,
             last_rx: now,
             deadline: now,
             stalls: 0,
@@ -95,7 +106,8 @@ impl PullMachine {
 
     fn read(&mut self, index: u16, now: Instant) -> MavMessage {
         self.rerequests += 1;
-        self.outstanding.insert(index, now + self.rto);
+        let first = self.asked.insert(index);
+        self.outstanding.insert(index, (now + self.rto, now, first));
         MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
             param_index: index as i16,
             target_system: self.target.0,
@@ -135,6 +147,7 @@ impl Machine for PullMachine {
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
         self.last_rx = now;
+        self.started = now;
         vec![self.list(now)]
     }
 
@@ -166,7 +179,20 @@ impl Machine for PullMachine {
         self.stalls = 0;
         self.by_name.insert(name.clone(), index);
         self.values.insert(index, (name, param));
-        let was_asked = self.outstanding.remove(&index).is_some();
+        let mut sample = None;
+        if self.values.len() == 1 && self.list_sends == 1 {
+            sample = Some(now.duration_since(self.started));
+        }
+        let asked = self.outstanding.remove(&index);
+        if let Some((_, sent, true)) = asked {
+            sample = Some(now.duration_since(sent));
+        }
+        if let Some(s) = sample {
+            self.samples.push(s);
+            self.rtt.sample(s);
+            self.rto = self.rtt.rto();
+        }
+        let was_asked = asked.is_some();
         self.complete();
         if self.done.is_some() {
             return Vec::new();
@@ -198,7 +224,7 @@ impl Machine for PullMachine {
         let overdue: Vec<u16> = self
             .outstanding
             .iter()
-            .filter(|(_, due)| **due <= now)
+            .filter(|(_, (due, ..))| *due <= now)
             .map(|(i, _)| *i)
             .collect();
         let mut out: Vec<MavMessage> = overdue.into_iter().map(|i| self.read(i, now)).collect();
@@ -212,7 +238,7 @@ impl Machine for PullMachine {
 
     fn deadline(&self) -> Instant {
         let stream_quiet = self.last_rx + self.rto;
-        let next_due = self.outstanding.values().min().copied();
+        let next_due = self.outstanding.values().map(|(due, ..)| *due).min();
         match next_due {
             Some(d) => d.min(self.deadline.max(stream_quiet)),
             None => self.deadline.max(stream_quiet),
@@ -221,6 +247,10 @@ impl Machine for PullMachine {
 
     fn result(&mut self) -> Option<Self::Output> {
         self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        std::mem::take(&mut self.samples)
     }
 }
 
@@ -411,5 +441,9 @@ impl Machine for ParamMachine {
 
     fn result(&mut self) -> Option<Self::Output> {
         self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        self.first_try_rtt.take().into_iter().collect()
     }
 }

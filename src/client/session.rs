@@ -47,6 +47,8 @@ pub(crate) struct Session {
     /// The target was given: never replace it by the first heartbeat.
     pub fixed_target: bool,
     pub shared: Arc<Shared>,
+    /// Links up now (a request waits for one before its first send).
+    pub links_up: watch::Sender<usize>,
 }
 
 impl Session {
@@ -63,6 +65,7 @@ impl Session {
             target,
             fixed_target,
             shared,
+            links_up,
         } = self;
         let mut links: HashMap<LinkId, LinkSender> = HashMap::new();
         let mut seq: u8 = 0;
@@ -85,9 +88,11 @@ impl Session {
                     None => return,
                     Some(LinkEvent::Up { id, tx, .. }) => {
                         links.insert(id, tx);
+                        links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Down { id, .. }) => {
                         links.remove(&id);
+                        links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
                         if !WANTED.contains(&frame.message_id()) {
