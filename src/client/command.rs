@@ -10,8 +10,9 @@ use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 
 use super::machine::{Inbound, Machine};
 
-/// Sends of one command before giving up (the first plus retries).
-pub const COMMAND_TRIES: u8 = 5;
+/// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
+/// way (half the exchanges failing) almost never exhausts them.
+pub const COMMAND_TRIES: u8 = 10;
 /// How long an IN_PROGRESS keeps the command alive without another word.
 pub const IN_PROGRESS_WAIT: Duration = Duration::from_secs(5);
 /// How long a refusal waits for the vehicle's STATUSTEXT when none came before the ACK.
