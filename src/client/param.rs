@@ -450,3 +450,179 @@ impl Machine for ParamMachine {
         self.first_try_rtt.take().into_iter().collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const V: (u8, u8) = (1, 1);
+    const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
+
+    fn value(name: &str, v: f32, index: u16, count: u16, ty: MavParamType) -> Inbound {
+        Inbound {
+            sys: V.0,
+            comp: V.1,
+            msg: MavMessage::PARAM_VALUE(apm::PARAM_VALUE_DATA {
+                param_value: v,
+                param_count: count,
+                param_index: index,
+                param_id: name.into(),
+                param_type: ty,
+            }),
+        }
+    }
+
+    fn rtt(ms: u64) -> Rtt {
+        let mut r = Rtt::default();
+        r.sample(Duration::from_millis(ms));
+        r
+    }
+
+    fn read_indices(out: &[MavMessage]) -> Vec<i16> {
+        out.iter()
+            .filter_map(|m| match m {
+                MavMessage::PARAM_REQUEST_READ(r) => Some(r.param_index),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn pull_rerequests_holes_after_a_silence_and_completes() {
+        let t0 = Instant::now();
+        let mut m = PullMachine::new(V, rtt(10));
+        let first = m.start(t0);
+        assert!(matches!(first[..], [MavMessage::PARAM_REQUEST_LIST(_)]));
+        // 5 parameters; 1 and 3 are lost.
+        for i in [0u16, 2, 4] {
+            m.on_message(t0, &value(&format!("P{i}"), f32::from(i), i, 5, F32));
+        }
+        assert!(m.result().is_none());
+        assert_eq!(m.progress(), (3, 5));
+        assert!(
+            m.on_time(t0 + Duration::from_millis(5)).is_empty(),
+            "too early"
+        );
+        let asks = m.on_time(m.deadline());
+        assert_eq!(read_indices(&asks), [1, 3]);
+        // An echo by name (index 65535) of a known parameter updates it.
+        m.on_message(t0, &value("P2", 7.0, u16::MAX, 5, F32));
+        m.on_message(t0, &value("P1", 1.0, 1, 5, F32));
+        // 3 was lost again: asked again once overdue.
+        let again = m.on_time(m.deadline());
+        assert_eq!(read_indices(&again), [3]);
+        m.on_message(t0, &value("P3", 3.0, 3, 5, F32));
+        let set = m.result().expect("done").expect("complete");
+        assert_eq!(set.len(), 5);
+        assert_eq!(set["P2"].value, 7.0);
+    }
+
+    #[test]
+    fn pull_gives_up_when_nothing_answers() {
+        let t0 = Instant::now();
+        let mut m = PullMachine::new(V, rtt(10));
+        m.start(t0);
+        let mut lists = 0;
+        for _ in 0..100 {
+            let d = m.deadline();
+            lists += m.on_time(d).len();
+            if let Some(r) = m.result() {
+                assert_eq!(
+                    r,
+                    Err(PullStalled {
+                        received: 0,
+                        total: 0
+                    })
+                );
+                assert!(lists >= 3, "the list request is repeated before giving up");
+                return;
+            }
+        }
+        panic!("never gave up");
+    }
+
+    #[test]
+    fn write_is_confirmed_only_by_the_exact_echo() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "LAT_SAT_A", 0.4, F32, Duration::from_millis(20));
+        m.start(t0);
+        // Another value (an old echo, or a refusal's unchanged value) does not confirm.
+        m.on_message(t0, &value("LAT_SAT_A", 1.2, 6, 38, F32));
+        assert!(m.result().is_none());
+        // A value for another name does not either.
+        m.on_message(t0, &value("LAT_SAT_B", 0.4, 7, 38, F32));
+        assert!(m.result().is_none());
+        m.on_message(t0, &value("LAT_SAT_A", 0.4, u16::MAX, 38, F32));
+        assert_eq!(m.result().expect("done").expect("confirmed").value, 0.4);
+    }
+
+    #[test]
+    fn integer_write_confirms_with_the_vehicle_rounding() {
+        let t0 = Instant::now();
+        let i16t = MavParamType::MAV_PARAM_TYPE_INT16;
+        let mut m = ParamMachine::write(V, "SIM_PUSH_MS", 250.4, i16t, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("SIM_PUSH_MS", 250.0, 34, 38, i16t));
+        assert_eq!(m.result().expect("done").expect("confirmed").value, 250.0);
+    }
+
+    #[test]
+    fn param_error_is_a_refusal_with_the_vehicle_text() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "LAT_SAT_B", 2.0, F32, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("LAT_SAT_B", 0.6, 7, 38, F32));
+        m.on_message(
+            t0,
+            &Inbound {
+                sys: 1,
+                comp: 1,
+                msg: MavMessage::PARAM_ERROR(apm::PARAM_ERROR_DATA {
+                    param_index: 7,
+                    target_system: 255,
+                    target_component: 190,
+                    param_id: "LAT_SAT_B".into(),
+                    error: MavParamError::MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+                }),
+            },
+        );
+        assert!(m.result().is_none(), "waits briefly for the reason");
+        m.on_message(
+            t0,
+            &Inbound {
+                sys: 1,
+                comp: 1,
+                msg: MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
+                    severity: apm::MavSeverity::MAV_SEVERITY_WARNING,
+                    text: "Param write denied (LAT_SAT_B: needs a > b + c + d)".into(),
+                    id: 0,
+                    chunk_seq: 0,
+                }),
+            },
+        );
+        match m.result() {
+            Some(Err(ParamFailure::Refused(r))) => {
+                assert!(r.contains("needs a > b + c + d"), "{r}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn write_retries_then_reports_no_answer() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "ALT_KP", 6.0, F32, Duration::from_millis(20));
+        let mut sends = m.start(t0).len();
+        while m.result_peek_pending() {
+            let d = m.deadline();
+            sends += m.on_time(d).len();
+        }
+        assert_eq!(sends, usize::from(PARAM_TRIES));
+    }
+
+    impl ParamMachine {
+        fn result_peek_pending(&self) -> bool {
+            self.done.is_none()
+        }
+    }
+}
