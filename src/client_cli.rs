@@ -255,13 +255,20 @@ pub fn params(args: ParamsArgs) -> ExitCode {
     with_client(&args.link, |c| async move {
         match command {
             ParamsCommand::Pull { output, format } => {
+                let t0 = std::time::Instant::now();
                 let set = pull(&c).await?;
+                let took = t0.elapsed();
                 let vehicle = c.target().unwrap_or((1, 1));
                 match output {
                     Some(path) => {
                         file::save(&path, &set, format, vehicle)
                             .map_err(|e| usage(e.to_string()))?;
-                        eprintln!("{} parameters written to {}", set.len(), path.display());
+                        eprintln!(
+                            "{} parameters written to {} (download {:.1} ms)",
+                            set.len(),
+                            path.display(),
+                            took.as_secs_f64() * 1e3
+                        );
                     }
                     None => print!("{}", file::render(&set, format, vehicle)),
                 }

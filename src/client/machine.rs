@@ -58,7 +58,7 @@ impl Default for Rtt {
 
 impl Rtt {
     /// Before any sample: generous for a radio, short enough that a lost first frame costs little.
-    pub const INITIAL_RTO: Duration = Duration::from_millis(300);
+    pub const INITIAL_RTO: Duration = Duration::from_millis(200);
     /// Floor: below this a loopback retry only duplicates work the vehicle is already doing.
     pub const MIN_RTO: Duration = Duration::from_millis(25);
     /// Ceiling.

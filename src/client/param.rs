@@ -1,8 +1,8 @@
 //! The parameter protocol as state machines: the whole-table download, one read, and one
 //! verified write.
 //!
-//! Download: PARAM_REQUEST_LIST, then, once the stream has been silent for a round-trip
-//! timeout, the missing indices by PARAM_REQUEST_READ(index), at most [`PULL_WINDOW`]
+//! Download: PARAM_REQUEST_LIST, then, once the stream has ended (its last index arrived, or it
+//! has been silent for a round-trip timeout), the missing indices by PARAM_REQUEST_READ(index), at most [`PULL_WINDOW`]
 //! outstanding: each answer lets the next request go, so the pace follows what the link
 //! carries. A request unanswered for a timeout is sent again. Echoes with index 65535 (a by-name
 //! answer or another client's write) update values by name.
@@ -195,12 +195,16 @@ impl Machine for PullMachine {
             self.rto = self.rtt.rto();
         }
         let was_asked = asked.is_some();
+        self.deadline = now + self.rto;
         self.complete();
         if self.done.is_some() {
             return Vec::new();
         }
-        // While re-requesting, each answer frees a window slot for the next request.
-        if was_asked {
+        // While re-requesting, each answer frees a window slot for the next request. The last
+        // index of the list stream (sent in index order) means the stream is over: ask for the
+        // holes now rather than after a silence.
+        let stream_end = !was_asked && self.count == Some(index + 1);
+        if was_asked || stream_end {
             self.refill(now)
         } else {
             Vec::new()
@@ -493,18 +497,22 @@ mod tests {
         let mut m = PullMachine::new(V, rtt(10));
         let first = m.start(t0);
         assert!(matches!(first[..], [MavMessage::PARAM_REQUEST_LIST(_)]));
-        // 5 parameters; 1 and 3 are lost.
-        for i in [0u16, 2, 4] {
-            m.on_message(t0, &value(&format!("P{i}"), f32::from(i), i, 5, F32));
+        // 5 parameters; 1 and 3 are lost, and the stream is still going.
+        for i in [0u16, 2] {
+            assert!(
+                m.on_message(t0, &value(&format!("P{i}"), f32::from(i), i, 5, F32))
+                    .is_empty()
+            );
         }
         assert!(m.result().is_none());
-        assert_eq!(m.progress(), (3, 5));
+        assert_eq!(m.progress(), (2, 5));
+        // The last index ends the stream: the holes are asked for at once.
+        let asks = m.on_message(t0, &value("P4", 4.0, 4, 5, F32));
+        assert_eq!(read_indices(&asks), [1, 3]);
         assert!(
             m.on_time(t0 + Duration::from_millis(5)).is_empty(),
-            "too early"
+            "nothing overdue yet"
         );
-        let asks = m.on_time(m.deadline());
-        assert_eq!(read_indices(&asks), [1, 3]);
         // An echo by name (index 65535) of a known parameter updates it.
         m.on_message(t0, &value("P2", 7.0, u16::MAX, 5, F32));
         m.on_message(t0, &value("P1", 1.0, 1, 5, F32));

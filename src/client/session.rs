@@ -26,6 +26,11 @@ const WANTED: [u32; 5] = [
     345, // PARAM_ERROR
 ];
 
+/// MAV_COMP_ID_AUTOPILOT1.
+const AUTOPILOT1: u8 = 1;
+/// Messages only an autopilot streams (SYS_STATUS, ATTITUDE).
+const TELEMETRY: [u32; 2] = [1, 30];
+
 /// Shared between the session task and every handle.
 #[derive(Debug)]
 pub(crate) struct Shared {
@@ -95,6 +100,16 @@ impl Session {
                         links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
+                        // The autopilot's own telemetry finds the vehicle as surely as its
+                        // heartbeat, and arrives many times a second: on a lossy link that
+                        // saves waiting for the next 1 Hz heartbeat.
+                        if !fixed_target
+                            && frame.component_id() == AUTOPILOT1
+                            && TELEMETRY.contains(&frame.message_id())
+                            && target.borrow().is_none()
+                        {
+                            target.send_replace(Some((frame.system_id(), AUTOPILOT1)));
+                        }
                         if !WANTED.contains(&frame.message_id()) {
                             continue;
                         }
