@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 
-use super::machine::{Inbound, Machine};
+use super::machine::{Inbound, Machine, retry_wait};
 
 /// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
 /// way (half the exchanges failing) almost never exhausts them.
@@ -96,7 +96,7 @@ impl CommandMachine {
     fn frame(&mut self, now: Instant) -> MavMessage {
         let confirmation = self.tries;
         self.tries += 1;
-        self.deadline = now + self.rto;
+        self.deadline = now + retry_wait(self.rto, self.tries);
         let p = self.params;
         MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
             param1: p[0],

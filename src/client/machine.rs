@@ -95,9 +95,36 @@ impl Rtt {
     }
 }
 
+/// Sends at the plain timeout before the wait between retries starts doubling.
+pub const STEADY_TRIES: u8 = 4;
+/// Longest wait between two sends of one request.
+pub const MAX_RETRY_WAIT: Duration = Duration::from_secs(1);
+
+/// The wait after send number `tries` (1-based): the timeout for the first few sends, then
+/// doubling up to [`MAX_RETRY_WAIT`]. Random loss needs quick retries; a stalled peer (a busy
+/// machine, a radio fade) needs the requester to keep asking for seconds, not milliseconds,
+/// before it calls the request unanswered.
+#[must_use]
+pub fn retry_wait(rto: Duration, tries: u8) -> Duration {
+    let doublings = u32::from(tries.saturating_sub(STEADY_TRIES)).min(16);
+    (rto * 2u32.pow(doublings)).min(MAX_RETRY_WAIT.max(rto))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn retries_back_off_after_a_few_quick_ones() {
+        let rto = Duration::from_millis(25);
+        let waits: Vec<u128> = (1..=12).map(|t| retry_wait(rto, t).as_millis()).collect();
+        assert_eq!(
+            waits,
+            [25, 25, 25, 25, 50, 100, 200, 400, 800, 1000, 1000, 1000]
+        );
+        let total: u128 = waits.iter().sum();
+        assert!(total > 3000, "twelve tries span {total} ms");
+    }
 
     #[test]
     fn rto_follows_samples_within_bounds() {

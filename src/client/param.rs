@@ -16,13 +16,16 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
 
-use super::machine::{Inbound, Machine, Rtt};
+use super::machine::{Inbound, Machine, Rtt, retry_wait};
 use crate::params::{Param, ParamSet, stored_value};
 
 /// Index re-requests outstanding at once during a download.
 pub const PULL_WINDOW: usize = 16;
-/// Consecutive timeouts without any new value before a download gives up.
+/// Consecutive timeouts without any new value before a download gives up…
 pub const PULL_STALLS: u32 = 12;
+/// …and at least this long without one: a busy machine can pause a fast link for longer than
+/// twelve short timeouts.
+pub const PULL_GIVE_UP: Duration = Duration::from_secs(3);
 /// Sends of one write or read before giving up. At 30 % loss each way one exchange fails about
 /// half the time, so twelve sends leave a 0.03 % chance of a false "no answer"; with the
 /// timeout at a few round trips that is still well under a second on a fast link.
@@ -217,7 +220,7 @@ impl Machine for PullMachine {
         }
         if now.duration_since(self.last_rx) >= self.rto {
             self.stalls += 1;
-            if self.stalls > PULL_STALLS {
+            if self.stalls > PULL_STALLS && now.duration_since(self.last_rx) >= PULL_GIVE_UP {
                 let (received, total) = self.progress();
                 self.done = Some(Err(PullStalled { received, total }));
                 return Vec::new();
@@ -352,7 +355,7 @@ impl ParamMachine {
 
     fn request(&mut self, now: Instant) -> MavMessage {
         self.tries += 1;
-        self.deadline = now + self.rto;
+        self.deadline = now + retry_wait(self.rto, self.tries);
         match self.write {
             Some((value, ty)) => MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
                 param_value: value,
@@ -531,7 +534,7 @@ mod tests {
         let mut m = PullMachine::new(V, rtt(10));
         m.start(t0);
         let mut lists = 0;
-        for _ in 0..100 {
+        for _ in 0..1000 {
             let d = m.deadline();
             lists += m.on_time(d).len();
             if let Some(r) = m.result() {
@@ -543,6 +546,7 @@ mod tests {
                     })
                 );
                 assert!(lists >= 3, "the list request is repeated before giving up");
+                assert!(d.duration_since(t0) >= PULL_GIVE_UP, "gave up too soon");
                 return;
             }
         }

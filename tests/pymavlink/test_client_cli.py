@@ -245,3 +245,9 @@ def test_gcs_failsafe_runs_when_every_operator_has_gone(twin_factory, daemon_fac
                 break
     finally:
         watcher.close()
+
+
+def test_shipped_gains_file_matches_the_twin_defaults(lossless):
+    gains = Path(__file__).resolve().parents[2] / "config" / "gains.param"
+    r = gcs("params", "diff", str(gains), link=lossless.tcp)
+    assert r.returncode == 0 and r.stdout.strip() == "0 differ", r.stdout + r.stderr
