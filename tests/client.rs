@@ -191,3 +191,31 @@ async fn commands_carry_the_vehicle_reason() {
     r.client.arm(true).await.expect("force arm");
     r.client.disarm(true).await.expect("force disarm");
 }
+
+/// A rollback the vehicle refuses: the client is told a stale value (LAT_SAT_D 0.3, which the
+/// twin would never accept beside c = 0.22), so restoring it fails and the report says what the
+/// vehicle now holds, read back from it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rollback_the_vehicle_refuses_is_reported_with_what_it_holds() {
+    let r = rig(0.0, 1, 1.0).await;
+    let c = &r.client;
+    let mut stale = c.params_pull(None).await.expect("pull");
+    stale.get_mut("LAT_SAT_D").expect("in the table").value = 0.3;
+    let want = wanted(&[("LAT_SAT_D", 0.15), ("LAT_SAT_B", 2.0)]);
+    let report = c
+        .push_onto(&stale, &want, &vtol_gcs::params::TwinRules, None)
+        .await
+        .expect("push runs");
+    assert!(
+        matches!(report.result, PushResult::RollbackIncomplete { .. }),
+        "{report:?}"
+    );
+    match &report.outcomes["LAT_SAT_D"] {
+        ParamOutcome::RollbackFailed { old, holds, .. } => {
+            assert_eq!(*old, 0.3);
+            assert_eq!(*holds, Some(0.15), "what the vehicle holds, read back");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(c.param_get("LAT_SAT_D").await.expect("read").value, 0.15);
+}
