@@ -15,7 +15,7 @@ use tokio_util::sync::CancellationToken;
 use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::params::file::{self, ParamFile};
 use vtol_gcs::params::plan::{ParamOutcome, PushReport, PushResult};
-use vtol_gcs::params::{self as params, Format, Param, ParamSet};
+use vtol_gcs::params::{self as params, Format, Param, ParamSet, Rules as _};
 use vtol_link::LinkUrl;
 
 /// Done.
@@ -321,8 +321,7 @@ fn parse_pairs(pairs: &[String]) -> Result<ParamFile, String> {
         return Err("set takes NAME VALUE pairs".into());
     }
     let mut set = ParamSet::new();
-    let mut lines = std::collections::BTreeMap::new();
-    for (i, pair) in pairs.chunks(2).enumerate() {
+    for pair in pairs.chunks(2) {
         let (name, text) = (&pair[0], &pair[1]);
         if !params::valid_name(name) {
             return Err(format!("'{name}' is not a parameter name"));
@@ -345,11 +344,11 @@ fn parse_pairs(pairs: &[String]) -> Result<ParamFile, String> {
         {
             return Err(format!("{name} given twice"));
         }
-        lines.insert(name.clone(), i + 1);
     }
     Ok(ParamFile {
         params: set,
-        lines,
+        // Values from the command line have no lines to point at.
+        lines: std::collections::BTreeMap::new(),
         format: Format::Mavproxy,
         typed: false,
     })
@@ -428,6 +427,20 @@ async fn push(c: &ClientHandle, wanted: &ParamFile, dry_run: bool) -> Result<(),
         );
     }
     if dry_run {
+        // What the twin's rules predict for this order; the vehicle has the last word.
+        let mut state = current.clone();
+        for ch in &order {
+            match params::TwinRules.refusal(&state, &ch.name, ch.new) {
+                Some(reason) => {
+                    let _ = writeln!(out, "{}: likely refused: {reason}", ch.name);
+                }
+                None => {
+                    if let Some(p) = state.get_mut(&ch.name) {
+                        p.value = ch.new;
+                    }
+                }
+            }
+        }
         let _ = writeln!(
             out,
             "{} would change (dry run: nothing written)",

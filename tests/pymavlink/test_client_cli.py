@@ -94,6 +94,9 @@ def test_file_breaking_the_conditions_changes_nothing(request, tmp_path, which):
     assert gcs("params", "pull", "-o", str(before), link=twin.tcp).returncode == 0
     f = tmp_path / "bad.param"
     f.write_text("ALT_KP,6\nLAT_SAT_B,2\n")  # Mission Planner format
+    if which == "lossless":
+        r = gcs("params", "push", str(f), "--dry-run", link=twin.tcp)
+        assert r.returncode == 0 and "LAT_SAT_B: likely refused" in r.stdout, r.stdout + r.stderr
     r = gcs("params", "push", str(f), link=twin.tcp)
     assert r.returncode == 1, r.stdout + r.stderr
     assert "LAT_SAT_B" in r.stderr and "refused" in r.stderr, r.stderr
