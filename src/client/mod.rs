@@ -585,3 +585,13 @@ fn failure(name: &str, f: ParamFailure) -> ClientError {
         }),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// The UI shares one handle across tasks and threads.
+    #[test]
+    fn handle_is_send_sync_and_clone() {
+        fn check<T: Send + Sync + Clone + 'static>() {}
+        check::<super::ClientHandle>();
+    }
+}

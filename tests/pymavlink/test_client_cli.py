@@ -235,17 +235,29 @@ def test_gcs_failsafe_runs_when_every_operator_has_gone(twin_factory, daemon_fac
         # Pilot present (heartbeats while waiting): no failsafe for longer than the timeout.
         end = time.monotonic() + timeout_s + 2
         while time.monotonic() < end:
-            h = pilot.recv("HEARTBEAT", timeout=5)
-            assert h.custom_mode == MODES["QHOVER"], f"mode {h.custom_mode} while the pilot is connected"
+            m = pilot.recv(["HEARTBEAT", "STATUSTEXT"], timeout=5)
+            assert m.get_type() == "HEARTBEAT" or "Failsafe" not in m.text, m
+            if m.get_type() == "HEARTBEAT":
+                assert m.custom_mode == MODES["QHOVER"], f"mode {m.custom_mode} while the pilot is connected"
         pilot.close()
         t_gone = time.monotonic()
+        # The switch is the moment of the twin's failsafe STATUSTEXT (or, if that frame is
+        # missed, the first QLAND heartbeat, which follows within a second at 1 Hz).
         deadline = t_gone + timeout_s + 1
-        while True:
+        switched = None
+        while switched is None:
             left = deadline - time.monotonic()
             assert left > 0, "no QLAND within FS_GCS_TIMEOUT + 1 s of the last client leaving"
-            h = watcher.recv_match(type="HEARTBEAT", blocking=True, timeout=left)
-            if h is not None and h.get_srcSystem() == 1 and h.custom_mode == MODES["QLAND"]:
-                break
+            m = watcher.recv_match(type=["HEARTBEAT", "STATUSTEXT"], blocking=True, timeout=left)
+            if m is None or m.get_srcSystem() != 1:
+                continue
+            if m.get_type() == "STATUSTEXT" and "Failsafe" in m.text:
+                switched = m
+            elif m.get_type() == "HEARTBEAT" and m.custom_mode == MODES["QLAND"]:
+                switched = m
+        h = watcher.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
+                               condition=f"HEARTBEAT.custom_mode=={MODES['QLAND']}")
+        assert h is not None, "the vehicle does not report QLAND after the failsafe"
     finally:
         watcher.close()
 
