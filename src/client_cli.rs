@@ -184,6 +184,8 @@ where
             )),
             other => other.into(),
         })?;
+            // Best effort: without an answer the timeouts start generous and adapt.
+            let _ = client.probe_rtt().await;
             let r = f(client).await;
             cancel.cancel();
             r

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 
-use super::machine::{Inbound, Machine, retry_wait};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
 
 /// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
 /// way (half the exchanges failing) almost never exhausts them.
@@ -183,7 +183,10 @@ impl Machine for CommandMachine {
             self.finish(r, now);
             return Vec::new();
         }
-        if self.tries >= COMMAND_TRIES {
+        let waited = self
+            .started
+            .map_or(Duration::ZERO, |s| now.duration_since(s));
+        if self.tries >= COMMAND_TRIES && waited >= GIVE_UP_AFTER {
             self.result = Some(Err(NoAck { tries: self.tries }));
             return Vec::new();
         }
@@ -270,13 +273,17 @@ mod tests {
             let out = m.on_time(m.deadline());
             assert_eq!(confirmation(&out), k);
         }
-        let _ = m.on_time(m.deadline());
-        assert_eq!(
-            m.result(),
-            Some(Err(NoAck {
-                tries: COMMAND_TRIES
-            }))
-        );
+        // Past the tries, it keeps asking (at the longest wait) until GIVE_UP_AFTER.
+        let mut tries = COMMAND_TRIES;
+        loop {
+            let d = m.deadline();
+            if m.on_time(d).is_empty() {
+                assert!(d.duration_since(t0) >= GIVE_UP_AFTER);
+                break;
+            }
+            tries += 1;
+        }
+        assert_eq!(m.result(), Some(Err(NoAck { tries })));
     }
 
     #[test]

@@ -60,7 +60,7 @@ impl Rtt {
     /// Before any sample: generous for a radio, short enough that a lost first frame costs little.
     pub const INITIAL_RTO: Duration = Duration::from_millis(200);
     /// Floor: below this a loopback retry only duplicates work the vehicle is already doing.
-    pub const MIN_RTO: Duration = Duration::from_millis(25);
+    pub const MIN_RTO: Duration = Duration::from_millis(10);
     /// Ceiling.
     pub const MAX_RTO: Duration = Duration::from_secs(3);
 
@@ -97,6 +97,9 @@ impl Rtt {
 
 /// Sends at the plain timeout before the wait between retries starts doubling.
 pub const STEADY_TRIES: u8 = 4;
+/// A request is called unanswered only after this long as well as after its tries: a loaded
+/// machine or a radio fade can silence a link for seconds.
+pub const GIVE_UP_AFTER: Duration = Duration::from_secs(5);
 /// Longest wait between two sends of one request.
 pub const MAX_RETRY_WAIT: Duration = Duration::from_secs(1);
 

@@ -13,6 +13,7 @@
 pub mod command;
 pub mod machine;
 pub mod param;
+pub mod probe;
 mod session;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -332,6 +333,18 @@ impl ClientHandle {
             Some(t) => Ok(t),
             None => self.wait_target(FIND_VEHICLE_TIMEOUT).await,
         }
+    }
+
+    /// Measures the round trip with TIMESYNC probes, so the first real request already has a
+    /// timeout scaled to the link. `None` when the vehicle did not answer (the timeouts then
+    /// start from [`Rtt::INITIAL_RTO`] and adapt as answers come).
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn probe_rtt(&self) -> Result<Option<Duration>, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = probe::ProbeMachine::new(target);
+        self.drive(&mut m, |_| {}).await
     }
 
     /// COMMAND_LONG with retries (confirmation incremented), ACK matched by command and target,

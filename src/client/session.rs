@@ -18,10 +18,11 @@ use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
 use super::machine::Inbound;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 5] = [
+const WANTED: [u32; 6] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
     77,  // COMMAND_ACK
+    111, // TIMESYNC
     253, // STATUSTEXT
     345, // PARAM_ERROR
 ];
