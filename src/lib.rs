@@ -6,6 +6,7 @@
 pub mod config;
 pub mod daemon;
 pub mod gcs;
+pub mod log;
 pub mod router;
 pub mod status;
 pub mod tlog;

@@ -9,6 +9,8 @@ use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, FileConfig, VehicleSource};
 use vtol_link::LinkUrl;
 
+mod log_cli;
+
 /// Terminal ground station and MAVLink bridge for the two-rotor convertible VTOL.
 #[derive(Debug, Parser)]
 #[command(version, about)]
@@ -21,11 +23,15 @@ struct Cli {
 enum Command {
     /// Run the daemon: vehicle link, client endpoints, router, tlog, status.
     Run(RunArgs),
+    /// Look at flight logs: stats, export (CSV, MCAP), plot (PNG).
+    #[command(subcommand)]
+    Log(log_cli::LogCommand),
 }
 
 #[derive(Debug, Args, Default)]
 struct RunArgs {
-    /// Vehicle link: `embedded` (default) or a URL (tcp:H:P, udpin:H:P, udpout:H:P, serial:DEV[:BAUD]).
+    /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
+    /// serial:DEV[:BAUD]) or a tlog played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
     vehicle: Option<VehicleSource>,
     /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD].
@@ -89,6 +95,7 @@ fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let args = match cli.command {
         Some(Command::Run(args)) => args,
+        Some(Command::Log(cmd)) => return log_cli::run(cmd),
         None => RunArgs::default(),
     };
     let config = build_config(args)?;

@@ -320,36 +320,122 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
     (era * 400 + yoe + i64::from(m <= 2), m, d)
 }
 
-/// Reads the records of a tlog. A torn record at the end (a crash mid-write) ends the
-/// iteration; a record whose frame does not check out is skipped by resynchronising on the
-/// next timestamp-plus-frame that does, and counted.
-#[derive(Debug)]
+/// Bytes read from the file at a time by [`TlogReader`].
+const READ_CHUNK: usize = 256 * 1024;
+/// Largest record: the timestamp and the largest frame.
+const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
+/// While resynchronising, a candidate record's timestamp must lie this close to the last good
+/// one (µs): a CRC-valid frame inside garbage is rare, one with a plausible time rarer still.
+const RESYNC_MAX_JUMP_US: u64 = 24 * 3600 * 1_000_000;
+
+/// Streaming reader of the records of a tlog written by this project, pymavlink or MAVProxy.
+///
+/// It reads the file in chunks (memory stays flat on long logs) and hands out frames that share
+/// the chunk's buffer. A record whose frame does not check out is skipped by resynchronising on
+/// the next timestamp-plus-frame that does; the bytes passed over are counted in
+/// [`skipped_bytes`](Self::skipped_bytes). While resynchronising only frames whose CRC the
+/// dialect can check, with a timestamp within a day of the last good one, are taken, so garbage
+/// is not mistaken for a frame of an unknown message id. An incomplete record at the end of the
+/// file (a crash mid-write, a cut copy) ends the iteration and is reported in
+/// [`truncated_tail_bytes`](Self::truncated_tail_bytes), never as an error.
 pub struct TlogReader {
-    data: Vec<u8>,
+    src: Box<dyn Read + Send>,
+    /// Unconsumed bytes of the file; `buf[pos..]` is still to be parsed.
+    buf: Bytes,
     pos: usize,
-    /// Bytes skipped while resynchronising.
+    eof: bool,
+    /// True after a bad record until a record checks out again.
+    resyncing: bool,
+    last_stamp: Option<u64>,
+    consumed: u64,
+    /// Bytes skipped while resynchronising (garbage between records, damaged records).
     pub skipped_bytes: usize,
+    /// Bytes of an incomplete last record, if the file ends inside one.
+    pub truncated_tail_bytes: usize,
+    /// A read error that ended the iteration early.
+    pub io_error: Option<io::Error>,
+}
+
+impl std::fmt::Debug for TlogReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TlogReader")
+            .field("consumed", &self.consumed)
+            .field("skipped_bytes", &self.skipped_bytes)
+            .field("truncated_tail_bytes", &self.truncated_tail_bytes)
+            .finish_non_exhaustive()
+    }
 }
 
 impl TlogReader {
-    /// Reads a whole file into memory.
+    /// Opens a file for streaming.
     ///
     /// # Errors
-    /// The file cannot be read.
+    /// The file cannot be opened.
     pub fn open(path: &Path) -> io::Result<Self> {
-        let mut data = Vec::new();
-        File::open(path)?.read_to_end(&mut data)?;
-        Ok(Self::from_bytes(data))
+        Ok(Self::new(Box::new(File::open(path)?)))
     }
 
-    /// Reads records from bytes.
+    /// Reads records from any byte source.
+    #[must_use]
+    pub fn new(src: Box<dyn Read + Send>) -> Self {
+        Self {
+            src,
+            buf: Bytes::new(),
+            pos: 0,
+            eof: false,
+            resyncing: false,
+            last_stamp: None,
+            consumed: 0,
+            skipped_bytes: 0,
+            truncated_tail_bytes: 0,
+            io_error: None,
+        }
+    }
+
+    /// Reads records from bytes in memory.
     #[must_use]
     pub fn from_bytes(data: Vec<u8>) -> Self {
-        Self {
-            data,
-            pos: 0,
-            skipped_bytes: 0,
+        Self::new(Box::new(io::Cursor::new(data)))
+    }
+
+    /// Bytes of the file parsed so far (records, skipped bytes and a torn tail): for progress.
+    #[must_use]
+    pub fn bytes_consumed(&self) -> u64 {
+        self.consumed
+    }
+
+    /// Makes sure at least `MAX_RECORD_LEN` bytes are buffered unless the file ends first.
+    fn fill(&mut self) {
+        if self.eof || self.buf.len() - self.pos >= MAX_RECORD_LEN {
+            return;
         }
+        let rest = &self.buf[self.pos..];
+        let mut next = Vec::with_capacity(rest.len() + READ_CHUNK);
+        next.extend_from_slice(rest);
+        while next.len() < MAX_RECORD_LEN && !self.eof {
+            let have = next.len();
+            next.resize(have + READ_CHUNK, 0);
+            match self.src.read(&mut next[have..]) {
+                Ok(0) => {
+                    next.truncate(have);
+                    self.eof = true;
+                }
+                Ok(n) => next.truncate(have + n),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => next.truncate(have),
+                Err(e) => {
+                    next.truncate(have);
+                    self.io_error = Some(e);
+                    self.eof = true;
+                }
+            }
+        }
+        self.buf = Bytes::from(next);
+        self.pos = 0;
+    }
+
+    fn advance(&mut self, n: usize) {
+        self.pos += n;
+        self.consumed += n as u64;
     }
 }
 
@@ -357,25 +443,66 @@ impl Iterator for TlogReader {
     type Item = (u64, Frame);
 
     fn next(&mut self) -> Option<Self::Item> {
-        while self.pos + 8 < self.data.len() {
-            let stamp_bytes: [u8; 8] = self.data[self.pos..self.pos + 8].try_into().ok()?;
-            let start = self.pos + 8;
-            if let Some(len) = vtol_link::frame_len_from_prefix(&self.data[start..]) {
-                if start + len <= self.data.len() {
-                    let bytes = Bytes::copy_from_slice(&self.data[start..start + len]);
-                    if let Ok(frame) = Frame::from_bytes(bytes) {
-                        self.pos = start + len;
-                        return Some((u64::from_be_bytes(stamp_bytes), frame));
-                    }
-                } else {
-                    // A torn last record: nothing more to read.
-                    return None;
-                }
+        loop {
+            self.fill();
+            let avail = &self.buf[self.pos..];
+            if avail.is_empty() {
+                return None;
             }
-            self.pos += 1;
-            self.skipped_bytes += 1;
+            let Some(len) = avail.get(8..).and_then(vtol_link::frame_len_from_prefix) else {
+                if avail.len() < 8 + 3 && self.eof {
+                    // Too short to hold even a header: a torn record if we are in step,
+                    // otherwise more garbage.
+                    return self.end_with_tail(avail.len());
+                }
+                self.skip_one();
+                continue;
+            };
+            if 8 + len > avail.len() {
+                // Only possible at the end of the file (fill keeps a whole record buffered).
+                if self.resyncing {
+                    self.skip_one();
+                    continue;
+                }
+                return self.end_with_tail(avail.len());
+            }
+            let stamp = u64::from_be_bytes(avail[..8].try_into().ok()?);
+            let bytes = self.buf.slice(self.pos + 8..self.pos + 8 + len);
+            match Frame::from_bytes(bytes) {
+                Ok(frame) if !self.resyncing || self.plausible(stamp, &frame) => {
+                    self.resyncing = false;
+                    self.last_stamp = Some(stamp);
+                    self.advance(8 + len);
+                    return Some((stamp, frame));
+                }
+                _ => self.skip_one(),
+            }
         }
+    }
+}
+
+impl TlogReader {
+    fn skip_one(&mut self) {
+        self.resyncing = true;
+        self.skipped_bytes += 1;
+        self.advance(1);
+    }
+
+    fn end_with_tail(&mut self, n: usize) -> Option<(u64, Frame)> {
+        if self.resyncing {
+            self.skipped_bytes += n;
+        } else {
+            self.truncated_tail_bytes += n;
+        }
+        self.advance(n);
         None
+    }
+
+    fn plausible(&self, stamp: u64, frame: &Frame) -> bool {
+        frame.is_verified()
+            && self
+                .last_stamp
+                .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US)
     }
 }
 
