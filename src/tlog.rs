@@ -404,15 +404,16 @@ impl TlogReader {
         self.consumed
     }
 
-    /// Makes sure at least `MAX_RECORD_LEN` bytes are buffered unless the file ends first.
+    /// Keeps two whole records buffered unless the file ends first (a resync candidate is checked
+    /// against the record behind it).
     fn fill(&mut self) {
-        if self.eof || self.buf.len() - self.pos >= MAX_RECORD_LEN {
+        if self.eof || self.buf.len() - self.pos >= 2 * MAX_RECORD_LEN {
             return;
         }
         let rest = &self.buf[self.pos..];
         let mut next = Vec::with_capacity(rest.len() + READ_CHUNK);
         next.extend_from_slice(rest);
-        while next.len() < MAX_RECORD_LEN && !self.eof {
+        while next.len() < 2 * MAX_RECORD_LEN && !self.eof {
             let have = next.len();
             next.resize(have + READ_CHUNK, 0);
             match self.src.read(&mut next[have..]) {
@@ -469,9 +470,16 @@ impl Iterator for TlogReader {
             let stamp = u64::from_be_bytes(avail[..8].try_into().ok()?);
             let bytes = self.buf.slice(self.pos + 8..self.pos + 8 + len);
             match Frame::from_bytes(bytes) {
-                Ok(frame) if !self.resyncing || self.plausible(stamp, &frame) => {
+                Ok(frame) if !self.resyncing || self.plausible(stamp, &frame, 8 + len) => {
                     self.resyncing = false;
-                    self.last_stamp = Some(stamp);
+                    // A damaged timestamp in a record that is otherwise whole must not become
+                    // the reference that later candidates are judged by.
+                    if self
+                        .last_stamp
+                        .is_none_or(|l| stamp.abs_diff(l) <= RESYNC_MAX_JUMP_US)
+                    {
+                        self.last_stamp = Some(stamp);
+                    }
                     self.advance(8 + len);
                     return Some((stamp, frame));
                 }
@@ -498,11 +506,24 @@ impl TlogReader {
         None
     }
 
-    fn plausible(&self, stamp: u64, frame: &Frame) -> bool {
-        frame.is_verified()
-            && self
-                .last_stamp
-                .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US)
+    /// A candidate found while resynchronising: a frame whose CRC checks, and either a time
+    /// near the last good one or another whole, CRC-checked record right behind it.
+    fn plausible(&self, stamp: u64, frame: &Frame, record_len: usize) -> bool {
+        if !frame.is_verified() {
+            return false;
+        }
+        if self
+            .last_stamp
+            .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US)
+        {
+            return true;
+        }
+        let next = &self.buf[self.pos + record_len..];
+        next.get(8..)
+            .and_then(vtol_link::frame_len_from_prefix)
+            .and_then(|len| next.get(8..8 + len))
+            .and_then(|bytes| Frame::from_bytes(Bytes::copy_from_slice(bytes)).ok())
+            .is_some_and(|f| f.is_verified())
     }
 }
 
