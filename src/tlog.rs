@@ -383,7 +383,8 @@ impl TlogReader {
             buf: Bytes::new(),
             pos: 0,
             eof: false,
-            resyncing: false,
+            // The first record is found like one after garbage: a file may start with junk.
+            resyncing: true,
             last_stamp: None,
             consumed: 0,
             skipped_bytes: 0,
@@ -460,8 +461,9 @@ impl Iterator for TlogReader {
                 continue;
             };
             if 8 + len > avail.len() {
-                // Only possible at the end of the file (fill keeps a whole record buffered).
-                if self.resyncing {
+                // Only possible at the end of the file (fill keeps whole records buffered). It
+                // is a torn last record only if no whole record starts in the bytes left.
+                if self.resyncing || whole_record_within(&avail[1..]) {
                     self.skip_one();
                     continue;
                 }
@@ -470,7 +472,7 @@ impl Iterator for TlogReader {
             let stamp = u64::from_be_bytes(avail[..8].try_into().ok()?);
             let bytes = self.buf.slice(self.pos + 8..self.pos + 8 + len);
             match Frame::from_bytes(bytes) {
-                Ok(frame) if !self.resyncing || self.plausible(stamp, &frame, 8 + len) => {
+                Ok(frame) if self.acceptable(stamp, &frame, 8 + len) => {
                     self.resyncing = false;
                     // A damaged timestamp in a record that is otherwise whole must not become
                     // the reference that later candidates are judged by.
@@ -487,6 +489,18 @@ impl Iterator for TlogReader {
             }
         }
     }
+}
+
+/// Whether a record with a CRC-checked frame starts anywhere in `bytes`.
+fn whole_record_within(bytes: &[u8]) -> bool {
+    (0..bytes.len()).any(|i| {
+        let rest = &bytes[i..];
+        rest.get(8..)
+            .and_then(vtol_link::frame_len_from_prefix)
+            .and_then(|len| rest.get(8..8 + len))
+            .and_then(|b| Frame::from_bytes(Bytes::copy_from_slice(b)).ok())
+            .is_some_and(|f| f.is_verified())
+    })
 }
 
 impl TlogReader {
@@ -506,24 +520,36 @@ impl TlogReader {
         None
     }
 
-    /// A candidate found while resynchronising: a frame whose CRC checks, and either a time
-    /// near the last good one or another whole, CRC-checked record right behind it.
-    fn plausible(&self, stamp: u64, frame: &Frame, record_len: usize) -> bool {
-        if !frame.is_verified() {
-            return false;
+    /// Whether a whole record at `pos` is taken.
+    ///
+    /// In step (right after a good record), a frame whose CRC checks is taken. A frame of an id
+    /// the dialect does not know has no CRC to check, so it is taken only if another whole,
+    /// CRC-checked record follows right behind it: otherwise garbage right after a record
+    /// could pass as one. (So such a frame as the very last record is counted as skipped.)
+    ///
+    /// While resynchronising (and at the start of the file), two of three must hold: the CRC
+    /// checks, the time is within a day of the last good one, a whole CRC-checked record
+    /// follows. A frame of an unknown id needs both of the others.
+    fn acceptable(&self, stamp: u64, frame: &Frame, record_len: usize) -> bool {
+        let followed = || {
+            let next = &self.buf[self.pos + record_len..];
+            next.get(8..)
+                .and_then(vtol_link::frame_len_from_prefix)
+                .and_then(|len| next.get(8..8 + len))
+                .and_then(|bytes| Frame::from_bytes(Bytes::copy_from_slice(bytes)).ok())
+                .is_some_and(|f| f.is_verified())
+        };
+        if !self.resyncing {
+            return frame.is_verified() || followed();
         }
-        if self
+        let near = self
             .last_stamp
-            .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US)
-        {
-            return true;
+            .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US);
+        match (frame.is_verified(), near) {
+            (true, true) => true,
+            (true, false) | (false, true) => followed(),
+            (false, false) => false,
         }
-        let next = &self.buf[self.pos + record_len..];
-        next.get(8..)
-            .and_then(vtol_link::frame_len_from_prefix)
-            .and_then(|len| next.get(8..8 + len))
-            .and_then(|bytes| Frame::from_bytes(Bytes::copy_from_slice(bytes)).ok())
-            .is_some_and(|f| f.is_verified())
     }
 }
 
@@ -596,9 +622,64 @@ mod tests {
         }
         w.flush().unwrap();
         let mut data = std::fs::read(&path).unwrap();
+        let record_len = data.len() / 3;
         data.truncate(data.len() - 5);
         let mut r = TlogReader::from_bytes(data);
         assert_eq!(r.by_ref().count(), 2);
+        assert_eq!(r.truncated_tail_bytes, record_len - 5);
+        assert_eq!(r.skipped_bytes, 0);
+    }
+
+    fn records_with_garbage(garbage: &[Vec<u8>]) -> (Vec<u8>, Vec<Vec<u8>>) {
+        let mut data = Vec::new();
+        let mut frames = Vec::new();
+        for (i, g) in garbage.iter().enumerate() {
+            data.extend_from_slice(g);
+            let f = Frame::encode_v2(1, 1, i as u8, &vtol_link::gcs_heartbeat());
+            data.extend_from_slice(&(1_000_000 + i as u64 * 1000).to_be_bytes());
+            data.extend_from_slice(f.as_bytes());
+            frames.push(f.as_bytes().to_vec());
+        }
+        (data, frames)
+    }
+
+    #[test]
+    fn garbage_that_looks_like_a_frame_of_an_unknown_id_is_skipped() {
+        // A stamp, then a v2 header of message id 0xABCDEF (not in the dialect, so no CRC to
+        // check) with a short length: in step it would be taken; between records it must not be.
+        let mut fake = vec![0xFFu8; 8];
+        fake.extend_from_slice(&[0xFD, 1, 0, 0, 9, 9, 9, 0xEF, 0xCD, 0xAB, 0, 0, 0]);
+        let mut after_garbage = vec![0x55];
+        after_garbage.extend_from_slice(&fake);
+        let (data, frames) = records_with_garbage(&[
+            vec![],
+            vec![0x55, 0x13],
+            after_garbage,
+            fake.clone(),
+            vec![],
+        ]);
+        let mut r = TlogReader::from_bytes(data);
+        let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+        // in step, with a whole checked record behind them, the same bytes are a record
+        let mut want = frames.clone();
+        want.insert(3, fake[8..].to_vec());
+        assert_eq!(got, want);
+        assert_eq!(r.skipped_bytes, 2 + 1 + 8 + 13);
+        assert_eq!(r.truncated_tail_bytes, 0);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn every_record_survives_garbage_between_records(
+            garbage in proptest::collection::vec(proptest::collection::vec(proptest::num::u8::ANY, 0..40), 1..30),
+        ) {
+            let (data, frames) = records_with_garbage(&garbage);
+            let total: usize = garbage.iter().map(Vec::len).sum();
+            let mut r = TlogReader::new(Box::new(std::io::Cursor::new(data)));
+            let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+            proptest::prop_assert_eq!(got, frames);
+            proptest::prop_assert_eq!(r.skipped_bytes, total);
+        }
     }
 
     #[test]
