@@ -190,15 +190,19 @@ fn write_log(path: &Path, max_frames: u64, seconds: u32) -> u64 {
 fn venv_python() -> Option<(PathBuf, PathBuf)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let venv = std::env::var_os("VENV").map_or_else(|| root.join(".venv"), PathBuf::from);
-    let venv = if venv.is_absolute() { venv } else { root.join(venv) };
+    let venv = if venv.is_absolute() {
+        venv
+    } else {
+        root.join(venv)
+    };
     let py = venv.join("bin/python");
     let dump = venv.join("bin/mavlogdump.py");
     (py.exists() && dump.exists()).then_some((py, dump))
 }
 
 fn main() {
-    let quick = std::env::var_os("LOG_TOOLS_QUICK").is_some()
-        || !std::env::args().any(|a| a == "--bench");
+    let quick =
+        std::env::var_os("LOG_TOOLS_QUICK").is_some() || !std::env::args().any(|a| a == "--bench");
     let (frames_target, plot_seconds) = if quick {
         (20_000, 60)
     } else {

@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use vtol_gcs::log::export::{self, ExportReport, Selection};
 use vtol_gcs::log::plot::{self, Kind, PlotOptions};
-use vtol_gcs::log::{LogError, open_tlog, stats};
+use vtol_gcs::log::{open_tlog, stats};
 
 /// `log` subcommands.
 #[derive(Debug, Subcommand)]
@@ -190,7 +190,7 @@ pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
                 title: a.title,
             };
             let panels = plot::draw(&main, compare.as_ref(), &a.output, &opts)
-                .map_err(|e: LogError| anyhow::Error::from(e))
+                .map_err(anyhow::Error::from)
                 .with_context(|| format!("plotting {}", a.file.display()))?;
             println!("wrote {} ({panels} panels)", a.output.display());
         }

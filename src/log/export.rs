@@ -104,7 +104,7 @@ pub fn csv_per_type(
     while let Some((stamp, frame)) = reader.next() {
         let start = *start.get_or_insert(stamp);
         n += 1;
-        if n % 16_384 == 0 {
+        if n.is_multiple_of(16_384) {
             progress(reader.bytes_consumed());
         }
         if !selection.wants_id(frame.message_id()) {
@@ -152,17 +152,20 @@ pub fn csv_per_type(
     Ok(report)
 }
 
+/// (message id, system id, component id).
+type SourceKey = (u32, u8, u8);
+
 /// Column layout of the wide table: per (type, source) the columns of its fields.
 struct WideLayout {
     header: Vec<String>,
-    /// (message id, sys, comp) -> index of its first column.
-    first_col: HashMap<(u32, u8, u8), usize>,
+    /// Index of the first column of each source's fields.
+    first_col: HashMap<SourceKey, usize>,
 }
 
 fn wide_layout(input: &Path, selection: &Selection) -> Result<WideLayout, LogError> {
     let (mut reader, _) = open_tlog(input)?;
-    // name -> sources -> field names, in order of first appearance of the name.
-    let mut seen: BTreeMap<&'static str, Vec<((u32, u8, u8), Vec<String>)>> = BTreeMap::new();
+    // name -> sources (id, sys, comp) with their field names.
+    let mut seen: BTreeMap<&'static str, Vec<(SourceKey, Vec<String>)>> = BTreeMap::new();
     for (_, frame) in reader.by_ref() {
         if !selection.wants_id(frame.message_id()) {
             continue;
@@ -248,7 +251,7 @@ pub fn csv_wide(
     while let Some((stamp, frame)) = reader.next() {
         let start = *start.get_or_insert(stamp);
         n += 1;
-        if n % 16_384 == 0 {
+        if n.is_multiple_of(16_384) {
             progress(reader.bytes_consumed());
         }
         let key = (frame.message_id(), frame.system_id(), frame.component_id());
@@ -325,11 +328,11 @@ pub fn mcap(
     let (mut reader, _) = open_tlog(input)?;
     let mut report = ExportReport::default();
     let mut schemas: HashMap<&'static str, u16> = HashMap::new();
-    let mut channels: HashMap<(u32, u8, u8), (u16, u32)> = HashMap::new();
+    let mut channels: HashMap<SourceKey, (u16, u32)> = HashMap::new();
     let mut n = 0u64;
     while let Some((stamp, frame)) = reader.next() {
         n += 1;
-        if n % 16_384 == 0 {
+        if n.is_multiple_of(16_384) {
             progress(reader.bytes_consumed());
         }
         if !selection.wants_id(frame.message_id()) {

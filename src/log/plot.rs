@@ -177,7 +177,7 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
     // The figures show one vehicle: the first system that sends one of these messages.
     let mut vehicle: Option<u8> = None;
     const WANTED: [u32; 3] = [30, 32, 36]; // ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW
-    while let Some((stamp, frame)) = reader.next() {
+    for (stamp, frame) in reader.by_ref() {
         let start = *start.get_or_insert(stamp);
         if stamp & 3 == 3 || !WANTED.contains(&frame.message_id()) {
             continue;

@@ -102,14 +102,14 @@ pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u
             last_id = id;
             last_count = 1;
         }
-        let key = usize::from(frame.system_id()) << 8 | usize::from(frame.component_id());
+        let key = (usize::from(frame.system_id()) << 8) | usize::from(frame.component_id());
         let s = &mut sources[key];
         if s.0 > 0 {
             s.1 += u64::from(frame.seq().wrapping_sub(s.2).wrapping_sub(1));
         }
         s.0 += 1;
         s.2 = frame.seq();
-        if frames % 65_536 == 0 {
+        if frames.is_multiple_of(65_536) {
             progress(reader.bytes_consumed());
         }
     }
