@@ -200,7 +200,7 @@ fn wide_layout(input: &Path, selection: &Selection) -> Result<WideLayout, LogErr
     Ok(WideLayout { header, first_col })
 }
 
-/// One CSV table sampled every 1/`rate_hz` s from t = 0: each column holds the latest value of
+/// One CSV table sampled every 1/`rate_hz` s from t = 0 to the log's last record: each column holds the latest value of
 /// its field at or before the row's time (zero-order hold; empty before the first message).
 /// Columns are `NAME.field`, or `NAME[sys:comp].field` when several sources send that type.
 ///
@@ -254,13 +254,14 @@ pub fn csv_wide(
         if n.is_multiple_of(16_384) {
             progress(reader.bytes_consumed());
         }
+        // The table spans the whole log, not only the selected messages.
+        let t = seconds(stamp, start);
+        last_t = t;
         let key = (frame.message_id(), frame.system_id(), frame.component_id());
         let Some(&col) = layout.first_col.get(&key) else {
             continue;
         };
-        let t = seconds(stamp, start);
         emit_until(t, false, &mut row, &mut tick, &mut w)?;
-        last_t = t;
         let Some((name, f)) = fields::decode(&frame) else {
             report.undecodable += 1;
             continue;
