@@ -69,12 +69,13 @@ fn enum_name(mut inner: Map<String, Value>) -> Value {
 }
 
 /// A field value as CSV text: numbers as the shortest text that reads back to the same value,
-/// strings as they are.
+/// strings as they are. A non-finite float is `nan`: the JSON form has no infinities, so ±inf
+/// and NaN arrive alike (as null, the only way a message field becomes null).
 #[must_use]
 pub fn csv_text(v: &Value) -> String {
     match v {
         Value::String(s) => s.clone(),
-        Value::Null => String::new(),
+        Value::Null => "nan".to_owned(),
         other => other.to_string(),
     }
 }
@@ -98,6 +99,20 @@ mod tests {
         assert_eq!(get("type"), Some(Value::String("MAV_TYPE_GCS".into())));
         assert!(get("mavtype").is_none());
         assert!(get("custom_mode").is_some_and(|v| v.is_number()));
+    }
+
+    #[test]
+    fn a_nan_field_is_written_as_nan_not_left_empty() {
+        let msg = apm::MavMessage::ATTITUDE(apm::ATTITUDE_DATA {
+            roll: f32::NAN,
+            ..Default::default()
+        });
+        let (_, f) = flatten(&msg);
+        let roll = f
+            .iter()
+            .find(|(n, _)| n == "roll")
+            .map(|(_, v)| csv_text(v));
+        assert_eq!(roll.as_deref(), Some("nan"));
     }
 
     #[test]
