@@ -17,6 +17,9 @@
 //!   flushed; logs go to stderr.
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
+//! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
+//! daemon; this module takes a [`ServeConfig`].
+//!
 //! # Embedding
 //!
 //! [`Twin::start`] runs the same vehicle inside an existing tokio runtime and returns a
@@ -329,137 +332,5 @@ fn dispatch(links: &HashMap<LinkId, LinkEntry>, out: Vec<Outbound>) {
             }
             Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
         }
-    }
-}
-
-/// Flags of `firmware-sim serve` (see the module docs for the stdout contract).
-#[derive(Debug, Clone, clap::Args)]
-pub struct ServeArgs {
-    /// Where GCSs connect (repeatable): tcpin:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT,
-    /// tcp:HOST:PORT, serial:DEVICE[:BAUD]. Port 0 = pick a free port.
-    #[arg(long = "listen", value_name = "URL", default_value = DEFAULT_LISTEN)]
-    pub listen: Vec<LinkUrl>,
-    /// Sim time per wall time (2 = twice real time).
-    #[arg(long, default_value_t = 1.0, value_parser = parse_speed, conflicts_with = "fast")]
-    pub speed: f64,
-    /// Run as fast as the CPU allows (tests).
-    #[arg(long)]
-    pub fast: bool,
-    /// Parameter file (.parm): loaded at start, rewritten atomically on every change.
-    #[arg(long, value_name = "FILE")]
-    pub param_file: Option<std::path::PathBuf>,
-    /// Seed of every random draw (sensor noise, gusts).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Model mode: physical or paper (PHYSICS.md §0).
-    #[arg(long, default_value = "physical")]
-    pub model: crate::airframe::ModelMode,
-    /// Noise, bias and quantisation off.
-    #[arg(long)]
-    pub ideal_sensors: bool,
-    /// MAVLink system id (overrides SYSID_THISMAV), 1–255.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
-    pub sysid: Option<u8>,
-}
-
-fn parse_speed(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 && v <= 1000.0 => Ok(v),
-        _ => Err(format!("speed must be a number in (0, 1000], got '{s}'")),
-    }
-}
-
-impl ServeArgs {
-    /// The configuration these flags describe, parameter file loaded.
-    ///
-    /// # Errors
-    /// [`ServeError::Params`] for an unusable parameter file.
-    pub fn to_config(&self) -> Result<ServeConfig, ServeError> {
-        let mut config = ServeConfig {
-            listen: self.listen.clone(),
-            clock: if self.fast {
-                ClockMode::AsFastAsPossible
-            } else {
-                ClockMode::Scaled { speed: self.speed }
-            },
-            endpoint: EndpointConfig {
-                vehicle: crate::vehicle::VehicleConfig {
-                    model: self.model,
-                    ideal_sensors: self.ideal_sensors,
-                    seed: self.seed,
-                    ..Default::default()
-                },
-                params: Params::new(),
-                param_file: self.param_file.clone(),
-                sysid: self.sysid,
-            },
-            link_options: LinkOptions::default(),
-        };
-        config.load_param_file()?;
-        Ok(config)
-    }
-}
-
-/// `firmware-sim serve`: builds a runtime, opens the endpoints, prints one `listening <url>`
-/// line per endpoint on stdout, and runs until Ctrl-C or SIGTERM.
-///
-/// # Errors
-/// Startup failures (bad parameter file, address in use); I/O errors of the runtime.
-pub fn run_cli(args: &ServeArgs) -> Result<(), ServeError> {
-    // Logs go to stderr so stdout carries only the `listening` lines. A subscriber the caller
-    // installed first wins.
-    let _ = tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .try_init();
-    let config = args.to_config()?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(ServeError::Runtime)?;
-    runtime.block_on(async {
-        let cancel = CancellationToken::new();
-        let twin = Twin::start(config, cancel.clone()).await?;
-        {
-            use std::io::Write as _;
-            let mut out = std::io::stdout().lock();
-            for b in twin.bound() {
-                let _ = writeln!(out, "listening {}", b.resolved_url());
-            }
-            let _ = out.flush();
-        }
-        shutdown_signal().await;
-        tracing::info!("shutting down");
-        cancel.cancel();
-        twin.join().await;
-        Ok(())
-    })
-}
-
-/// Resolves on Ctrl-C or (on Unix) SIGTERM.
-async fn shutdown_signal() {
-    let ctrl_c = async {
-        if tokio::signal::ctrl_c().await.is_err() {
-            std::future::pending::<()>().await;
-        }
-    };
-    #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
-            }
-            Err(_) => std::future::pending::<()>().await,
-        }
-    };
-    #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        () = ctrl_c => {}
-        () = term => {}
     }
 }
