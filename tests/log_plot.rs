@@ -4,31 +4,22 @@
 
 use std::path::Path;
 
-use clap::Parser;
-use firmware_sim::simulate::{self, SimulateArgs};
+use firmware_sim::airframe::ModelMode;
+use firmware_sim::simulate::{self, SimulateConfig};
 use vtol_gcs::log::plot::{self, Kind, PlotOptions};
 use vtol_gcs::tlog::{Direction, Record, TlogWriter};
 use vtol_link::Frame;
 use vtol_link::dialect as apm;
 
-#[derive(Parser)]
-struct Sim {
-    #[command(flatten)]
-    args: SimulateArgs,
-}
-
 fn simulate_csv(path: &Path) {
-    let sim = Sim::parse_from([
-        "simulate",
-        "--model",
-        "paper",
-        "--duration",
-        "10",
-        "--initial",
-        "phi=0.1,theta=0.1,psi=1,x=0.1,y=0.1,z=0.1",
-    ]);
+    let cfg = SimulateConfig {
+        duration_s: 10.0,
+        model: ModelMode::Paper,
+        initial: simulate::parse_initial("phi=0.1,theta=0.1,psi=1,x=0.1,y=0.1,z=0.1").unwrap(),
+        ..SimulateConfig::default()
+    };
     let mut out = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    simulate::run(&sim.args, Some(&mut out)).unwrap();
+    simulate::run(&cfg, Some(&mut out)).unwrap();
 }
 
 struct Png {
