@@ -182,9 +182,42 @@ fn a_tlog_and_a_compared_simulation_share_the_axes() {
     let img = read_png(&out);
     assert_eq!((img.w, img.h), (1800, 1200));
     assert_panels_drawn(&img, 4, 4, 12);
-    // inputs cannot come from a tlog alone: one clear error
+    // this tlog has no controller outputs: one clear error
     let e = plot::draw(&logged, None, &out, &opts(Kind::Inputs, None)).unwrap_err();
-    assert!(e.to_string().contains("simulate"), "{e}");
+    assert!(e.to_string().contains("NAMED_VALUE_FLOAT"), "{e}");
+}
+
+#[test]
+fn the_twins_controller_outputs_in_a_tlog_are_the_inputs_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("inputs.tlog");
+    let mut w = TlogWriter::create(&path).unwrap();
+    let names = firmware_sim::endpoint::streams::CONTROLLER_OUTPUT_NAMES;
+    for i in 0..200u32 {
+        for (k, name) in names.iter().enumerate() {
+            let msg = apm::MavMessage::NAMED_VALUE_FLOAT(apm::NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms: i * 20,
+                value: (k as f32 + 1.0) * (i as f32 * 0.05).sin(),
+                name: (*name).into(),
+            });
+            w.write(&Record {
+                t_us: 1_795_346_880_000_000 + u64::from(i) * 20_000,
+                direction: Direction::FromVehicle,
+                frame: Frame::encode_v2(1, 1, (i % 256) as u8, &msg),
+            })
+            .unwrap();
+        }
+    }
+    w.flush().unwrap();
+    let data = plot::load(&path).unwrap();
+    let inputs = data.inputs.as_ref().expect("inputs from NAMED_VALUE_FLOAT");
+    assert!(inputs.iter().all(|s| s.len() == 200));
+    let out = dir.path().join("inputs.png");
+    assert_eq!(
+        plot::draw(&data, None, &out, &opts(Kind::Inputs, Some((800, 900)))).unwrap(),
+        4
+    );
+    assert_panels_drawn(&read_png(&out), 4, 1, 4);
 }
 
 #[test]

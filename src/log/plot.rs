@@ -3,8 +3,8 @@
 //! against the setpoint (Fig. 4), control inputs τφ, τθ, τψ, f_z (Fig. 5) and PWM (the PWM
 //! panels of Figs. 8–10).
 //!
-//! Sources are tlogs (ATTITUDE, LOCAL_POSITION_NED and SERVO_OUTPUT_RAW of the vehicle) and
-//! `firmware-sim simulate` CSV. Both are drawn in the paper's frames (inertial z up, η = (ψ, θ,
+//! Sources are tlogs (ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW and the twin's controller
+//! outputs as NAMED_VALUE_FLOAT, from the vehicle) and `firmware-sim simulate` CSV. Both are drawn in the paper's frames (inertial z up, η = (ψ, θ,
 //! φ)): a tlog's NED/FRD values go through the twin's own frame map, so an offline flight and
 //! a logged one compare on the same axes (`--compare`).
 //!
@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use firmware_sim::endpoint::streams::CONTROLLER_OUTPUT_NAMES;
 use firmware_sim::frames::Euler;
 use firmware_sim::frames::{euler_to_ned_rpy, ned_to_paper};
 use nalgebra::Vector3;
@@ -173,10 +174,12 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
     let mut att: [Points; 3] = Default::default();
     let mut pos: [Points; 3] = Default::default();
     let mut pwm: [Points; 5] = Default::default();
+    let mut inputs: [Points; 4] = Default::default();
     let mut start = None;
     // The figures show one vehicle: the first system that sends one of these messages.
     let mut vehicle: Option<u8> = None;
-    const WANTED: [u32; 3] = [30, 32, 36]; // ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW
+    // ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, NAMED_VALUE_FLOAT
+    const WANTED: [u32; 4] = [30, 32, 36, 251];
     for (stamp, frame) in reader.by_ref() {
         let start = *start.get_or_insert(stamp);
         if stamp & 3 == 3 || !WANTED.contains(&frame.message_id()) {
@@ -209,6 +212,13 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
                     s.push((t, v[i]));
                 }
             }
+            // The twin's controller outputs τ̃φ, τ̃θ, τ̃ψ, f_z (already in the paper's frame).
+            Ok(M::NAMED_VALUE_FLOAT(n)) => {
+                let name = n.name.to_str().unwrap_or("");
+                if let Some(i) = CONTROLLER_OUTPUT_NAMES.iter().position(|c| *c == name) {
+                    inputs[i].push((t, f64::from(n.value)));
+                }
+            }
             Ok(M::SERVO_OUTPUT_RAW(s)) => {
                 let raw = [
                     s.servo1_raw,
@@ -231,7 +241,7 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
         attitude: some(&att).then_some(att),
         position: some(&pos).then_some(pos),
         pwm: some(&pwm).then_some(pwm),
-        inputs: None,
+        inputs: some(&inputs).then_some(inputs),
     })
 }
 
@@ -291,13 +301,12 @@ fn kinds_of(kind: Kind, sources: &[&FlightData]) -> Result<Vec<Kind>, LogError> 
             Kind::Position => "no LOCAL_POSITION_NED (or x/y/z columns)",
             Kind::Pwm => "no SERVO_OUTPUT_RAW (or pwm1..pwm5 columns)",
             Kind::Inputs => {
-                "no control inputs: only firmware-sim simulate CSV carries tau_phi, tau_theta, tau_psi, fz"
+                "no control inputs: a simulate CSV (tau_phi, tau_theta, tau_psi, fz) or the twin's NAMED_VALUE_FLOAT TAU_PHI, TAU_THETA, TAU_PSI, FZ"
             }
             Kind::All => unreachable!("handled above"),
         };
-        return Err(LogError::Unsupported(
-            format!("cannot plot {kind:?}: {what}").to_lowercase(),
-        ));
+        let name = format!("{kind:?}").to_lowercase();
+        return Err(LogError::Unsupported(format!("cannot plot {name}: {what}")));
     }
     Ok(vec![kind])
 }
