@@ -43,6 +43,14 @@ pub enum DaemonError {
     /// The log could not be created.
     #[error(transparent)]
     Tlog(#[from] crate::tlog::TlogError),
+    /// The log to replay could not be opened.
+    #[error("cannot open {path} for replay: {source}")]
+    Replay {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
 }
 
 /// What a running daemon exposes (to the status line, the UI and tests).
@@ -143,6 +151,27 @@ pub async fn start(
                 let _ = link_task.await;
             });
             tasks.spawn(embedded_twin(twin_end, cancel.clone()));
+        }
+        VehicleSource::Replay(replay) => {
+            let reader = replay.open().map_err(|source| DaemonError::Replay {
+                path: replay.path.clone(),
+                source,
+            })?;
+            let (log_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
+            let (_, link_task) = spawn_stream_link(
+                router_end,
+                "replay",
+                vehicle_tx,
+                config.link.clone(),
+                cancel.clone(),
+            );
+            tasks.spawn(async move {
+                let _ = link_task.await;
+            });
+            let (path, speed, cancel) = (replay.path.clone(), replay.speed, cancel.clone());
+            tasks.spawn(async move {
+                crate::log::replay::run(reader, &path, speed, log_end, cancel).await;
+            });
         }
         VehicleSource::Url(url) => {
             let h = spawn_endpoint(url, vehicle_tx, config.link.clone(), cancel.clone())

@@ -7,6 +7,7 @@ pub mod client;
 pub mod config;
 pub mod daemon;
 pub mod gcs;
+pub mod log;
 pub mod params;
 pub mod router;
 pub mod status;

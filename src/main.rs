@@ -12,6 +12,8 @@ use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, FileConfig, VehicleSource};
 use vtol_link::LinkUrl;
 
+mod log_cli;
+
 /// Terminal ground station and MAVLink bridge for the two-rotor convertible VTOL.
 #[derive(Debug, Parser)]
 #[command(version, about)]
@@ -32,11 +34,15 @@ enum Command {
     Disarm(client_cli::ArmArgs),
     /// Change the flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND, ...).
     Mode(client_cli::ModeArgs),
+    /// Look at flight logs: stats, export (CSV, MCAP), plot (PNG).
+    #[command(subcommand)]
+    Log(log_cli::LogCommand),
 }
 
 #[derive(Debug, Args, Default)]
 struct RunArgs {
-    /// Vehicle link: `embedded` (default) or a URL (tcp:H:P, udpin:H:P, udpout:H:P, serial:DEV[:BAUD]).
+    /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
+    /// serial:DEV[:BAUD]) or a tlog played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
     vehicle: Option<VehicleSource>,
     /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD].
@@ -110,6 +116,7 @@ fn main() -> std::process::ExitCode {
         Some(Command::Arm(a)) => return client_cli::arm(a, true),
         Some(Command::Disarm(a)) => return client_cli::arm(a, false),
         Some(Command::Mode(a)) => return client_cli::mode(a),
+        Some(Command::Log(cmd)) => log_cli::run(cmd),
         Some(Command::Run(args)) => run(args),
         None => run(RunArgs::default()),
     };

@@ -90,8 +90,8 @@ fn bench(c: &mut Criterion) {
         c.bench_function("sensors_estimator", |b| {
             b.iter(|| {
                 let imu = s.sample_imu(&Vector3::zeros(), &Vector3::new(0.0, 0.0, 9.8));
-                let fix = s.sample_position(&Vector3::new(0.0, 0.0, 1.0));
-                est.update(&imu, Some(&fix.pos_m));
+                let fix = s.sample_position(&Vector3::new(0.0, 0.0, 1.0), 0.0);
+                est.update(&imu, Some(&fix.pos_m), Some(fix.heading_rad));
             })
         });
     }

@@ -16,8 +16,15 @@
 //! 6 cm off its setpoint, so low-frequency attitude noise is what limits the hold. Without a
 //! position sensor (the prototype) the filter falls back to the plain accelerometer correction.
 //!
-//! Yaw is not observable from gravity and comes from gyro integration only; its bias is what the
-//! calibration found. `paper` mode bypasses this module ([I17]).
+//! Yaw is not observable from gravity. When the motion-capture heading is fused (the modes that
+//! fly on the motion capture), a second-order complementary filter pulls ψ̂ to the delayed
+//! heading fix and estimates the yaw-gyro bias, both error poles at −[`HEADING_BANDWIDTH_RAD_S`];
+//! without it (QSTABILIZE, the paper's experiment, or the heading sensor switched off) yaw comes
+//! from gyro integration only and drifts with the residual bias of the calibration.
+//! `paper` mode bypasses this module ([I17]).
+//!
+//! Large tilts: the gyros are integrated through W_n⁻¹ with a second-order (midpoint) step, so
+//! a fast swing from 0.8 rad does not leave a first-order integration error in the estimate.
 
 use nalgebra::Vector3;
 
@@ -28,8 +35,15 @@ use crate::sensors::ImuSample;
 /// Time constant of the accelerometer correction, s: the gyros are trusted above ~0.16 Hz,
 /// the accelerometer below.
 pub const ACCEL_CORRECTION_TIME_S: f64 = 1.0;
-/// Bandwidth of the position-aided filter: its four error poles sit at −ω, rad/s.
-pub const NAV_BANDWIDTH_RAD_S: f64 = 4.0;
+/// Bandwidth of the position-aided filter: its four error poles sit at −ω, rad/s. With the
+/// chains' gains 1 mrad of tilt error holds the vehicle about 6 cm off, and below the filter's
+/// bandwidth the tilt error is gyro noise shaped by ~6s/ω²: at 4 rad/s that alone wandered
+/// ±3 cm in ten minutes, at 8 rad/s the hold is about ±2 cm (the 1 mm position noise it lets in
+/// instead is the smaller term).
+pub const NAV_BANDWIDTH_RAD_S: f64 = 8.0;
+/// Bandwidth of the heading filter: both error poles at −ω, rad/s. Slow enough that the 0.1°
+/// heading noise stays below 0.05°, fast enough to track the gyro-bias drift.
+pub const HEADING_BANDWIDTH_RAD_S: f64 = 1.0;
 /// Latency of the position sensor the filter compensates, s (`sensors::POSITION_LATENCY_S`).
 const POSITION_LATENCY_S: f64 = crate::sensors::POSITION_LATENCY_S;
 /// Length of the history of predicted positions kept for the latency.
@@ -57,6 +71,10 @@ pub struct Estimator {
     pos_m: Vector3<f64>,
     vel_m_s: Vector3<f64>,
     pos_history_m: [Vector3<f64>; NAV_HISTORY],
+    /// Specific thrust along z_B the firmware commands, m/s² (`None`: assume hover).
+    thrust_accel_m_s2: Option<f64>,
+    /// ψ̂ of the last updates, indexed like `pos_history_m` (for the heading fix's latency).
+    psi_history_rad: [f64; NAV_HISTORY],
     history_head: usize,
     delay_samples: usize,
 }
@@ -82,6 +100,8 @@ impl Estimator {
             pos_m: Vector3::zeros(),
             vel_m_s: Vector3::zeros(),
             pos_history_m: [Vector3::zeros(); NAV_HISTORY],
+            psi_history_rad: [initial.psi; NAV_HISTORY],
+            thrust_accel_m_s2: None,
             history_head: 0,
             delay_samples: ((POSITION_LATENCY_S / dt_s).round() as usize).min(NAV_HISTORY - 1),
         }
@@ -135,17 +155,35 @@ impl Estimator {
     }
 
     /// One update: integrate the gyros, then correct with the position sensor's fix
-    /// (`pos_m`, delayed by the sensor's latency) if there is one, else with the accelerometer.
-    pub fn update(&mut self, imu: &ImuSample, pos_m: Option<&Vector3<f64>>) {
+    /// (`pos_m`, delayed by the sensor's latency) if there is one, else with the accelerometer,
+    /// and with the heading fix (`heading_rad`, same latency) if it is fused.
+    pub fn update(
+        &mut self,
+        imu: &ImuSample,
+        pos_m: Option<&Vector3<f64>>,
+        heading_rad: Option<f64>,
+    ) {
         let dt = self.dt_s;
         let g = self.gravity_m_s2;
         self.omega_rad_s = imu.gyro_rad_s - self.gyro_bias_rad_s;
-        let rates = EulerTrig::new(&self.euler).euler_rates(&self.omega_rad_s);
+        // Midpoint rule on η̇ = W_n⁻¹(η) Ω: W_n⁻¹ changes fast at large tilt, and a plain Euler
+        // step there leaves an error of order Ω²Δt per update that never comes back.
+        let rates0 = EulerTrig::new(&self.euler).euler_rates(&self.omega_rad_s);
+        let half = Euler::new(
+            self.euler.psi + 0.5 * rates0[0] * dt,
+            self.euler.theta + 0.5 * rates0[1] * dt,
+            self.euler.phi + 0.5 * rates0[2] * dt,
+        );
+        let rates = EulerTrig::new(&half).euler_rates(&self.omega_rad_s);
         let mut e = Euler::new(
             self.euler.psi + rates[0] * dt,
             self.euler.theta + rates[1] * dt,
             self.euler.phi + rates[2] * dt,
         );
+        // Heading first: the position correction works in the heading frame.
+        if let Some(h) = heading_rad {
+            self.heading_correction(&mut e, h);
+        }
         let f_x = imu.accel_m_s2[0] - self.accel_bias_m_s2[0];
         let f_y = imu.accel_m_s2[1] - self.accel_bias_m_s2[1];
 
@@ -164,7 +202,31 @@ impl Estimator {
             }
         }
         e.psi = wrap_pi(e.psi);
+        // The history advances once per update, with or without a position fix.
+        if pos_m.is_none() {
+            self.history_head = (self.history_head + 1) % NAV_HISTORY;
+        }
+        self.psi_history_rad[self.history_head] = e.psi;
         self.euler = e;
+    }
+
+    /// The heading correction: ψ̂ toward the delayed fix, the residual that persists into the
+    /// yaw-gyro bias (near level ψ̇ ≈ r).
+    fn heading_correction(&mut self, e: &mut Euler, heading_rad: f64) {
+        let dt = self.dt_s;
+        let w = HEADING_BANDWIDTH_RAD_S;
+        let (k1, k2) = (2.0 * w, w * w);
+        // The fix is `delay_samples` old: compare it with ψ̂ of that instant (the slots are
+        // indexed as the position history's; the current update's slot is written after).
+        let idx = (self.history_head + NAV_HISTORY - self.delay_samples) % NAV_HISTORY;
+        let r = wrap_pi(heading_rad - self.psi_history_rad[idx]);
+        let d = (k1 * r * dt).clamp(-MAX_CORRECTION_RAD, MAX_CORRECTION_RAD);
+        e.psi += d;
+        // Shift the history by the same correction so that it stays consistent.
+        for p in &mut self.psi_history_rad {
+            *p = wrap_pi(*p + d);
+        }
+        self.gyro_bias_rad_s.z -= k2 * r * dt;
     }
 
     /// The position-aided correction (see the module header).
@@ -185,8 +247,14 @@ impl Estimator {
         let r = p - self.pos_history_m[idx];
 
         let trig = EulerTrig::new(e);
-        let tilt_cos = (e.theta.cos() * e.phi.cos()).max(0.5);
-        let f_body = Vector3::new(f_x, f_y, g / tilt_cos);
+        // The accelerometer has no z axis: the thrust is the firmware's own command when it
+        // flies (what the altitude law asked for, tilt compensation and climb included), else
+        // the hover assumption.
+        let f_z = self.thrust_accel_m_s2.unwrap_or_else(|| {
+            let tilt_cos = (e.theta.cos() * e.phi.cos()).max(0.5);
+            g / tilt_cos
+        });
+        let f_body = Vector3::new(f_x, f_y, f_z);
         let accel = trig.rotation_body_to_inertial() * f_body - Vector3::new(0.0, 0.0, g);
         self.pos_m += (self.vel_m_s + k1 * r) * dt;
         self.vel_m_s += (accel + k2 * r) * dt;
@@ -214,6 +282,25 @@ impl Estimator {
     #[must_use]
     pub fn euler(&self) -> Euler {
         self.euler
+    }
+
+    /// The specific thrust f_z/m the firmware is commanding, m/s², used in place of the
+    /// accelerometer's missing z axis; `None` assumes hover thrust g/(cos φ cos θ).
+    pub fn set_thrust_accel(&mut self, thrust_accel_m_s2: Option<f64>) {
+        self.thrust_accel_m_s2 = thrust_accel_m_s2;
+    }
+
+    /// Position of the position-aided filter (latency compensated; inertial, z up), m, once a
+    /// fix has been fused.
+    #[must_use]
+    pub fn position_m(&self) -> Option<Vector3<f64>> {
+        self.nav_initialised.then_some(self.pos_m)
+    }
+
+    /// Velocity of the position-aided filter (inertial, z up), m/s, once a fix has been fused.
+    #[must_use]
+    pub fn velocity_m_s(&self) -> Option<Vector3<f64>> {
+        self.nav_initialised.then_some(self.vel_m_s)
     }
 
     /// Estimated body rates (gyro minus bias), rad/s.
@@ -257,7 +344,7 @@ mod tests {
         while !est.calibrate(&s.sample_imu(&Vector3::zeros(), &Vector3::new(0.0, 0.0, G))) {}
         for _ in 0..1000 {
             let imu = s.sample_imu(&Vector3::zeros(), &f);
-            est.update(&imu, None);
+            est.update(&imu, None, None);
         }
         let got = est.euler();
         assert!(
@@ -277,7 +364,7 @@ mod tests {
         let fix = Vector3::new(0.0, 0.0, 1.0);
         for _ in 0..2000 {
             let imu = s.sample_imu(&Vector3::new(0.0, bias, 0.0), &Vector3::new(0.0, 0.0, G));
-            est.update(&imu, Some(&fix));
+            est.update(&imu, Some(&fix), None);
         }
         assert!(est.euler().theta.abs() < 1e-4, "{:?}", est.euler());
         assert!(
@@ -303,7 +390,7 @@ mod tests {
             // The fix lags the truth by one 10 ms sample.
             let fix = seen;
             seen = Vector3::new(0.0, 0.5 * a_y * t * t, 1.0);
-            est.update(&imu, Some(&fix));
+            est.update(&imu, Some(&fix), None);
         }
         assert!((est.euler().phi - phi).abs() < 2e-3, "{:?}", est.euler());
     }

@@ -1,12 +1,21 @@
-//! `firmware-sim`: the twin's command line. Thin: parse the flags (clap), call the library,
-//! report errors in one line (anyhow at the edge).
+//! `firmware-sim`: the twin's command line. Thin: parse the flags (clap), build the library's
+//! configuration, own the runtime, the terminal and the signals, report errors in one line
+//! (anyhow at the edge).
 
 use std::io::Write;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
-use firmware_sim::simulate::{self, SimulateArgs};
+use firmware_sim::clock::ClockMode;
+use firmware_sim::endpoint::EndpointConfig;
+use firmware_sim::params::Params;
+use firmware_sim::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError, Twin};
+use firmware_sim::simulate::{self, InitialArg, Push, SimulateConfig};
+use firmware_sim::{FlightMode, ModelMode};
+use nalgebra::Vector3;
+use tokio_util::sync::CancellationToken;
+use vtol_link::{LinkOptions, LinkUrl};
 
 /// The simulated twin of the two-rotor convertible VTOL (Escareño, Salazar & Lozano, CDC 2006).
 #[derive(Debug, Parser)]
@@ -22,7 +31,66 @@ enum Command {
     /// Offline closed-loop flight in fast time, written as CSV.
     Simulate(SimulateArgs),
     /// The twin as a MAVLink vehicle: prints `listening <url>` per endpoint, runs until Ctrl-C.
-    Serve(firmware_sim::serve::ServeArgs),
+    Serve(ServeArgs),
+}
+
+/// Flags of `simulate` (the library takes a [`SimulateConfig`]).
+#[derive(Debug, Clone, clap::Args)]
+struct SimulateArgs {
+    /// Simulated duration, s (up to 86400).
+    #[arg(long, default_value_t = 25.0)]
+    duration: f64,
+    /// Initial state: phi=..,theta=..,psi=..,x=..,y=..,z=.. (rad, m; paper frame, z up).
+    #[arg(long, default_value = "", value_parser = simulate::parse_initial)]
+    initial: InitialArg,
+    /// QLOITER's position setpoint x=..,y=..,z=.. (m, z up); default (0, 0, HOVER_ALT).
+    #[arg(long, value_parser = simulate::parse_setpoint)]
+    setpoint: Option<Vector3<f64>>,
+    /// Model: paper or physical.
+    #[arg(long, default_value = "physical")]
+    model: ModelMode,
+    /// Flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND).
+    #[arg(long, default_value = "QLOITER")]
+    mode: FlightMode,
+    /// Perfect sensing: no noise, bias or quantisation, and the controller reads the true state.
+    #[arg(long)]
+    ideal_sensors: bool,
+    /// Seed of every random draw.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Parameter NAME=VALUE (repeatable), checked as one set by the vehicle's table.
+    #[arg(long = "param", value_parser = simulate::parse_param)]
+    params: Vec<(String, f64)>,
+    /// A push AXIS=N.m@SECONDS[:MS] (repeatable), e.g. roll=0.1@5:200 (FRD axes).
+    #[arg(long = "push", value_parser = simulate::parse_push)]
+    pushes: Vec<Push>,
+    /// CSV output file (`-` = stdout).
+    #[arg(long)]
+    csv: Option<String>,
+    /// CSV rows per simulated second.
+    #[arg(long, default_value_t = 100.0)]
+    rate: f64,
+    /// Physics steps per simulated second (1000 to 10000, whole µs per step).
+    #[arg(long, default_value_t = 1000.0)]
+    physics_rate: f64,
+}
+
+impl SimulateArgs {
+    fn config(&self) -> SimulateConfig {
+        SimulateConfig {
+            duration_s: self.duration,
+            initial: self.initial,
+            setpoint_m: self.setpoint,
+            model: self.model,
+            mode: self.mode,
+            ideal_sensors: self.ideal_sensors,
+            seed: self.seed,
+            params: self.params.clone(),
+            rate_hz: self.rate,
+            physics_rate_hz: self.physics_rate,
+            pushes: self.pushes.clone(),
+        }
+    }
 }
 
 fn main() -> ExitCode {
@@ -56,23 +124,26 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(args) => run_simulate(&args),
-        Command::Serve(args) => Ok(firmware_sim::serve::run_cli(&args)?),
+        Command::Serve(args) => run_serve(&args),
     }
 }
 
 fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
+    let cfg = args.config();
+    // Checked before any file is created, so a refused flight leaves nothing behind.
+    simulate::vehicle_config(&cfg)?;
     let summary = match args.csv.as_deref() {
-        None => simulate::run(args, None)?,
+        None => simulate::run(&cfg, None)?,
         Some("-") => {
             let stdout = std::io::stdout();
             let mut w = std::io::BufWriter::new(stdout.lock());
-            simulate::run(args, Some(&mut w))?
+            simulate::run(&cfg, Some(&mut w))?
         }
         Some(path) => {
             let file = std::fs::File::create(path)
                 .with_context(|| format!("cannot create CSV file '{path}'"))?;
             let mut w = std::io::BufWriter::new(file);
-            simulate::run(args, Some(&mut w))?
+            simulate::run(&cfg, Some(&mut w))?
         }
     };
     let t = &summary.last;
@@ -97,4 +168,157 @@ state={:?} armed={} landed={}",
         writeln!(std::io::stdout(), "{line}")?;
     }
     Ok(())
+}
+
+/// Flags of `firmware-sim serve` (see the module docs for the stdout contract).
+#[derive(Debug, Clone, clap::Args)]
+struct ServeArgs {
+    /// Where GCSs connect (repeatable): tcpin:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT,
+    /// tcp:HOST:PORT, serial:DEVICE[:BAUD]. Port 0 = pick a free port.
+    #[arg(long = "listen", value_name = "URL", default_value = DEFAULT_LISTEN)]
+    listen: Vec<LinkUrl>,
+    /// Sim time per wall time (2 = twice real time).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed, conflicts_with = "fast")]
+    speed: f64,
+    /// Run as fast as the CPU allows (tests).
+    #[arg(long)]
+    fast: bool,
+    /// Parameter file (.parm): loaded at start, rewritten atomically on every change.
+    #[arg(long, value_name = "FILE")]
+    param_file: Option<std::path::PathBuf>,
+    /// Seed of every random draw (sensor noise, gusts).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Model mode: physical or paper (PHYSICS.md §0).
+    #[arg(long, default_value = "physical")]
+    model: ModelMode,
+    /// Perfect sensing: no noise, bias or quantisation, and the controller reads the true state.
+    #[arg(long)]
+    ideal_sensors: bool,
+    /// MAVLink system id (overrides SYSID_THISMAV), 1–255.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
+    sysid: Option<u8>,
+    /// Fraction of frames dropped in each direction (0 to 1, seeded by --seed).
+    #[arg(long, default_value_t = 0.0, value_parser = parse_loss)]
+    loss: f64,
+    /// Delay of every frame in each direction, milliseconds.
+    #[arg(long, default_value_t = 0, value_name = "MS")]
+    latency: u64,
+}
+
+fn parse_loss(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+        _ => Err(format!("loss must be a fraction in [0, 1), got '{s}'")),
+    }
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 1000.0 => Ok(v),
+        _ => Err(format!("speed must be a number in (0, 1000], got '{s}'")),
+    }
+}
+
+impl ServeArgs {
+    /// The configuration these flags describe, parameter file loaded.
+    ///
+    /// # Errors
+    /// [`ServeError::Params`] for an unusable parameter file.
+    fn to_config(&self) -> Result<ServeConfig, ServeError> {
+        let mut config = ServeConfig {
+            listen: self.listen.clone(),
+            clock: if self.fast {
+                ClockMode::AsFastAsPossible
+            } else {
+                ClockMode::Scaled { speed: self.speed }
+            },
+            endpoint: EndpointConfig {
+                vehicle: firmware_sim::VehicleConfig {
+                    model: self.model,
+                    // Perfect sensing: no noise, and the controller reads the true state.
+                    ideal_sensors: self.ideal_sensors,
+                    perfect_state: self.ideal_sensors,
+                    seed: self.seed,
+                    ..Default::default()
+                },
+                params: Params::new(),
+                param_file: self.param_file.clone(),
+                sysid: self.sysid,
+            },
+            link_options: LinkOptions::default(),
+            impairment: Impairment {
+                loss: self.loss,
+                latency: std::time::Duration::from_millis(self.latency),
+                seed: self.seed,
+            },
+        };
+        config.load_param_file()?;
+        Ok(config)
+    }
+}
+
+/// `firmware-sim serve`: builds a runtime, opens the endpoints, prints one `listening <url>`
+/// line per endpoint on stdout, and runs until Ctrl-C or SIGTERM.
+///
+/// # Errors
+/// Startup failures (bad parameter file, address in use); I/O errors of the runtime.
+fn run_serve(args: &ServeArgs) -> anyhow::Result<()> {
+    // Logs go to stderr so stdout carries only the `listening` lines. A subscriber the caller
+    // installed first wins.
+    let _ = tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .try_init();
+    let config = args.to_config()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(ServeError::Runtime)?;
+    runtime.block_on(async {
+        let cancel = CancellationToken::new();
+        let twin = Twin::start(config, cancel.clone()).await?;
+        {
+            use std::io::Write as _;
+            let mut out = std::io::stdout().lock();
+            for b in twin.bound() {
+                let _ = writeln!(out, "listening {}", b.resolved_url());
+            }
+            let _ = out.flush();
+        }
+        shutdown_signal().await;
+        tracing::info!("shutting down");
+        cancel.cancel();
+        twin.join().await;
+        Ok::<(), ServeError>(())
+    })?;
+    Ok(())
+}
+
+/// Resolves on Ctrl-C or (on Unix) SIGTERM.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {}
+        () = term => {}
+    }
 }

@@ -371,6 +371,34 @@ impl Params {
         Ok(Accepted { index, old, new })
     }
 
+    /// A whole set of writes validated at once, as a `.parm` file is: each value must pass its
+    /// parameter's type, range and access checks (the same as [`Params::set`], same error
+    /// texts), and the resulting gain set must satisfy the constraints, so levels may be given
+    /// in any order. On error nothing changes.
+    ///
+    /// # Errors
+    /// The first refused write, or [`ParamError::Gains`] naming the last parameter of the set.
+    pub fn set_all(&mut self, writes: &[(String, f64)]) -> Result<(), ParamError> {
+        let mut candidate = self.values.clone();
+        let mut last = None;
+        for (name, value) in writes {
+            let index = Self::index_of(name).ok_or_else(|| ParamError::Unknown(name.clone()))?;
+            let d = &TABLE[index];
+            if d.access == Access::ReadOnly {
+                return Err(ParamError::ReadOnly(d.name));
+            }
+            candidate[index] = Self::checked(d, *value)?;
+            last = Some(d.name);
+        }
+        if let Some(name) = last {
+            gains_of(&candidate)
+                .validate()
+                .map_err(|source| ParamError::Gains { name, source })?;
+        }
+        self.values = candidate;
+        Ok(())
+    }
+
     /// Sets a value from inside the firmware (a one-shot trigger resetting itself), skipping the
     /// access check but not the range.
     ///
@@ -400,6 +428,19 @@ impl Params {
             });
         }
         Ok(v)
+    }
+
+    /// The wind `SIM_WIND_*` describe, in the paper's frame (z up), m/s, and the gust intensity:
+    /// the direction is where the wind comes from (ArduPilot SITL).
+    #[must_use]
+    pub fn wind_paper_m_s(&self) -> (nalgebra::Vector3<f64>, f64) {
+        let speed = self.value("SIM_WIND_SPD");
+        let from = self.value("SIM_WIND_DIR").to_radians();
+        let ned = nalgebra::Vector3::new(-speed * from.cos(), -speed * from.sin(), 0.0);
+        (
+            crate::frames::ned_to_paper(&ned),
+            self.value("SIM_WIND_TURB"),
+        )
     }
 
     /// The controller gains the table holds.
@@ -605,6 +646,27 @@ mod tests {
         assert_eq!((ok.old, ok.new), (1.2, 1.5));
         // C cast: an integer parameter rounds.
         assert_eq!(p.set("SR0_EXTRA1", 4.6).unwrap().new, 5.0);
+    }
+
+    #[test]
+    fn a_set_is_validated_as_a_whole() {
+        let mut p = Params::new();
+        let w = |n: &str, v: f64| (n.to_owned(), v);
+        // d = 0.3 alone breaks c > d; with c = 0.35, b = 0.7 and a = 1.5 the set holds.
+        p.set_all(&[
+            w("LAT_SAT_D", 0.3),
+            w("LAT_SAT_C", 0.35),
+            w("LAT_SAT_B", 0.7),
+            w("LAT_SAT_A", 1.5),
+        ])
+        .unwrap();
+        assert_eq!(p.gains().lateral.d, 0.3);
+        let before = p.clone();
+        let e = p.set_all(&[w("ALT_KP", 1e6)]).unwrap_err();
+        assert_eq!(e.to_string(), "ALT_KP: 1000000 outside [0, 100]");
+        assert!(p.set_all(&[w("LAT_SAT_D", 0.5)]).is_err());
+        assert!(p.set_all(&[w("SERVO1_FUNCTION", 1.0)]).is_err());
+        assert_eq!(p, before, "a refused set changes nothing");
     }
 
     #[test]

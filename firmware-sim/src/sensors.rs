@@ -1,7 +1,8 @@
 //! The prototype's embedded hardware as the firmware sees it (`PHYSICS.md` §0, Section V of the
 //! paper): three ADXRS150 rate gyros, one two-axis ADXL203 accelerometer, a 12-bit ADC between
 //! them and the firmware, the RC receiver, and an external position sensor (motion capture) that
-//! the altitude and position modes need but the prototype did not have.
+//! the altitude and position modes need but the prototype did not have. Motion-capture rigs
+//! measure pose, so that sensor also reports a heading, with its own noise and the same latency.
 //!
 //! Frames: gyros and accelerometer measure in the body frame B (x_B, y_B, z_B; the accelerometer
 //! has x_B and y_B only); the position sensor measures in the inertial frame I (z up). Every
@@ -42,6 +43,9 @@ pub const ADC_MAX_COUNTS: u16 = 4095;
 pub const POSITION_NOISE_M: f64 = 0.001;
 /// Position-sensor latency, s.
 pub const POSITION_LATENCY_S: f64 = 0.010;
+/// Motion-capture heading noise (1σ), rad (0.1°: a rig that resolves 1 mm on markers 0.3 m
+/// apart resolves a few mrad of heading, and averages several markers).
+pub const HEADING_NOISE_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 /// Time constant of the low-pass filter on the differenced position, s.
 pub const POSITION_VEL_FILTER_S: f64 = 0.04;
 /// Standard gravity used to scale the accelerometer, m/s² (Table I).
@@ -166,16 +170,23 @@ pub struct PositionFix {
     pub pos_m: Vector3<f64>,
     /// Filtered velocity from differencing consecutive fixes, m/s.
     pub vel_m_s: Vector3<f64>,
+    /// Measured heading ψ, rad in (−π, π] (as of `latency` ago, plus the rig's alignment
+    /// offset).
+    pub heading_rad: f64,
 }
 
-/// External position sensor (motion capture): noisy, delayed fixes at the control rate,
-/// velocity by low-pass filtered differencing.
+/// External position sensor (motion capture): noisy, delayed fixes of position and heading at
+/// the control rate, velocity by low-pass filtered differencing.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PositionSensor {
     ideal: bool,
     dt_s: f64,
     delay_samples: usize,
     history: [Vector3<f64>; POSITION_HISTORY],
+    heading_history: [f64; POSITION_HISTORY],
+    /// Constant error of the reported heading, rad: a rig whose frame is misaligned with the
+    /// vehicle's reference (a fault to inject; 0 by default).
+    pub heading_offset_rad: f64,
     head: usize,
     primed: bool,
     last_meas_m: Vector3<f64>,
@@ -193,6 +204,8 @@ impl PositionSensor {
             dt_s,
             delay_samples: delay,
             history: [Vector3::zeros(); POSITION_HISTORY],
+            heading_history: [0.0; POSITION_HISTORY],
+            heading_offset_rad: 0.0,
             head: 0,
             primed: false,
             last_meas_m: Vector3::zeros(),
@@ -201,22 +214,31 @@ impl PositionSensor {
         }
     }
 
-    /// Records the true position and returns the fix the firmware gets now.
-    pub fn sample(&mut self, true_pos_m: &Vector3<f64>, rng: &mut ChaCha8Rng) -> PositionFix {
+    /// Records the true position and heading and returns the fix the firmware gets now.
+    pub fn sample(
+        &mut self,
+        true_pos_m: &Vector3<f64>,
+        true_heading_rad: f64,
+        rng: &mut ChaCha8Rng,
+    ) -> PositionFix {
         if !self.primed {
             // Power-up: the rig has been tracking the vehicle where it stands.
             self.history = [*true_pos_m; POSITION_HISTORY];
+            self.heading_history = [true_heading_rad; POSITION_HISTORY];
             self.last_meas_m = *true_pos_m;
             self.primed = true;
         }
         self.head = (self.head + 1) % POSITION_HISTORY;
         self.history[self.head] = *true_pos_m;
+        self.heading_history[self.head] = true_heading_rad;
         let idx = (self.head + POSITION_HISTORY - self.delay_samples) % POSITION_HISTORY;
         let mut meas = self.history[idx];
+        let mut heading = self.heading_history[idx] + self.heading_offset_rad;
         if !self.ideal {
             for i in 0..3 {
                 meas[i] += POSITION_NOISE_M * rng.sample::<f64, _>(StandardNormal);
             }
+            heading += HEADING_NOISE_RAD * rng.sample::<f64, _>(StandardNormal);
         }
         let raw_vel = (meas - self.last_meas_m) / self.dt_s;
         self.vel_m_s += (raw_vel - self.vel_m_s) * self.vel_gain;
@@ -224,6 +246,7 @@ impl PositionSensor {
         PositionFix {
             pos_m: meas,
             vel_m_s: self.vel_m_s,
+            heading_rad: crate::frames::wrap_pi(heading),
         }
     }
 }
@@ -291,9 +314,14 @@ impl Sensors {
             .sample(omega_body_rad_s, specific_force_body_m_s2, &mut self.rng)
     }
 
-    /// Samples the position sensor.
-    pub fn sample_position(&mut self, true_pos_m: &Vector3<f64>) -> PositionFix {
-        self.position.sample(true_pos_m, &mut self.rng)
+    /// Samples the position sensor (position and heading).
+    pub fn sample_position(
+        &mut self,
+        true_pos_m: &Vector3<f64>,
+        true_heading_rad: f64,
+    ) -> PositionFix {
+        self.position
+            .sample(true_pos_m, true_heading_rad, &mut self.rng)
     }
 }
 
@@ -379,8 +407,12 @@ mod tests {
         let mut fix = PositionFix::default();
         for k in 0..200 {
             let truth = Vector3::new(0.5 * f64::from(k) * 0.01, 0.0, 1.0);
-            fix = p.sample(&truth, &mut rng);
+            fix = p.sample(&truth, 0.01 * f64::from(k), &mut rng);
         }
+        assert!(
+            (fix.heading_rad - 1.98).abs() < 1e-12,
+            "heading delayed alike"
+        );
         // One sample (10 ms) behind the truth at 0.5 m/s, velocity converged.
         assert!((fix.pos_m.x - 0.5 * 1.98).abs() < 1e-12, "{}", fix.pos_m.x);
         assert!((fix.vel_m_s.x - 0.5).abs() < 1e-6);

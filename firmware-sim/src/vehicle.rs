@@ -3,11 +3,20 @@
 //! allocation. The MAVLink endpoint and the offline `simulate` command both drive it.
 //!
 //! Frames are the paper's (inertial z up, body thrust along +z_B). The plant is integrated with
-//! RK4 at [`PHYSICS_DT_S`]; sensors, estimator and controller run every control period
-//! (100 Hz by default) and their outputs are held in between, as the firmware's PWM is. In
-//! `paper` mode the controller sees the true state and drives the plant directly ([I17], [I18]);
-//! in `physical` mode it sees the estimator and the position sensor and drives PWM through the
-//! actuator models.
+//! RK4 at [`PHYSICS_DT_S`] (by default; [`VehicleConfig::physics_dt_us`]).
+//!
+//! * `physical`: sensors, estimator and controller run every control period (100 Hz by
+//!   default) and their outputs are held in between, as the firmware's PWM is; the controller
+//!   sees the estimator and the position sensor (or the true state with
+//!   [`VehicleConfig::perfect_state`]) and drives PWM through the actuator models.
+//! * `paper`: the paper's simulation is continuous-time, so the controller is part of the
+//!   vector field: it is evaluated on the true state at every RK4 stage of every physics step
+//!   and drives the plant directly ([I17], [I18]). A sampled controller would hold f_x of (43)
+//!   over the control period, and because (43) cancels g·sin θ that leaves an error of order
+//!   g·θ̇·Δt in ẍ, as large as the x loop's own acceleration.
+//!
+//! The control tick runs at the END of a step whose end time is a tick time (and once at
+//! construction), so the telemetry of time t always carries the controller's output at t.
 
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
@@ -28,10 +37,10 @@ use crate::plant::rigid_body::EulerTrig;
 use crate::plant::{self, PlantInput, PlantState, ground};
 use crate::sensors::{self, Sensors};
 
-/// The physics step: the plant is integrated at 1 kHz.
+/// The default physics step: the plant is integrated at 1 kHz.
 pub const PHYSICS_DT_S: f64 = 0.001;
-/// The physics step in µs (the simulation clock counts whole steps).
-const PHYSICS_DT_US: u64 = 1000;
+/// The default physics step in µs (the simulation clock counts whole steps).
+pub const PHYSICS_DT_US: u64 = 1000;
 /// Tilt beyond which the vehicle is considered tipped over (crash), rad.
 pub const CRASH_TILT_RAD: f64 = std::f64::consts::FRAC_PI_3;
 /// cos([`CRASH_TILT_RAD`]), compared with cos θ cos φ every step.
@@ -63,8 +72,16 @@ pub struct VehicleConfig {
     pub airframe: Airframe,
     /// `paper` or `physical` (`PHYSICS.md` §0).
     pub model: ModelMode,
-    /// Noise, bias and quantisation off when true.
+    /// Noise, bias and quantisation off when true (the firmware still flies on its estimator).
     pub ideal_sensors: bool,
+    /// The controller reads the true state instead of the estimator and the position sensor
+    /// (perfect sensing; `paper` mode always does).
+    pub perfect_state: bool,
+    /// The motion-capture heading is fused in the modes that fly on the motion capture
+    /// (QHOVER, QLOITER, QLAND). Off: yaw from the gyros only, as in QSTABILIZE.
+    pub heading_sensor: bool,
+    /// Physics step, µs (1000 by default; the control period is rounded to whole steps).
+    pub physics_dt_us: u64,
     /// Seed of every random draw.
     pub seed: u64,
     /// Control loop rate, Hz (100 by default).
@@ -77,6 +94,12 @@ pub struct VehicleConfig {
     pub mode: FlightMode,
     /// Start armed (the offline `simulate` command flies from t = 0).
     pub armed: bool,
+    /// QLOITER's position setpoint at start (paper frame, z up), m; `None` = (0, 0,
+    /// `HOVER_ALT`). Given here rather than set after construction because the controller's
+    /// output at t = 0 is computed at construction.
+    pub position_setpoint_m: Option<Vector3<f64>>,
+    /// RC receiver pulse widths at start, µs (0 = no signal), as [`Vehicle::set_rc_input`].
+    pub rc_us: [u16; 8],
 }
 
 impl Default for VehicleConfig {
@@ -85,12 +108,17 @@ impl Default for VehicleConfig {
             airframe: Airframe::default(),
             model: ModelMode::Physical,
             ideal_sensors: false,
+            perfect_state: false,
+            heading_sensor: true,
+            physics_dt_us: PHYSICS_DT_US,
             seed: 1,
             control_rate_hz: 100.0,
             initial: InitialState::default(),
             gains: Gains::default(),
             mode: FlightMode::QStabilize,
             armed: false,
+            position_setpoint_m: None,
+            rc_us: [0; 8],
         }
     }
 }
@@ -174,12 +202,12 @@ struct Wind {
 }
 
 impl Wind {
-    fn new(seed: u64) -> Self {
+    fn new(seed: u64, dt_s: f64) -> Self {
         Self {
             mean_m_s: Vector3::zeros(),
             gust_sigma_m_s: 0.0,
             gust_m_s: Vector3::zeros(),
-            keep: (-PHYSICS_DT_S / GUST_TIME_CONSTANT_S).exp(),
+            keep: (-dt_s / GUST_TIME_CONSTANT_S).exp(),
             rng: ChaCha8Rng::seed_from_u64(seed ^ WIND_SEED_SALT),
         }
     }
@@ -220,6 +248,13 @@ pub struct Vehicle {
     steps: u64,
     control_every_steps: u64,
     control_dt_s: f64,
+    dt_s: f64,
+    dt_us: u64,
+    /// Fault injection: a constant error added to the heading the controller flies on.
+    chain_heading_error_rad: f64,
+    /// The controller's input of the last tick (`paper` mode evaluates the controller at the
+    /// RK4 stages with the same mode, setpoint and pilot input).
+    last_control_input: ControlInput,
     push_torque_body_nm: Vector3<f64>,
     push_steps_left: u64,
     wind: Wind,
@@ -233,9 +268,16 @@ impl Vehicle {
     #[must_use]
     pub fn new(config: VehicleConfig) -> Self {
         let af = &config.airframe;
-        let control_every_steps =
-            ((1.0 / (config.control_rate_hz.max(1.0) * PHYSICS_DT_S)).round() as u64).max(1);
-        let control_dt_s = control_every_steps as f64 * PHYSICS_DT_S;
+        let dt_us = config.physics_dt_us.max(1);
+        let dt_s = dt_us as f64 * 1e-6;
+        let control_every_steps = match config.model {
+            // Continuous-time: the controller runs at every step (and inside it).
+            ModelMode::Paper => 1,
+            ModelMode::Physical => {
+                ((1.0 / (config.control_rate_hz.max(1.0) * dt_s)).round() as u64).max(1)
+            }
+        };
+        let control_dt_s = control_every_steps as f64 * dt_s;
         let mut plant = PlantState::at_rest(config.initial.pos_m, config.initial.euler);
         let on_ground = plant.pos_m.z <= 0.0;
         if on_ground {
@@ -243,9 +285,9 @@ impl Vehicle {
         }
         let mut sensors = Sensors::new(config.ideal_sensors, config.seed, control_dt_s);
         let mut estimator = Estimator::new(plant.euler, control_dt_s, af.gravity_m_s2);
-        let mut actuators = ActuatorModel::new(af, PHYSICS_DT_S);
+        let mut actuators = ActuatorModel::new(af, dt_s);
         let mut state = SystemState::Calibrating;
-        if config.model == ModelMode::Paper || config.ideal_sensors {
+        if config.model == ModelMode::Paper || config.ideal_sensors || config.perfect_state {
             estimator.skip_calibration();
             state = SystemState::Standby;
         } else if config.armed {
@@ -269,18 +311,25 @@ impl Vehicle {
             sensors,
             estimator,
             controller: Controller::new(config.airframe.clone(), config.model),
-            setpoint_m: Vector3::new(0.0, 0.0, config.gains.hover_alt_m),
+            setpoint_m: config
+                .position_setpoint_m
+                .unwrap_or_else(|| Vector3::new(0.0, 0.0, config.gains.hover_alt_m)),
             on_ground,
             landed_time_s: 0.0,
             steps: 0,
             control_every_steps,
             control_dt_s,
+            dt_s,
+            dt_us,
+            last_control_input: ControlInput::default(),
+            chain_heading_error_rad: 0.0,
             push_torque_body_nm: Vector3::zeros(),
             push_steps_left: 0,
-            wind: Wind::new(config.seed),
+            wind: Wind::new(config.seed, dt_s),
             telemetry: Telemetry {
                 mode: config.mode,
                 armed: config.armed,
+                rc_us: config.rc_us,
                 state,
                 euler_est: plant.euler,
                 pwm_us: DISARMED_PWM_US,
@@ -294,16 +343,16 @@ impl Vehicle {
         };
         v.input.actuators = v.actuators.state;
         v.refresh_truth();
+        // The controller's output at t = 0 (the first row of a flight log carries it).
+        v.control_tick();
         v
     }
 
-    /// Advances the twin by one physics step of [`PHYSICS_DT_S`].
+    /// Advances the twin by one physics step ([`PHYSICS_DT_S`] by default).
     pub fn step(&mut self) {
-        if self.steps.is_multiple_of(self.control_every_steps) {
-            self.control_tick();
-        }
         let af = &self.config.airframe;
         let model = self.config.model;
+        let dt = self.dt_s;
 
         // Actuators: hold the controller's outputs between control ticks.
         match model {
@@ -341,9 +390,30 @@ impl Vehicle {
             let input = self.input;
             let start = self.plant.euler;
             let start_trig = self.plant_trig;
-            self.plant = rk4_step(&self.plant, PHYSICS_DT_S, |s| {
+            // `paper`: the controller is part of the vector field. The first stage is the
+            // step's start, where the last tick already evaluated it on the same state.
+            let continuous = model == ModelMode::Paper && self.telemetry.armed;
+            let (controller, gains) = (&self.controller, &self.config.gains);
+            let template = self.last_control_input;
+            let mut first_stage = true;
+            self.plant = rk4_step(&self.plant, dt, |s| {
                 let trig = start_trig.shifted(&start, &s.euler);
-                plant::derivative_with_trig(af, model, s, &input, &trig)
+                let mut u = input;
+                if continuous && !first_stage {
+                    let ci = ControlInput {
+                        euler: s.euler,
+                        omega_body_rad_s: s.omega_body_rad_s,
+                        pos_m: s.pos_m,
+                        vel_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
+                        ..template
+                    };
+                    // A copy: the stages are trial points, only the tick updates the state.
+                    let out = controller.clone().update(&ci, gains);
+                    u.actuators = out.actuators;
+                    u.fx_paper_n = out.fx_n;
+                }
+                first_stage = false;
+                plant::derivative_with_trig(af, model, s, &u, &trig)
             });
             let touchdown = ground::touchdown(&mut self.plant);
             // The step moves the angles by a few mrad, so the next step's trig comes from this
@@ -367,7 +437,7 @@ impl Vehicle {
 
         // Landed bookkeeping and QLAND's automatic disarm.
         if self.on_ground {
-            self.landed_time_s += PHYSICS_DT_S;
+            self.landed_time_s += dt;
             if self.telemetry.armed
                 && self.telemetry.mode == FlightMode::QLand
                 && self.landed_time_s >= LAND_DISARM_DELAY_S
@@ -379,8 +449,11 @@ impl Vehicle {
         }
 
         self.steps += 1;
-        self.telemetry.t_us += PHYSICS_DT_US;
+        self.telemetry.t_us += self.dt_us;
         self.refresh_truth();
+        if self.steps.is_multiple_of(self.control_every_steps) {
+            self.control_tick();
+        }
     }
 
     /// Sensors → estimator → controller, once per control period.
@@ -399,7 +472,9 @@ impl Vehicle {
         let imu = self
             .sensors
             .sample_imu(&self.plant.omega_body_rad_s, &specific_force);
-        let fix = self.sensors.sample_position(&self.plant.pos_m);
+        let fix = self
+            .sensors
+            .sample_position(&self.plant.pos_m, self.plant.euler.psi);
         let rc = self.telemetry.rc_us;
         let pilot: PilotInput = sensors::rc_to_pilot(&rc);
 
@@ -408,12 +483,23 @@ impl Vehicle {
                 self.telemetry.state = SystemState::Standby;
             }
         } else if model == ModelMode::Physical {
-            self.estimator.update(&imu, Some(&fix.pos_m));
+            // The heading fix is fused where the firmware flies on the motion capture; the
+            // paper's own experiment (QSTABILIZE) has gyros and accelerometer only.
+            let heading = (self.config.heading_sensor
+                && self.telemetry.mode != FlightMode::QStabilize)
+                .then_some(fix.heading_rad);
+            // The thrust the firmware commanded last tick stands in for the missing z axis of
+            // the accelerometer (the motors lag it by their 40 ms time constant).
+            let thrust = (self.telemetry.armed && !self.on_ground)
+                .then(|| self.telemetry.control.fz_n / af.mass_kg);
+            self.estimator.set_thrust_accel(thrust);
+            self.estimator.update(&imu, Some(&fix.pos_m), heading);
         }
 
         let truth_vel = self.telemetry.vel_m_s;
-        let input = match model {
-            ModelMode::Paper => ControlInput {
+        let truth = model == ModelMode::Paper || self.config.perfect_state;
+        let input = if truth {
+            ControlInput {
                 dt_s: self.control_dt_s,
                 mode: self.telemetry.mode,
                 euler: self.plant.euler,
@@ -424,11 +510,17 @@ impl Vehicle {
                 yaw_setpoint_rad: 0.0,
                 rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
                 pilot,
-            },
-            ModelMode::Physical => ControlInput {
+            }
+        } else {
+            ControlInput {
                 dt_s: self.control_dt_s,
                 mode: self.telemetry.mode,
-                euler: self.estimator.euler(),
+                euler: Euler {
+                    psi: crate::frames::wrap_pi(
+                        self.estimator.euler().psi + self.chain_heading_error_rad,
+                    ),
+                    ..self.estimator.euler()
+                },
                 omega_body_rad_s: self.estimator.omega_rad_s(),
                 pos_m: fix.pos_m,
                 vel_m_s: fix.vel_m_s,
@@ -436,8 +528,9 @@ impl Vehicle {
                 yaw_setpoint_rad: 0.0,
                 rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
                 pilot,
-            },
+            }
         };
+        self.last_control_input = input;
 
         let out = if self.telemetry.armed {
             self.controller.update(&input, &self.config.gains)
@@ -515,6 +608,12 @@ impl Vehicle {
         &self.config
     }
 
+    /// The physics step, s.
+    #[must_use]
+    pub fn physics_dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
     /// Simulation time, s.
     #[must_use]
     pub fn time_s(&self) -> f64 {
@@ -574,8 +673,8 @@ impl Vehicle {
 
     fn estimator_or_truth_euler(&self) -> Euler {
         match self.config.model {
-            ModelMode::Paper => self.plant.euler,
-            ModelMode::Physical => self.estimator.euler(),
+            ModelMode::Physical if !self.config.perfect_state => self.estimator.euler(),
+            _ => self.plant.euler,
         }
     }
 
@@ -613,7 +712,27 @@ impl Vehicle {
     /// Applies a body torque (N·m) for `duration_s`: the paper's push on an axis.
     pub fn push(&mut self, torque_body_nm: Vector3<f64>, duration_s: f64) {
         self.push_torque_body_nm = torque_body_nm;
-        self.push_steps_left = (duration_s.max(0.0) / PHYSICS_DT_S).round() as u64;
+        self.push_steps_left = (duration_s.max(0.0) / self.dt_s).round() as u64;
+    }
+
+    /// Fault injection: the motion-capture rig reports the heading `offset_rad` off (a rig
+    /// whose frame is misaligned with the vehicle's reference). With heading fusion on, the
+    /// estimate converges to the wrong heading and the position chains fly on it.
+    pub fn set_heading_sensor_offset(&mut self, offset_rad: f64) {
+        self.sensors.position.heading_offset_rad = offset_rad;
+    }
+
+    /// Fault injection: the controller flies on a heading `error_rad` off the estimate (a
+    /// constant heading error in the position chains' heading frame and the yaw law; the
+    /// estimator itself is untouched). `physical` mode with the estimator only.
+    pub fn set_controller_heading_error(&mut self, error_rad: f64) {
+        self.chain_heading_error_rad = error_rad;
+    }
+
+    /// The heading estimate's error, ψ̂ − ψ wrapped to (−π, π], rad.
+    #[must_use]
+    pub fn heading_error_rad(&self) -> f64 {
+        crate::frames::wrap_pi(self.telemetry.euler_est.psi - self.plant.euler.psi)
     }
 
     /// Sets a steady wind (inertial, m/s) and a gust intensity (m/s, standard deviation).

@@ -28,6 +28,8 @@ pub mod result {
 
 /// Command numbers the twin implements.
 pub mod cmd {
+    /// MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN.
+    pub const PREFLIGHT_REBOOT_SHUTDOWN: u16 = 246;
     /// MAV_CMD_DO_SET_MODE.
     pub const DO_SET_MODE: u16 = 176;
     /// MAV_CMD_COMPONENT_ARM_DISARM.
@@ -74,6 +76,13 @@ impl Endpoint {
                 self.ack(link, frame, c.command, r);
                 for msg in follow_up {
                     self.send(link, &msg);
+                }
+                // The ACK goes out first, then the autopilot restarts.
+                if c.command == cmd::PREFLIGHT_REBOOT_SHUTDOWN && r == result::ACCEPTED {
+                    let p1 = c.params[0].round();
+                    if p1 == 1.0 {
+                        self.reboot();
+                    }
                 }
                 return;
             }
@@ -132,12 +141,12 @@ impl Endpoint {
                     return result::FAILED;
                 }
                 let errors = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
-                match self.build_message(msgid, errors) {
-                    Some(m) => {
-                        after.push(m);
-                        result::ACCEPTED
-                    }
-                    None => result::FAILED,
+                let msgs = self.build_messages(msgid, errors);
+                if msgs.is_empty() {
+                    result::FAILED
+                } else {
+                    after.extend(msgs);
+                    result::ACCEPTED
                 }
             }
             cmd::REQUEST_AUTOPILOT_CAPABILITIES => {
@@ -158,6 +167,14 @@ impl Endpoint {
                     result::DENIED
                 }
                 _ => result::DENIED,
+            },
+            cmd::PREFLIGHT_REBOOT_SHUTDOWN => match p[0].round() {
+                // Reboot the autopilot: only on the ground, disarmed, as ArduPilot does.
+                1.0 if self.vehicle.telemetry().armed => result::DENIED,
+                1.0 => result::ACCEPTED,
+                0.0 => result::ACCEPTED,
+                // Shutdown or bootloader: there is no hardware to power off.
+                _ => result::UNSUPPORTED,
             },
             _ => result::UNSUPPORTED,
         }

@@ -102,7 +102,15 @@ pub struct Endpoint {
     push_resets: Vec<(&'static str, u64)>,
     last_armed: bool,
     last_state: SystemState,
+    /// `--sysid`, which outlives a reboot (`SYSID_THISMAV` is re-read at one).
+    sysid_override: Option<u8>,
+    /// While rebooting (after MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN): silent until this sim time, µs.
+    rebooting_until_us: Option<u64>,
 }
+
+/// How long a reboot keeps the twin silent, µs: a small autopilot restarting (ArduPilot's own
+/// boards are gone for a second or two).
+pub const REBOOT_SILENCE_US: u64 = 1_500_000;
 
 impl Endpoint {
     /// A vehicle at sim time 0 with no links yet.
@@ -116,6 +124,7 @@ impl Endpoint {
         } = config;
         vehicle.gains = params.gains();
         vehicle.control_rate_hz = params.value("CTRL_RATE_HZ");
+        let sysid_override = sysid;
         let sysid = sysid.unwrap_or(params.value("SYSID_THISMAV") as u8);
         let vehicle = Vehicle::new(vehicle);
         let last_armed = vehicle.telemetry().armed;
@@ -135,6 +144,8 @@ impl Endpoint {
             push_resets: Vec::new(),
             last_armed,
             last_state,
+            sysid_override,
+            rebooting_until_us: None,
         };
         ep.apply_wind();
         ep
@@ -190,8 +201,52 @@ impl Endpoint {
         self.links.remove(&link);
     }
 
+    /// Whether the twin is rebooting (silent, deaf to frames).
+    #[must_use]
+    pub fn is_rebooting(&self) -> bool {
+        self.rebooting_until_us.is_some()
+    }
+
+    /// Restarts the vehicle as the reboot command does: on the ground, level, disarmed, where
+    /// it was (horizontally), with the parameters as they stand (`CTRL_RATE_HZ` and
+    /// `SYSID_THISMAV` take effect here), then silent for [`REBOOT_SILENCE_US`]. Clears a crash.
+    pub(crate) fn reboot(&mut self) {
+        let mut config = self.vehicle.config().clone();
+        let here = self.vehicle.telemetry().pos_m;
+        config.initial = crate::vehicle::InitialState {
+            pos_m: nalgebra::Vector3::new(here.x, here.y, 0.0),
+            euler: crate::frames::Euler::new(self.vehicle.telemetry().euler.psi, 0.0, 0.0),
+        };
+        config.armed = false;
+        config.position_setpoint_m = None;
+        config.rc_us = [0; 8];
+        config.gains = self.params.gains();
+        config.control_rate_hz = self.params.value("CTRL_RATE_HZ");
+        self.vehicle = Vehicle::new(config);
+        self.sysid = self
+            .sysid_override
+            .unwrap_or(self.params.value("SYSID_THISMAV") as u8);
+        self.push_resets.clear();
+        self.manual = manual::ManualState::default();
+        self.failsafe = heartbeat::Failsafe::default();
+        self.commands = commands::CommandMemory::default();
+        let groups = self.group_rates_from_params();
+        for l in self.links.values_mut() {
+            l.schedule = streams::Schedule::new(groups);
+            l.param_queue.clear();
+        }
+        self.last_armed = false;
+        self.last_state = self.vehicle.telemetry().state;
+        self.apply_wind();
+        self.rebooting_until_us = Some(self.now_us + REBOOT_SILENCE_US);
+    }
+
     /// Handles one complete frame received on `link` and returns the replies.
     pub fn handle(&mut self, link: LinkKey, bytes: &[u8]) -> Vec<Outbound> {
+        if self.is_rebooting() {
+            // Nobody is listening during a reboot.
+            return Vec::new();
+        }
         self.add_link(link);
         match wire::parse_frame(bytes) {
             Ok(frame) => self.handle_frame(link, &frame),
@@ -208,6 +263,15 @@ impl Endpoint {
             self.vehicle.step();
             self.now_us += STEP_US;
         }
+        if let Some(until) = self.rebooting_until_us {
+            if self.now_us < until {
+                // Rebooting: nothing goes out, the vehicle sits on the ground calibrating.
+                self.out.clear();
+                return Vec::new();
+            }
+            self.rebooting_until_us = None;
+            self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, "Rebooted");
+        }
         self.manual.expire(self.now_us, &mut self.vehicle);
         self.expire_pushes();
         self.check_failsafe();
@@ -221,7 +285,7 @@ impl Endpoint {
                 None => continue,
             };
             for msgid in due {
-                if let Some(msg) = self.build_message(msgid, errors_comm) {
+                for msg in self.build_messages(msgid, errors_comm) {
                     self.send(link, &msg);
                 }
             }
@@ -229,11 +293,17 @@ impl Endpoint {
         std::mem::take(&mut self.out)
     }
 
-    fn build_message(&self, msgid: u32, errors_comm: u16) -> Option<apm::MavMessage> {
+    /// The messages one stream id stands for (one, except the controller's outputs).
+    fn build_messages(&self, msgid: u32, errors_comm: u16) -> Vec<apm::MavMessage> {
         match msgid {
-            streams::id::HEARTBEAT => Some(self.heartbeat()),
-            streams::id::AUTOPILOT_VERSION => Some(streams::autopilot_version(self.sysid)),
-            _ => streams::build(msgid, self.vehicle.telemetry(), errors_comm),
+            streams::id::HEARTBEAT => vec![self.heartbeat()],
+            streams::id::AUTOPILOT_VERSION => vec![streams::autopilot_version(self.sysid)],
+            streams::id::NAMED_VALUE_FLOAT => {
+                streams::controller_outputs(self.vehicle.telemetry()).into()
+            }
+            _ => streams::build(msgid, self.vehicle.telemetry(), errors_comm)
+                .into_iter()
+                .collect(),
         }
     }
 

@@ -7,7 +7,7 @@ use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
 use super::{Endpoint, InFrame, LinkKey, streams};
-use crate::frames::{body_rates_to_frd, ned_to_paper};
+use crate::frames::body_rates_to_frd;
 use crate::params::{Access, ParamError, ParamType, Params};
 
 /// PARAM_VALUEs sent per link per tick during a list transfer. The serve loop ticks every 5 ms,
@@ -213,11 +213,8 @@ impl Endpoint {
 
     /// Wind from `SIM_WIND_*`: the direction is where the wind comes from (ArduPilot SITL).
     pub(super) fn apply_wind(&mut self) {
-        let speed = self.params.value("SIM_WIND_SPD");
-        let from = self.params.value("SIM_WIND_DIR").to_radians();
-        let ned = Vector3::new(-speed * from.cos(), -speed * from.sin(), 0.0);
-        self.vehicle
-            .set_wind(ned_to_paper(&ned), self.params.value("SIM_WIND_TURB"));
+        let (wind, gust) = self.params.wind_paper_m_s();
+        self.vehicle.set_wind(wind, gust);
     }
 
     /// Resets one-shot push parameters whose push is over, and tells every GCS.

@@ -41,7 +41,14 @@ pub mod id {
     pub const AUTOPILOT_VERSION: u32 = 148;
     /// EXTENDED_SYS_STATE.
     pub const EXTENDED_SYS_STATE: u32 = 245;
+    /// NAMED_VALUE_FLOAT: the controller's outputs, one message per value
+    /// ([`super::CONTROLLER_OUTPUT_NAMES`]).
+    pub const NAMED_VALUE_FLOAT: u32 = 251;
 }
+
+/// Names of the controller's outputs sent as NAMED_VALUE_FLOAT, in order: τ̃φ, τ̃θ, τ̃ψ (rad/s²,
+/// the paper's frame, Fig 5) and the thrust f_z (N).
+pub const CONTROLLER_OUTPUT_NAMES: [&str; 4] = ["TAU_PHI", "TAU_THETA", "TAU_PSI", "FZ"];
 
 /// ArduPlane stream groups (`MAV_DATA_STREAM`), as the `SR0_*` parameters name them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,7 +122,7 @@ pub struct StreamDef {
 }
 
 /// Every message the twin streams, with its default rate.
-pub const STREAMABLE: [StreamDef; 11] = [
+pub const STREAMABLE: [StreamDef; 12] = [
     StreamDef {
         msgid: id::HEARTBEAT,
         default_hz: 1.0,
@@ -171,7 +178,29 @@ pub const STREAMABLE: [StreamDef; 11] = [
         default_hz: 1.0,
         group: Some(Group::ExtendedStatus),
     },
+    // The controller's outputs, at the servo outputs' rate: a tlog then holds Fig 5.
+    StreamDef {
+        msgid: id::NAMED_VALUE_FLOAT,
+        default_hz: 10.0,
+        group: Some(Group::Extra1),
+    },
 ];
+
+/// The controller's outputs of the last control tick as NAMED_VALUE_FLOAT messages, in the
+/// order of [`CONTROLLER_OUTPUT_NAMES`].
+#[must_use]
+pub fn controller_outputs(t: &Telemetry) -> [apm::MavMessage; 4] {
+    let c = &t.control;
+    let values = [c.tau_tilde[2], c.tau_tilde[1], c.tau_tilde[0], c.fz_n];
+    let ms = time_boot_ms(t);
+    std::array::from_fn(|i| {
+        apm::MavMessage::NAMED_VALUE_FLOAT(apm::NAMED_VALUE_FLOAT_DATA {
+            time_boot_ms: ms,
+            value: values[i] as f32,
+            name: CharArray::from(CONTROLLER_OUTPUT_NAMES[i]),
+        })
+    })
+}
 
 /// A per-message interval request.
 #[derive(Debug, Clone, Copy, PartialEq)]

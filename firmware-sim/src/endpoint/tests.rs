@@ -726,3 +726,93 @@ fn messages_for_other_systems_are_ignored() {
     assert_eq!(ep.stats().not_for_us, 1);
     assert_eq!(ep.params().value("HOVER_ALT"), 1.0);
 }
+
+#[test]
+fn controller_outputs_stream_as_named_value_float() {
+    let mut ep = endpoint();
+    let _ = ep.handle(
+        GCS,
+        &v2(&command_long(
+            apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        )),
+    );
+    ep.vehicle.set_mode(crate::mode::FlightMode::QHover);
+    let mut seen: std::collections::BTreeMap<String, (u32, f32)> = Default::default();
+    for k in 1..=200 {
+        let msgs = decode(&ep.tick(k * 10_000));
+        for m in msgs {
+            if let apm::MavMessage::NAMED_VALUE_FLOAT(d) = m {
+                let name = d.name.to_str().unwrap_or_default().to_owned();
+                let e = seen.entry(name).or_default();
+                e.0 += 1;
+                e.1 = d.value;
+            }
+        }
+    }
+    let names: Vec<&str> = seen.keys().map(String::as_str).collect();
+    assert_eq!(names, ["FZ", "TAU_PHI", "TAU_PSI", "TAU_THETA"]);
+    for (name, (count, _)) in &seen {
+        assert!((18..=22).contains(count), "{name}: {count} in 2 s at 10 Hz");
+    }
+    // The last values are the controller's last output (it flies: thrust near the weight).
+    let c = ep.vehicle().telemetry().control;
+    assert_eq!(seen["FZ"].1, c.fz_n as f32);
+    assert_eq!(seen["TAU_THETA"].1, c.tau_tilde[1] as f32);
+    assert!(c.fz_n > 3.0, "{c:?}");
+}
+
+#[test]
+fn reboot_clears_a_crash_after_a_silence() {
+    let mut config = EndpointConfig::default();
+    config.vehicle.ideal_sensors = true;
+    // Dropped from 2 m, disarmed: a crash that latches.
+    config.vehicle.initial.pos_m = nalgebra::Vector3::new(0.3, -0.2, 2.0);
+    let mut ep = Endpoint::new(config);
+    ep.add_link(GCS);
+    let _ = ep.tick(2_000_000);
+    assert_eq!(ep.vehicle().telemetry().state, SystemState::Emergency);
+    let reboot = |p1: f32| {
+        v2(&command_long(
+            apm::MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN,
+            [p1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        ))
+    };
+    // Shutdown is not something a simulated board can do.
+    assert_eq!(acks(&ep.handle(GCS, &reboot(2.0))), [(246, 3)]);
+    assert_eq!(acks(&ep.handle(GCS, &reboot(1.0))), [(246, 0)]);
+    assert!(ep.is_rebooting());
+    // Silent and deaf while rebooting.
+    let t0 = ep.now_us();
+    assert!(ep.tick(t0 + 1_000_000).is_empty());
+    assert!(ep.handle(GCS, &reboot(1.0)).is_empty());
+    // Back: on the ground where it fell, disarmed, no longer crashed, talking again.
+    let msgs = decode(&ep.tick(t0 + REBOOT_SILENCE_US + 1_000_000));
+    assert!(!ep.is_rebooting());
+    assert!(
+        msgs.iter()
+            .any(|m| matches!(m, apm::MavMessage::HEARTBEAT(_))),
+        "heartbeats resume"
+    );
+    let t = ep.vehicle().telemetry();
+    assert_eq!(t.state, SystemState::Standby);
+    assert!(t.landed && !t.armed);
+    assert!(
+        (t.pos_m.x - 0.3).abs() < 0.1 && t.pos_m.z == 0.0,
+        "{:?}",
+        t.pos_m
+    );
+    // Armed, the reboot is refused.
+    let _ = ep.handle(
+        GCS,
+        &v2(&command_long(
+            apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        )),
+    );
+    assert!(ep.vehicle().telemetry().armed);
+    assert_eq!(acks(&ep.handle(GCS, &reboot(1.0))), [(246, 2)]);
+}
