@@ -14,7 +14,7 @@ use vtol_link::{LinkUrl, spawn_endpoint, spawn_stream_link};
 use crate::config::{Config, VehicleSource};
 use crate::router::{Router, RouterHandle};
 use crate::tlog::TlogHandle;
-use crate::vehicle::VehicleState;
+use crate::vehicle::{SharedHistory, VehicleState};
 use crate::{gcs, status, vehicle};
 
 /// Frames buffered between the links and the router.
@@ -53,7 +53,15 @@ pub struct Running {
     pub state: watch::Receiver<VehicleState>,
     /// Router counters and live links.
     pub router: RouterHandle,
+    /// The recent past, for charts.
+    pub history: SharedHistory,
+    /// The tlog's counters, if logging.
+    pub tlog_stats: Option<std::sync::Arc<crate::tlog::TlogStats>>,
 }
+
+/// Peer name of the daemon's own-traffic link (its heartbeat, and the UI's commands): the UI
+/// and the status line do not count it as a client.
+pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 
 /// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
 #[must_use]
@@ -89,7 +97,16 @@ pub async fn start(
 
     let (router, router_handle) = Router::new(tlog, Some(tap_tx));
     tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
-    tasks.spawn(vehicle::run(tap_rx, state_tx, cancel.clone()));
+    let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
+        crate::vehicle::History::new(std::time::Instant::now()),
+    ));
+    tasks.spawn(vehicle::run(
+        tap_rx,
+        router_handle.links.clone(),
+        state_tx,
+        std::sync::Arc::clone(&history),
+        cancel.clone(),
+    ));
 
     // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
     let mut serving = Vec::new();
@@ -107,7 +124,7 @@ pub async fn start(
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
     let (_, link_task) = spawn_stream_link(
         router_end,
-        "vtol-gcs (own traffic)",
+        OWN_TRAFFIC_PEER,
         client_tx,
         config.link.clone(),
         cancel.clone(),
@@ -153,8 +170,14 @@ pub async fn start(
         tlog_path,
         state: state_rx,
         router: router_handle,
+        history,
+        tlog_stats: tlog_stats.clone(),
     };
     let interval = config.status_interval;
+    if interval.is_zero() {
+        // The terminal UI owns the screen: no status lines.
+        return Ok(running);
+    }
     let status_running = running.clone();
     let cancel_status = cancel.clone();
     tasks.spawn(async move {
@@ -167,7 +190,8 @@ pub async fn start(
                     let state = status_running.state.borrow().clone();
                     let links = status_running.router.links.borrow().clone();
                     let records = tlog_stats.as_ref().map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
-                    println!("{}", status::line(&state, &links, records, std::time::Instant::now()));
+                    let unroutable = status_running.router.stats.unroutable.load(std::sync::atomic::Ordering::Relaxed);
+                    println!("{}", status::line(&state, &links, records, unroutable, std::time::Instant::now()));
                 }
             }
         }

@@ -9,4 +9,5 @@ pub mod gcs;
 pub mod router;
 pub mod status;
 pub mod tlog;
+pub mod tui;
 pub mod vehicle;

@@ -1,5 +1,5 @@
-//! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the daemon until
-//! Ctrl-C or SIGTERM.
+//! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the terminal UI
+//! (no arguments, or `tui`) or the headless daemon (`run`) until `q`, Ctrl-C or SIGTERM.
 
 use std::path::PathBuf;
 
@@ -19,8 +19,22 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run the daemon: vehicle link, client endpoints, router, tlog, status.
+    /// Run the daemon headless: vehicle link, client endpoints, router, tlog, status lines.
     Run(RunArgs),
+    /// The terminal UI on a daemon in this process (as with no arguments), or attached to a
+    /// running daemon's serve port or straight to a vehicle with `--connect`.
+    Tui(TuiArgs),
+}
+
+#[derive(Debug, Args, Default)]
+struct TuiArgs {
+    /// Attach to this URL (a daemon's serve port, e.g. tcp:127.0.0.1:5770, or a vehicle)
+    /// instead of running the embedded twin; nothing is served and no tlog is written unless
+    /// --serve or --log-dir ask for it.
+    #[arg(long)]
+    connect: Option<LinkUrl>,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 #[derive(Debug, Args, Default)]
@@ -80,18 +94,29 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
     let cli = Cli::parse();
-    let args = match cli.command {
-        Some(Command::Run(args)) => args,
-        None => RunArgs::default(),
+    let (args, ui) = match cli.command {
+        Some(Command::Run(args)) => (args, None),
+        Some(Command::Tui(t)) => (t.run, Some(t.connect)),
+        None => (RunArgs::default(), Some(None)),
     };
-    let config = build_config(args)?;
+    let explicit_log = args.log_dir.is_some();
+    let explicit_serve = !args.serve.is_empty();
+    let mut config = build_config(args)?;
+    let ui = match ui {
+        Some(_) if config.headless => None,
+        other => other,
+    };
+    if let Some(Some(url)) = &ui {
+        config.vehicle = VehicleSource::Url(url.clone());
+        if !explicit_serve {
+            config.serve.clear();
+        }
+        if !explicit_log {
+            config.log_dir = None;
+        }
+    }
+    init_tracing(ui.is_some(), config.log_dir.as_deref())?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async move {
         let cancel = CancellationToken::new();
@@ -100,10 +125,69 @@ fn run() -> anyhow::Result<()> {
             wait_for_shutdown_signal().await;
             signal_cancel.cancel();
         });
-        vtol_gcs::daemon::run(config, cancel)
-            .await
-            .map_err(anyhow::Error::from)
+        if ui.is_none() {
+            return vtol_gcs::daemon::run(config, cancel)
+                .await
+                .map_err(anyhow::Error::from);
+        }
+        // The UI owns the screen: no status lines.
+        config.status_interval = std::time::Duration::ZERO;
+        let mut tasks = tokio::task::JoinSet::new();
+        let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
+        let result = vtol_gcs::tui::run(&running, Unavailable, cancel.clone()).await;
+        cancel.cancel();
+        while tasks.join_next().await.is_some() {}
+        result.context("terminal")
     })
+}
+
+/// Log lines go to stderr, except under the UI, which owns the terminal: there they go to
+/// `vtol-gcs.log` beside the tlogs (or nowhere when not logging).
+fn init_tracing(ui: bool, log_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into());
+    let builder = tracing_subscriber::fmt().with_env_filter(filter);
+    if !ui {
+        builder.with_writer(std::io::stderr).init();
+        return Ok(());
+    }
+    match log_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let path = dir.join("vtol-gcs.log");
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&path)
+                .with_context(|| format!("cannot open {}", path.display()))?;
+            builder
+                .with_ansi(false)
+                .with_writer(std::sync::Mutex::new(file))
+                .init();
+        }
+        None => builder.with_writer(std::io::sink).init(),
+    }
+    Ok(())
+}
+
+/// Stands in for the client until it is wired: every request is answered "not available".
+#[derive(Debug, Clone, Copy)]
+struct Unavailable;
+
+impl vtol_gcs::tui::Control for Unavailable {
+    async fn execute(
+        &self,
+        request: vtol_gcs::tui::app::Request,
+        out: tokio::sync::mpsc::Sender<vtol_gcs::tui::app::Outcome>,
+    ) {
+        let _ = out
+            .send(vtol_gcs::tui::app::Outcome::Command {
+                what: format!("{request:?}"),
+                result: Err("commands are not available yet".into()),
+            })
+            .await;
+    }
 }
 
 async fn wait_for_shutdown_signal() {
