@@ -137,8 +137,10 @@ mod tests {
         assert_eq!(value_at(&msg, "time_boot_ms"), Some(1234.0));
         assert_eq!(value_at(&msg, "nope"), None);
 
-        let mut q = dialect::ATTITUDE_QUATERNION_DATA::default();
-        q.repr_offset_q = [0.5, 0.25, 0.0, -1.0];
+        let q = dialect::ATTITUDE_QUATERNION_DATA {
+            repr_offset_q: [0.5, 0.25, 0.0, -1.0],
+            ..Default::default()
+        };
         let msg = MavMessage::ATTITUDE_QUATERNION(q);
         assert_eq!(value_at(&msg, "repr_offset_q[1]"), Some(0.25));
         assert_eq!(value_at(&msg, "repr_offset_q[3]"), Some(-1.0));

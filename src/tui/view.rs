@@ -659,13 +659,11 @@ pub fn heading_tape(yaw_deg: f64, width: u16) -> Vec<Line<'static>> {
     ]
 }
 
+/// A chart series: name, colour, points (seconds before now, value).
+type Series = (String, Color, Vec<(f64, f64)>);
+
 /// One chart of several series over the window, y bounds from the data.
-fn chart<'a>(
-    title: String,
-    series: &'a [(String, Color, Vec<(f64, f64)>)],
-    window_s: f64,
-    unit: &str,
-) -> Chart<'a> {
+fn chart<'a>(title: String, series: &'a [Series], window_s: f64, unit: &str) -> Chart<'a> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for (_, _, pts) in series {
         for (_, y) in pts {
@@ -1060,7 +1058,7 @@ fn draw_messages(
     ])
     .split(charts_area);
     for (ci, chart_keys) in m.charts.iter().enumerate() {
-        let series: Vec<(String, Color, Vec<(f64, f64)>)> = chart_keys
+        let series: Vec<Series> = chart_keys
             .iter()
             .enumerate()
             .map(|(i, k)| {
