@@ -1,6 +1,7 @@
-//! `vtol-gcs run`: wires the links, the router, the tlog writer, the vehicle tracker, the
-//! daemon's own heartbeat and the status line, and runs them until the cancellation token
-//! fires (Ctrl-C or SIGTERM in the binary). On the way out the tlog is flushed and closed.
+//! `vtol-gcs run`: wires the links, the router, the tlog writer, the vehicle tracker and the
+//! daemon's own client, and runs them until the cancellation token fires (Ctrl-C or SIGTERM in
+//! the binary). On the way out the tlog is flushed and closed. Nothing here prints: the binary
+//! owns the terminal (status lines or the terminal UI) and reads what it shows from [`Running`].
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -11,11 +12,13 @@ use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{LinkUrl, spawn_endpoint, spawn_stream_link};
 
+use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
 use crate::router::{Router, RouterHandle};
 use crate::tlog::TlogHandle;
+use crate::tlog::TlogStats;
 use crate::vehicle::{SharedHistory, VehicleState};
-use crate::{gcs, status, vehicle};
+use crate::{gcs, vehicle};
 
 /// Frames buffered between the links and the router.
 const EVENT_QUEUE: usize = 8192;
@@ -45,6 +48,10 @@ pub enum DaemonError {
 /// What a running daemon exposes (to the status line, the UI and tests).
 #[derive(Debug, Clone)]
 pub struct Running {
+    /// The daemon's own MAVLink client (commands, parameters, the operator heartbeat).
+    pub client: ClientHandle,
+    /// Live tlog counters, if logging.
+    pub tlog_stats: Option<std::sync::Arc<TlogStats>>,
     /// Where each serve URL ended up (the real port when 0 was asked for).
     pub serving: Vec<(LinkUrl, Option<SocketAddr>)>,
     /// The tlog file, if logging.
@@ -55,12 +62,10 @@ pub struct Running {
     pub router: RouterHandle,
     /// The recent past, for charts.
     pub history: SharedHistory,
-    /// The tlog's counters, if logging.
-    pub tlog_stats: Option<std::sync::Arc<crate::tlog::TlogStats>>,
 }
 
-/// Peer name of the daemon's own-traffic link (its heartbeat, and the UI's commands): the UI
-/// and the status line do not count it as a client.
+/// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
+/// the UI and the status line do not count it as a client.
 pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 
 /// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
@@ -132,12 +137,12 @@ pub async fn start(
     tasks.spawn(async move {
         let _ = link_task.await;
     });
-    tasks.spawn(gcs::run(
+    let client = gcs::attach(
         gcs_end,
         config.system_id,
         config.component_id,
         cancel.clone(),
-    ));
+    );
 
     match &config.vehicle {
         VehicleSource::Embedded => {
@@ -165,38 +170,15 @@ pub async fn start(
         }
     }
 
-    let running = Running {
+    Ok(Running {
+        client,
+        tlog_stats,
         serving,
         tlog_path,
         state: state_rx,
         router: router_handle,
         history,
-        tlog_stats: tlog_stats.clone(),
-    };
-    let interval = config.status_interval;
-    if interval.is_zero() {
-        // The terminal UI owns the screen: no status lines.
-        return Ok(running);
-    }
-    let status_running = running.clone();
-    let cancel_status = cancel.clone();
-    tasks.spawn(async move {
-        let mut tick = tokio::time::interval(interval);
-        tick.tick().await;
-        loop {
-            tokio::select! {
-                () = cancel_status.cancelled() => return,
-                _ = tick.tick() => {
-                    let state = status_running.state.borrow().clone();
-                    let links = status_running.router.links.borrow().clone();
-                    let records = tlog_stats.as_ref().map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
-                    let unroutable = status_running.router.stats.unroutable.load(std::sync::atomic::Ordering::Relaxed);
-                    println!("{}", status::line(&state, &links, records, unroutable, std::time::Instant::now()));
-                }
-            }
-        }
-    });
-    Ok(running)
+    })
 }
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.
@@ -220,14 +202,7 @@ async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToke
 /// See [`start`].
 pub async fn run(config: Config, cancel: CancellationToken) -> Result<(), DaemonError> {
     let mut tasks = JoinSet::new();
-    let running = start(&config, &cancel, &mut tasks).await?;
-    println!("vehicle {}", config.vehicle);
-    for (url, addr) in &running.serving {
-        println!("serving {}", describe(url, *addr));
-    }
-    if let Some(p) = &running.tlog_path {
-        println!("logging {}", p.display());
-    }
+    start(&config, &cancel, &mut tasks).await?;
     cancel.cancelled().await;
     while tasks.join_next().await.is_some() {}
     Ok(())

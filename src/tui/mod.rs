@@ -7,6 +7,7 @@
 //! hook), and SIGTERM/Ctrl-C (the caller's cancellation token ends the loop).
 
 pub mod app;
+pub mod exec;
 pub mod fields;
 pub mod view;
 
