@@ -12,8 +12,9 @@ use crate::vehicle::{VehicleState, VehicleView};
 
 /// Step of the QLOITER position target per arrow key, m.
 pub const TARGET_STEP_M: f32 = 0.5;
-/// Torque of a push (`SIM_PUSH_*`), N·m.
-pub const PUSH_NM: f32 = 0.2;
+/// Torque of a push (`SIM_PUSH_*`), N·m: a clear, recoverable disturbance of the twin in
+/// hover (about 20° of roll for the default 200 ms; 0.2 N·m reaches about 50°).
+pub const PUSH_NM: f32 = 0.1;
 /// Chart window bounds and step, s.
 pub const WINDOW_MIN_S: f64 = 5.0;
 /// Longest chart window (the history keeps 120 s).

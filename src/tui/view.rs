@@ -12,7 +12,7 @@ use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::canvas::{Canvas, Line as CLine};
 use ratatui::widgets::{
-    Axis, Block, Borders, Cell, Chart, Clear, Dataset, Gauge, GraphType, LineGauge, Paragraph, Row,
+    Axis, Block, Borders, Cell, Chart, Clear, Dataset, Gauge, GraphType, Paragraph, Row,
     Table, Wrap,
 };
 use vtol_link::dialect::MavState;
@@ -565,15 +565,9 @@ fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
         let rows = Layout::vertical(vec![Constraint::Length(1); used.len()]).split(inner);
         for (row, i) in rows.iter().zip(&used) {
             let us = v.servo_us[*i];
-            let ratio = ((f64::from(us) - 1000.0) / 1000.0).clamp(0.0, 1.0);
-            f.render_widget(
-                LineGauge::default()
-                    .filled_style(Style::new().fg(Color::Cyan))
-                    .unfilled_style(Style::new().fg(Color::DarkGray))
-                    .label(format!("{:<13} {us:>4} µs ", names[*i]))
-                    .ratio(ratio),
-                *row,
-            );
+            let label = format!("{:<13} {us:>4} µs ", names[*i]);
+            let width = usize::from(row.width).saturating_sub(label.chars().count());
+            f.render_widget(Paragraph::new(pwm_bar(label, us, width)), *row);
         }
     }
 
@@ -610,6 +604,20 @@ fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
             .block(Block::bordered().title(" Operator ")),
         events,
     );
+}
+
+/// One output as a text bar over 1000–2000 µs: readable without colour.
+fn pwm_bar(label: String, us: u16, width: usize) -> Line<'static> {
+    let ratio = ((f64::from(us) - 1000.0) / 1000.0).clamp(0.0, 1.0);
+    let filled = (ratio * width as f64).round() as usize;
+    Line::from(vec![
+        Span::raw(label),
+        Span::styled("█".repeat(filled), Style::new().fg(Color::Cyan)),
+        Span::styled(
+            "░".repeat(width - filled.min(width)),
+            Style::new().fg(Color::DarkGray),
+        ),
+    ])
 }
 
 /// A compass tape of `width` columns centred on `yaw_deg`: labels above ticks, 2° a column.
@@ -693,6 +701,8 @@ fn chart<'a>(title: String, series: &'a [Series], window_s: f64, unit: &str) -> 
         .collect();
     Chart::new(datasets)
         .block(Block::bordered().title(title))
+        // Show the legend whenever it fits: with several series it is the only key.
+        .hidden_legend_constraints((Constraint::Ratio(1, 2), Constraint::Ratio(1, 1)))
         .x_axis(
             Axis::default()
                 .bounds([-window_s, 0.0])
