@@ -272,8 +272,10 @@ async fn gains_file_diff_then_transactional_upload() {
         "LAT_SAT_A 0.4\nLAT_SAT_B 0.2\nLAT_SAT_C 0.1\nLAT_SAT_D 0.05\n",
     )
     .expect("write");
-    let mut app = App::default();
-    app.view = View::Params;
+    let mut app = App {
+        view: View::Params,
+        ..App::default()
+    };
     let state = running.state.borrow().clone();
     chars(&mut app, &state, "f");
     assert!(app.typing);
