@@ -145,20 +145,30 @@ pub async fn run<C: Control>(
     cancel: CancellationToken,
 ) -> std::io::Result<()> {
     let mut terminal = ratatui::try_init()?;
-    let result = event_loop(&mut terminal, running, control, cancel).await;
+    let stop = Arc::new(AtomicBool::new(false));
+    let (key_tx, keys) = mpsc::channel(64);
+    let input = spawn_input(key_tx, Arc::clone(&stop));
+    let result = event_loop(&mut terminal, running, control, keys, cancel).await;
+    stop.store(true, Ordering::Relaxed);
+    let _ = tokio::task::spawn_blocking(move || input.join()).await;
     ratatui::try_restore()?;
     result
 }
 
-async fn event_loop<C: Control>(
-    terminal: &mut ratatui::DefaultTerminal,
+/// The UI's loop on any backend and any event source (the terminal's, or a benchmark's):
+/// keys become requests carried out by `control` as tasks, outcomes update the state, and the
+/// screen is redrawn at once after a key or an outcome, and at most every [`FRAME_INTERVAL`]
+/// for vehicle data. Returns on `q`, when `events` closes, or when `cancel` fires.
+///
+/// # Errors
+/// The backend's write error.
+pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
+    terminal: &mut ratatui::Terminal<B>,
     running: &Running,
     control: C,
+    mut events: mpsc::Receiver<Event>,
     cancel: CancellationToken,
-) -> std::io::Result<()> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let (key_tx, mut keys) = mpsc::channel(64);
-    let input = spawn_input(key_tx, Arc::clone(&stop));
+) -> Result<(), B::Error> {
     let (out_tx, mut outcomes) = mpsc::channel(64);
     let mut app = App::default();
     let mut cache = SeriesCache::default();
@@ -166,7 +176,9 @@ async fn event_loop<C: Control>(
     let mut tick = tokio::time::interval(FRAME_INTERVAL);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut dirty = true;
-    let mut last_draw = Instant::now() - IDLE_REDRAW;
+    let mut last_draw = Instant::now()
+        .checked_sub(IDLE_REDRAW)
+        .unwrap_or_else(Instant::now);
     // The table names the outputs and holds HOVER_ALT: fetch it once at start.
     {
         let c = control.clone();
@@ -174,12 +186,12 @@ async fn event_loop<C: Control>(
         app.params.progress = Some(("download".into(), 0, 0));
         tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
     }
-    let result = loop {
+    loop {
         let mut now_draw = false;
         tokio::select! {
-            () = cancel.cancelled() => break Ok(()),
-            ev = keys.recv() => {
-                let Some(ev) = ev else { break Ok(()) };
+            () = cancel.cancelled() => return Ok(()),
+            ev = events.recv() => {
+                let Some(ev) = ev else { return Ok(()) };
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
@@ -189,7 +201,7 @@ async fn event_loop<C: Control>(
                             tokio::spawn(async move { c.execute(req, out).await });
                         }
                         if app.quit {
-                            break Ok(());
+                            return Ok(());
                         }
                         now_draw = true;
                     }
@@ -205,7 +217,7 @@ async fn event_loop<C: Control>(
             }
             r = state_rx.changed() => {
                 if r.is_err() {
-                    break Ok(());
+                    return Ok(());
                 }
                 dirty = true;
             }
@@ -217,15 +229,9 @@ async fn event_loop<C: Control>(
         }
         // Keys and outcomes draw at once (a person is waiting); vehicle data at most at 30 fps.
         if now_draw || (dirty && last_draw.elapsed() >= FRAME_INTERVAL) {
-            if let Err(e) = draw_running(terminal, &mut app, running, &mut cache, Instant::now()) {
-                break Err(e);
-            }
+            draw_running(terminal, &mut app, running, &mut cache, Instant::now())?;
             last_draw = Instant::now();
             dirty = false;
         }
-    };
-    stop.store(true, Ordering::Relaxed);
-    drop(keys);
-    let _ = tokio::task::spawn_blocking(move || input.join()).await;
-    result
+    }
 }
