@@ -359,7 +359,16 @@ fn live(seconds: f64, keypresses: usize) {
 
     let flood_cancel = CancellationToken::new();
     rt.spawn(flood(serve_addr, 5000, flood_cancel.clone()));
+    let frames_in = || {
+        running
+            .router
+            .stats
+            .frames_in
+            .load(std::sync::atomic::Ordering::Relaxed)
+    };
+    let (in0, t_in) = (frames_in(), Instant::now());
     let (ui, rest, fps, mut lat) = run_ui(None, Some((keypresses, 0.0)));
+    let arrived = (frames_in() - in0) as f64 / t_in.elapsed().as_secs_f64();
     flood_cancel.cancel();
     lat.sort();
     let pct = |p: f64| lat[((lat.len() as f64 - 1.0) * p).round() as usize].as_secs_f64() * 1000.0;
