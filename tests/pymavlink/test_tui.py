@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from conftest import Gcs
+from daemon_support import daemon_factory  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
 GCS_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs"))
@@ -199,4 +200,19 @@ def test_sigterm_restores_the_terminal(screen_factory):
     pids = [int(line.split()[0]) for line in children if "vtol-gcs" in line]
     assert len(pids) == 1, children
     os.kill(pids[0], 15)
+    s.assert_exited_cleanly()
+
+
+def test_connect_to_a_running_daemon(screen_factory, daemon_factory):  # noqa: F811
+    """`vtol-gcs tui --connect` attaches to a headless daemon's serve port: the vehicle behind it
+    appears, and a mode switch from the keyboard reaches it."""
+    d = daemon_factory(serve=["tcpin:127.0.0.1:0"], log=False)
+    port = next(addr for scheme, addr in d.serving if scheme == "tcpin").rsplit(":", 1)[1]
+    s = screen_factory(f"{shlex.quote(str(GCS_BIN))} tui --connect tcp:127.0.0.1:{port}")
+    s.wait(r"Horizon")
+    s.wait(r"ESC1\s+1\d{3} µs", 30)
+    s.keys("t")
+    s.wait(r"mode QHOVER: done")
+    s.wait(r"QHOVER ")
+    s.keys("q")
     s.assert_exited_cleanly()
