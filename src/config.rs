@@ -101,6 +101,8 @@ pub struct FileConfig {
     pub udp_peer_timeout_s: Option<f64>,
     /// Seconds between status lines.
     pub status_interval_s: Option<f64>,
+    /// Wait for a serial vehicle device that does not exist yet instead of failing at start.
+    pub wait_for_device: Option<bool>,
 }
 
 /// A configuration problem.
@@ -213,6 +215,9 @@ impl FileConfig {
         }
         if let Some(t) = self.status_interval_s {
             config.status_interval = positive_secs("status_interval_s", t)?;
+        }
+        if let Some(w) = self.wait_for_device {
+            config.link.wait_for_device = w;
         }
         Ok(())
     }

@@ -70,6 +70,9 @@ struct RunArgs {
     /// TOML configuration file (see config/vtol-gcs.toml); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// A serial device that does not exist yet is waited for (default: an error at start).
+    #[arg(long)]
+    wait_for_device: bool,
 }
 
 fn build_config(args: RunArgs) -> anyhow::Result<Config> {
@@ -91,6 +94,9 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     }
     if args.headless {
         config.headless = true;
+    }
+    if args.wait_for_device {
+        config.link.wait_for_device = true;
     }
     Ok(config)
 }

@@ -109,20 +109,23 @@ pub struct TlogWriter {
 }
 
 impl TlogWriter {
-    /// Creates (or truncates) `path`.
+    /// Creates `path`, which must not exist yet: a log is never overwritten.
     ///
     /// # Errors
-    /// The file cannot be created.
+    /// The file exists already, or cannot be created.
     pub fn create(path: &Path) -> Result<Self, TlogError> {
-        let file = OpenOptions::new()
-            .create(true)
-            .truncate(true)
-            .write(true)
-            .open(path)
-            .map_err(|source| TlogError::Create {
-                path: path.to_owned(),
-                source,
-            })?;
+        // `create_new` is O_EXCL: of two processes racing for one name, exactly one wins.
+        let file = match OpenOptions::new().create_new(true).write(true).open(path) {
+            // A device or a pipe (/dev/full, a FIFO) holds no log to lose: write to it.
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists && !is_regular_file(path) => {
+                OpenOptions::new().write(true).open(path)
+            }
+            other => other,
+        }
+        .map_err(|source| TlogError::Create {
+            path: path.to_owned(),
+            source,
+        })?;
         Ok(Self {
             out: BufWriter::with_capacity(64 * 1024, file),
         })
@@ -167,26 +170,28 @@ pub struct TlogHandle {
 }
 
 impl TlogHandle {
-    /// Opens `dir/<start time>.tlog` and starts the writer thread with a queue of `queue_len`
-    /// records.
+    /// Creates a new `dir/<start time>.tlog` and starts the writer thread with a queue of
+    /// `queue_len` records. A name already taken (a restart within the same second, or another
+    /// daemon logging to the same directory) gets a `-2`, `-3` … suffix: no log is ever
+    /// overwritten or shared.
     ///
     /// # Errors
     /// The directory or the file cannot be created.
     pub fn start(dir: &Path, queue_len: usize) -> Result<Self, TlogError> {
-        std::fs::create_dir_all(dir).map_err(|source| TlogError::Create {
-            path: dir.to_owned(),
-            source,
-        })?;
-        let path = dir.join(log_file_name(SystemTime::now()));
-        Self::start_at(&path, queue_len)
+        let (path, writer) = create_unique(dir, SystemTime::now())?;
+        Self::spawn(path, writer, queue_len)
     }
 
-    /// Starts the writer on an explicit file path.
+    /// Starts the writer on an explicit file path, which must not exist yet.
     ///
     /// # Errors
-    /// The file cannot be created.
+    /// The file exists already, or cannot be created.
     pub fn start_at(path: &Path, queue_len: usize) -> Result<Self, TlogError> {
         let writer = TlogWriter::create(path)?;
+        Self::spawn(path.to_owned(), writer, queue_len)
+    }
+
+    fn spawn(path: PathBuf, writer: TlogWriter, queue_len: usize) -> Result<Self, TlogError> {
         let (tx, rx) = sync_channel(queue_len);
         let stats = Arc::new(TlogStats::default());
         let thread_stats = Arc::clone(&stats);
@@ -194,12 +199,12 @@ impl TlogHandle {
             .name("tlog-writer".into())
             .spawn(move || writer_loop(writer, &rx, &thread_stats))
             .map_err(|source| TlogError::Create {
-                path: path.to_owned(),
+                path: path.clone(),
                 source,
             })?;
         Ok(Self {
             tx,
-            path: path.to_owned(),
+            path,
             stats,
             thread: Some(thread),
         })
@@ -291,6 +296,45 @@ fn writer_loop(mut writer: TlogWriter, rx: &Receiver<Record>, stats: &TlogStats)
             }
         }
     }
+}
+
+fn is_regular_file(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| m.is_file())
+}
+
+/// How many suffixed names are tried before giving up on a directory.
+const MAX_NAME_TRIES: u32 = 1000;
+
+/// Creates the first free name of `<start time>.tlog`, `<start time>-2.tlog`, … in `dir`.
+fn create_unique(dir: &Path, t: SystemTime) -> Result<(PathBuf, TlogWriter), TlogError> {
+    std::fs::create_dir_all(dir).map_err(|source| TlogError::Create {
+        path: dir.to_owned(),
+        source,
+    })?;
+    let base = log_file_name(t);
+    let stem = base.trim_end_matches(".tlog");
+    let mut last_err = None;
+    for n in 1..=MAX_NAME_TRIES {
+        let name = if n == 1 {
+            base.clone()
+        } else {
+            format!("{stem}-{n}.tlog")
+        };
+        let path = dir.join(name);
+        match TlogWriter::create(&path) {
+            Ok(w) => return Ok((path, w)),
+            Err(TlogError::Create { source, .. })
+                if source.kind() == io::ErrorKind::AlreadyExists =>
+            {
+                last_err = Some(source);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Err(TlogError::Create {
+        path: dir.join(base),
+        source: last_err.unwrap_or_else(|| io::Error::other("no free log name")),
+    })
 }
 
 /// `YYYY-MM-DD_HH-MM-SS.tlog` (UTC) for a start time.
@@ -469,6 +513,45 @@ mod tests {
         }
         h.log(Record::now(Direction::FromVehicle, heartbeat(2)));
         h.close();
+    }
+
+    #[test]
+    fn an_existing_log_is_never_overwritten() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("kept.tlog");
+        std::fs::write(&path, b"earlier flight").unwrap();
+        let err = TlogWriter::create(&path).unwrap_err().to_string();
+        assert!(err.contains("kept.tlog"), "{err}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"earlier flight");
+    }
+
+    #[test]
+    fn logs_started_in_the_same_second_get_their_own_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let t = UNIX_EPOCH + Duration::from_secs(1_795_346_880);
+        let (a, mut wa) = create_unique(dir.path(), t).unwrap();
+        let (b, mut wb) = create_unique(dir.path(), t).unwrap();
+        let (c, _) = create_unique(dir.path(), t).unwrap();
+        assert_eq!(a.file_name().unwrap(), "2026-11-22_11-28-00.tlog");
+        assert_eq!(b.file_name().unwrap(), "2026-11-22_11-28-00-2.tlog");
+        assert_eq!(c.file_name().unwrap(), "2026-11-22_11-28-00-3.tlog");
+        // Interleaved writes land in their own files, whole.
+        for seq in 0..10 {
+            for w in [&mut wa, &mut wb] {
+                w.write(&Record {
+                    t_us: 8,
+                    direction: Direction::FromVehicle,
+                    frame: heartbeat(seq),
+                })
+                .unwrap();
+            }
+        }
+        wa.flush().unwrap();
+        wb.flush().unwrap();
+        for p in [&a, &b] {
+            let seqs: Vec<u8> = TlogReader::open(p).unwrap().map(|r| r.1.seq()).collect();
+            assert_eq!(seqs, (0..10).collect::<Vec<_>>());
+        }
     }
 
     #[test]

@@ -51,6 +51,26 @@ impl Daemon {
     }
 }
 
+impl Daemon {
+    /// SIGTERM, then waits (at most 20 s) for a successful exit.
+    fn terminate(&mut self) {
+        let status = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let exit = loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "daemon did not exit on SIGTERM");
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert!(exit.success(), "exit status {exit}");
+    }
+}
+
 impl Drop for Daemon {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -90,20 +110,7 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
     sock.write_all(b"\xfe\x00garbage that is not mavlink")
         .unwrap();
 
-    let status = Command::new("kill")
-        .args(["-TERM", &d.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let exit = loop {
-        if let Some(s) = d.child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(Instant::now() < deadline, "daemon did not exit on SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    assert!(exit.success(), "exit status {exit}");
+    d.terminate();
     let mut reader = TlogReader::open(std::path::Path::new(&tlog)).unwrap();
     let records: Vec<_> = reader.by_ref().collect();
     assert_eq!(
@@ -161,6 +168,84 @@ fn a_serve_port_in_use_is_one_clear_line() {
     assert_eq!(lines.len(), 1, "{err}");
     assert!(
         lines[0].starts_with("error: cannot open tcpin:") && lines[0].contains("in use"),
+        "{err}"
+    );
+}
+
+#[test]
+fn two_daemons_sharing_a_log_dir_keep_two_whole_logs() {
+    let dir = tempfile::tempdir().unwrap();
+    let log_dir = dir.path().to_str().unwrap();
+    let args = [
+        "run",
+        "--serve",
+        "tcpin:127.0.0.1:0",
+        "--log-dir",
+        log_dir,
+        "--headless",
+    ];
+    // Started together, so they usually ask for the same name within the same second.
+    let mut daemons = [Daemon::start(&args), Daemon::start(&args)];
+    let paths: Vec<String> = daemons
+        .iter()
+        .map(|d| d.line_starting("logging "))
+        .collect();
+    assert_ne!(paths[0], paths[1], "both daemons were given one file");
+    // Wait (at most 20 s) until each log holds a run of the vehicle's frames.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    for p in &paths {
+        while TlogReader::open(std::path::Path::new(p))
+            .unwrap()
+            .filter(|(_, f)| f.system_id() == 1)
+            .count()
+            < 50
+        {
+            assert!(Instant::now() < deadline, "{p} stays short");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    for d in &mut daemons {
+        d.terminate();
+    }
+    // Each file is one daemon's log: it reads cleanly and the embedded twin's sequence numbers
+    // run on without a jump (two runs interleaved in one file would break both).
+    for p in &paths {
+        let mut reader = TlogReader::open(std::path::Path::new(p)).unwrap();
+        let seqs: Vec<u8> = reader
+            .by_ref()
+            .filter(|(t, f)| t & 3 == 0 && f.system_id() == 1)
+            .map(|(_, f)| f.seq())
+            .collect();
+        assert_eq!(reader.skipped_bytes, 0, "{p} has torn records");
+        assert!(seqs.len() >= 50, "{p}: {} vehicle frames", seqs.len());
+        for w in seqs.windows(2) {
+            assert_eq!(w[1], w[0].wrapping_add(1), "{p}: sequence jumps");
+        }
+    }
+}
+
+#[test]
+fn a_serial_vehicle_that_does_not_exist_is_one_clear_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let device = dir.path().join("ttyUSB-missing");
+    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
+        .args([
+            "run",
+            "--no-log",
+            "--serve",
+            "tcpin:127.0.0.1:0",
+            "--vehicle",
+            &format!("serial:{}:57600", device.display()),
+        ])
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].contains("ttyUSB-missing") && lines[0].contains("does not exist"),
         "{err}"
     );
 }

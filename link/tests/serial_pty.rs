@@ -11,7 +11,7 @@ use common::{WAIT, hb, wait_down, wait_frame, wait_up};
 use tokio::sync::mpsc;
 use tokio::time::timeout;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{LinkOptions, LinkUrl, spawn_endpoint};
+use vtol_link::{LinkError, LinkOptions, LinkUrl, spawn_endpoint};
 
 fn have_socat() -> bool {
     Command::new("socat")
@@ -112,5 +112,41 @@ async fn serial_over_pty_pair_reopens_after_device_vanishes() {
     cancel.cancel();
     timeout(WAIT, ep_a.join()).await.unwrap();
     timeout(WAIT, ep_b.join()).await.unwrap();
+    stop_socat(socat, &[&pa, &pb]);
+}
+
+#[tokio::test]
+async fn a_missing_device_is_an_error_unless_waiting_was_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pa, pb) = (dir.path().join("ttyA"), dir.path().join("ttyB"));
+    let cancel = CancellationToken::new();
+    let url: LinkUrl = format!("serial:{}:57600", pa.display()).parse().unwrap();
+    let (ta, mut ea) = mpsc::channel(64);
+    let err = spawn_endpoint(&url, ta.clone(), LinkOptions::default(), cancel.clone())
+        .await
+        .unwrap_err();
+    assert!(matches!(err, LinkError::NoDevice { .. }), "{err}");
+    assert!(err.to_string().contains("ttyA"), "{err}");
+
+    if !have_socat() {
+        eprintln!("socat not installed (apt-get install -y socat); skipping the wait half");
+        return;
+    }
+    let opts = LinkOptions {
+        wait_for_device: true,
+        reconnect_min: Duration::from_millis(20),
+        reconnect_max: Duration::from_millis(200),
+        ..Default::default()
+    };
+    let ep = spawn_endpoint(&url, ta, opts, cancel.clone())
+        .await
+        .unwrap();
+    // The device appears after the endpoint started: the link comes up on it.
+    let socat = start_socat(&pa, &pb).await;
+    let (id, peer, _) = wait_up(&mut ea).await;
+    assert_eq!(Some(id), ep.link_id());
+    assert!(peer.contains("ttyA"), "{peer}");
+    cancel.cancel();
+    timeout(WAIT, ep.join()).await.unwrap();
     stop_socat(socat, &[&pa, &pb]);
 }

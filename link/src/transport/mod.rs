@@ -324,6 +324,9 @@ pub struct LinkOptions {
     pub reconnect_min: Duration,
     /// Cap of the doubling reconnect delay (default 2 s).
     pub reconnect_max: Duration,
+    /// Open a serial endpoint whose device does not exist yet and wait for it to appear
+    /// (default false: a missing device at start is an error, most likely a typo).
+    pub wait_for_device: bool,
 }
 
 impl Default for LinkOptions {
@@ -333,6 +336,7 @@ impl Default for LinkOptions {
             udp_peer_timeout: Duration::from_secs(10),
             reconnect_min: Duration::from_millis(100),
             reconnect_max: Duration::from_secs(2),
+            wait_for_device: false,
         }
     }
 }
@@ -366,6 +370,12 @@ pub enum LinkError {
         addr: SocketAddr,
         /// The OS error.
         source: io::Error,
+    },
+    /// A serial device that does not exist when the endpoint is opened.
+    #[error("serial device {device} does not exist")]
+    NoDevice {
+        /// The device path.
+        device: String,
     },
     /// Another I/O error while opening.
     #[error("{url}: {source}")]
@@ -424,8 +434,10 @@ impl EndpointHandle {
 /// Opens the endpoint a URL describes and runs it until `cancel` fires.
 ///
 /// Listeners and udpout bind before this returns (so errors like "address in use" surface
-/// here and [`EndpointHandle::local_addr`] is known). TCP clients and serial ports never fail
-/// here: they retry with back-off until they connect, since a vehicle may appear later.
+/// here and [`EndpointHandle::local_addr`] is known). A serial device that does not exist is an
+/// error unless [`LinkOptions::wait_for_device`] is set. Past that, TCP clients and serial ports
+/// never fail here: they retry with back-off until they connect (a vehicle may appear later, a
+/// USB radio may be replugged).
 pub async fn spawn_endpoint(
     url: &LinkUrl,
     events: mpsc::Sender<LinkEvent>,
@@ -451,6 +463,11 @@ pub async fn spawn_endpoint(
             (None, Some(id), task)
         }
         LinkUrl::Serial { device, baud } => {
+            if !opts.wait_for_device && !std::path::Path::new(device).exists() {
+                return Err(LinkError::NoDevice {
+                    device: device.clone(),
+                });
+            }
             let (id, task) = serial::spawn_serial(device.clone(), *baud, events, opts, cancel);
             (None, Some(id), task)
         }
