@@ -15,7 +15,7 @@ use tokio_util::sync::CancellationToken;
 use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::params::file::{self, ParamFile};
 use vtol_gcs::params::plan::{ParamOutcome, PushReport, PushResult};
-use vtol_gcs::params::{self as params, Format, Param, ParamSet};
+use vtol_gcs::params::{self as params, Format, Param, ParamSet, Rules as _};
 use vtol_link::LinkUrl;
 
 /// Done.
@@ -184,6 +184,8 @@ where
             )),
             other => other.into(),
         })?;
+            // Best effort: without an answer the timeouts start generous and adapt.
+            let _ = client.probe_rtt().await;
             let r = f(client).await;
             cancel.cancel();
             r
@@ -255,13 +257,20 @@ pub fn params(args: ParamsArgs) -> ExitCode {
     with_client(&args.link, |c| async move {
         match command {
             ParamsCommand::Pull { output, format } => {
+                let t0 = std::time::Instant::now();
                 let set = pull(&c).await?;
+                let took = t0.elapsed();
                 let vehicle = c.target().unwrap_or((1, 1));
                 match output {
                     Some(path) => {
                         file::save(&path, &set, format, vehicle)
                             .map_err(|e| usage(e.to_string()))?;
-                        eprintln!("{} parameters written to {}", set.len(), path.display());
+                        eprintln!(
+                            "{} parameters written to {} (download {:.1} ms)",
+                            set.len(),
+                            path.display(),
+                            took.as_secs_f64() * 1e3
+                        );
                     }
                     None => print!("{}", file::render(&set, format, vehicle)),
                 }
@@ -314,8 +323,7 @@ fn parse_pairs(pairs: &[String]) -> Result<ParamFile, String> {
         return Err("set takes NAME VALUE pairs".into());
     }
     let mut set = ParamSet::new();
-    let mut lines = std::collections::BTreeMap::new();
-    for (i, pair) in pairs.chunks(2).enumerate() {
+    for pair in pairs.chunks(2) {
         let (name, text) = (&pair[0], &pair[1]);
         if !params::valid_name(name) {
             return Err(format!("'{name}' is not a parameter name"));
@@ -338,11 +346,11 @@ fn parse_pairs(pairs: &[String]) -> Result<ParamFile, String> {
         {
             return Err(format!("{name} given twice"));
         }
-        lines.insert(name.clone(), i + 1);
     }
     Ok(ParamFile {
         params: set,
-        lines,
+        // Values from the command line have no lines to point at.
+        lines: std::collections::BTreeMap::new(),
         format: Format::Mavproxy,
         typed: false,
     })
@@ -421,6 +429,20 @@ async fn push(c: &ClientHandle, wanted: &ParamFile, dry_run: bool) -> Result<(),
         );
     }
     if dry_run {
+        // What the twin's rules predict for this order; the vehicle has the last word.
+        let mut state = current.clone();
+        for ch in &order {
+            match params::TwinRules.refusal(&state, &ch.name, ch.new) {
+                Some(reason) => {
+                    let _ = writeln!(out, "{}: likely refused: {reason}", ch.name);
+                }
+                None => {
+                    if let Some(p) = state.get_mut(&ch.name) {
+                        p.value = ch.new;
+                    }
+                }
+            }
+        }
         let _ = writeln!(
             out,
             "{} would change (dry run: nothing written)",

@@ -8,10 +8,11 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 
-use super::machine::{Inbound, Machine};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
 
-/// Sends of one command before giving up (the first plus retries).
-pub const COMMAND_TRIES: u8 = 5;
+/// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
+/// way (half the exchanges failing) almost never exhausts them.
+pub const COMMAND_TRIES: u8 = 10;
 /// How long an IN_PROGRESS keeps the command alive without another word.
 pub const IN_PROGRESS_WAIT: Duration = Duration::from_secs(5);
 /// How long a refusal waits for the vehicle's STATUSTEXT when none came before the ACK.
@@ -95,7 +96,7 @@ impl CommandMachine {
     fn frame(&mut self, now: Instant) -> MavMessage {
         let confirmation = self.tries;
         self.tries += 1;
-        self.deadline = now + self.rto;
+        self.deadline = now + retry_wait(self.rto, self.tries);
         let p = self.params;
         MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
             param1: p[0],
@@ -182,7 +183,10 @@ impl Machine for CommandMachine {
             self.finish(r, now);
             return Vec::new();
         }
-        if self.tries >= COMMAND_TRIES {
+        let waited = self
+            .started
+            .map_or(Duration::ZERO, |s| now.duration_since(s));
+        if self.tries >= COMMAND_TRIES && waited >= GIVE_UP_AFTER {
             self.result = Some(Err(NoAck { tries: self.tries }));
             return Vec::new();
         }
@@ -197,6 +201,10 @@ impl Machine for CommandMachine {
 
     fn result(&mut self) -> Option<Self::Output> {
         self.result.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        self.first_try_rtt.take().into_iter().collect()
     }
 }
 
@@ -265,13 +273,17 @@ mod tests {
             let out = m.on_time(m.deadline());
             assert_eq!(confirmation(&out), k);
         }
-        let _ = m.on_time(m.deadline());
-        assert_eq!(
-            m.result(),
-            Some(Err(NoAck {
-                tries: COMMAND_TRIES
-            }))
-        );
+        // Past the tries, it keeps asking (at the longest wait) until GIVE_UP_AFTER.
+        let mut tries = COMMAND_TRIES;
+        loop {
+            let d = m.deadline();
+            if m.on_time(d).is_empty() {
+                assert!(d.duration_since(t0) >= GIVE_UP_AFTER);
+                break;
+            }
+            tries += 1;
+        }
+        assert_eq!(m.result(), Some(Err(NoAck { tries })));
     }
 
     #[test]

@@ -32,6 +32,11 @@ pub trait Machine {
     fn deadline(&self) -> Instant;
     /// The result, once finished (taken once).
     fn result(&mut self) -> Option<Self::Output>;
+    /// Round trips measured since the last call, from exchanges answered on their first send
+    /// only (Karn's rule).
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        Vec::new()
+    }
 }
 
 /// Smoothed round-trip time and its variation (RFC 6298), from exchanges answered on their
@@ -53,9 +58,9 @@ impl Default for Rtt {
 
 impl Rtt {
     /// Before any sample: generous for a radio, short enough that a lost first frame costs little.
-    pub const INITIAL_RTO: Duration = Duration::from_millis(300);
+    pub const INITIAL_RTO: Duration = Duration::from_millis(200);
     /// Floor: below this a loopback retry only duplicates work the vehicle is already doing.
-    pub const MIN_RTO: Duration = Duration::from_millis(25);
+    pub const MIN_RTO: Duration = Duration::from_millis(10);
     /// Ceiling.
     pub const MAX_RTO: Duration = Duration::from_secs(3);
 
@@ -90,9 +95,39 @@ impl Rtt {
     }
 }
 
+/// Sends at the plain timeout before the wait between retries starts doubling.
+pub const STEADY_TRIES: u8 = 4;
+/// A request is called unanswered only after this long as well as after its tries: a loaded
+/// machine or a radio fade can silence a link for seconds.
+pub const GIVE_UP_AFTER: Duration = Duration::from_secs(5);
+/// Longest wait between two sends of one request.
+pub const MAX_RETRY_WAIT: Duration = Duration::from_secs(1);
+
+/// The wait after send number `tries` (1-based): the timeout for the first few sends, then
+/// doubling up to [`MAX_RETRY_WAIT`]. Random loss needs quick retries; a stalled peer (a busy
+/// machine, a radio fade) needs the requester to keep asking for seconds, not milliseconds,
+/// before it calls the request unanswered.
+#[must_use]
+pub fn retry_wait(rto: Duration, tries: u8) -> Duration {
+    let doublings = u32::from(tries.saturating_sub(STEADY_TRIES)).min(16);
+    (rto * 2u32.pow(doublings)).min(MAX_RETRY_WAIT.max(rto))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn retries_back_off_after_a_few_quick_ones() {
+        let rto = Duration::from_millis(25);
+        let waits: Vec<u128> = (1..=12).map(|t| retry_wait(rto, t).as_millis()).collect();
+        assert_eq!(
+            waits,
+            [25, 25, 25, 25, 50, 100, 200, 400, 800, 1000, 1000, 1000]
+        );
+        let total: u128 = waits.iter().sum();
+        assert!(total > 3000, "twelve tries span {total} ms");
+    }
 
     #[test]
     fn rto_follows_samples_within_bounds() {

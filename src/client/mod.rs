@@ -13,6 +13,7 @@
 pub mod command;
 pub mod machine;
 pub mod param;
+pub mod probe;
 mod session;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -114,6 +115,7 @@ pub struct ClientHandle {
     out: mpsc::Sender<MavMessage>,
     inbound: broadcast::Sender<Arc<Inbound>>,
     target: watch::Receiver<Option<(u8, u8)>>,
+    links_up: watch::Receiver<usize>,
     rtt: Arc<Mutex<Rtt>>,
     shared: Arc<session::Shared>,
     cache: Arc<Mutex<ParamSet>>,
@@ -152,7 +154,9 @@ impl ClientHandle {
             sent: AtomicUsize::new(0),
             dropped: AtomicUsize::new(0),
         });
+        let (links_up_tx, links_up) = watch::channel(0);
         let session = session::Session {
+            links_up: links_up_tx,
             me,
             inbound: inbound.clone(),
             target: target_tx,
@@ -165,6 +169,7 @@ impl ClientHandle {
             out,
             inbound,
             target,
+            links_up,
             rtt: Arc::new(Mutex::new(Rtt::default())),
             shared,
             cache: Arc::new(Mutex::new(ParamSet::new())),
@@ -269,6 +274,22 @@ impl ClientHandle {
             .map_err(|_| ClientError::Link("client stopped".into()))
     }
 
+    /// Waits up to `timeout` for a link to be up (a `tcp:` client connects in the background).
+    ///
+    /// # Errors
+    /// [`ClientError::Link`].
+    pub async fn wait_connected(&self, timeout: Duration) -> Result<(), ClientError> {
+        let mut rx = self.links_up.clone();
+        match tokio::time::timeout(timeout, rx.wait_for(|n| *n > 0)).await {
+            Ok(Ok(_)) => Ok(()),
+            Ok(Err(_)) => Err(ClientError::Link("client stopped".into())),
+            Err(_) => Err(ClientError::Link(format!(
+                "not connected after {} s",
+                timeout.as_secs()
+            ))),
+        }
+    }
+
     /// Runs a machine to its result: subscribe first, then send what it asks, feed it every
     /// inbound message and its deadlines.
     async fn drive<M: Machine>(
@@ -276,6 +297,8 @@ impl ClientHandle {
         m: &mut M,
         mut on_step: impl FnMut(&M),
     ) -> Result<M::Output, ClientError> {
+        // A first send with no link up would only be lost and cost a timeout.
+        self.wait_connected(FIND_VEHICLE_TIMEOUT).await?;
         let mut rx = self.inbound.subscribe();
         for msg in m.start(std::time::Instant::now()) {
             self.send(msg).await?;
@@ -295,6 +318,9 @@ impl ClientHandle {
                 },
                 () = tokio::time::sleep_until(deadline) => m.on_time(std::time::Instant::now()),
             };
+            for s in m.take_rtt_samples() {
+                self.sample_rtt(Some(s));
+            }
             on_step(m);
             for msg in sends {
                 self.send(msg).await?;
@@ -307,6 +333,18 @@ impl ClientHandle {
             Some(t) => Ok(t),
             None => self.wait_target(FIND_VEHICLE_TIMEOUT).await,
         }
+    }
+
+    /// Measures the round trip with TIMESYNC probes, so the first real request already has a
+    /// timeout scaled to the link. `None` when the vehicle did not answer (the timeouts then
+    /// start from [`Rtt::INITIAL_RTO`] and adapt as answers come).
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn probe_rtt(&self) -> Result<Option<Duration>, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = probe::ProbeMachine::new(target);
+        self.drive(&mut m, |_| {}).await
     }
 
     /// COMMAND_LONG with retries (confirmation incremented), ACK matched by command and target,
@@ -322,7 +360,6 @@ impl ClientHandle {
         let target = self.vehicle().await?;
         let mut m = CommandMachine::new(self.me, target, command, params, self.rto());
         let out = self.drive(&mut m, |_| {}).await?;
-        self.sample_rtt(m.first_try_rtt);
         out.map_err(|e| {
             ClientError::Timeout(format!(
                 "{command:?}: no COMMAND_ACK after {} tries",
@@ -407,7 +444,8 @@ impl ClientHandle {
         progress: Option<watch::Sender<(usize, usize)>>,
     ) -> Result<ParamSet, ClientError> {
         let target = self.vehicle().await?;
-        let mut m = PullMachine::new(target, self.rto());
+        let rtt = self.rtt.lock().map(|r| *r).unwrap_or_default();
+        let mut m = PullMachine::new(target, rtt);
         let out = self
             .drive(&mut m, |m| {
                 if let Some(p) = &progress {
@@ -440,7 +478,6 @@ impl ClientHandle {
         let target = self.vehicle().await?;
         let mut m = ParamMachine::read(target, name, self.rto());
         let out = self.drive(&mut m, |_| {}).await?;
-        self.sample_rtt(m.first_try_rtt);
         let p = out.map_err(|f| failure(name, f))?;
         if let Ok(mut c) = self.cache.lock() {
             c.insert(name.to_owned(), p);
@@ -469,7 +506,6 @@ impl ClientHandle {
         let target = self.vehicle().await?;
         let mut m = ParamMachine::write(target, name, value, ty, self.rto());
         let out = self.drive(&mut m, |_| {}).await?;
-        self.sample_rtt(m.first_try_rtt);
         let p = out.map_err(|f| failure(name, f))?;
         if let Ok(mut c) = self.cache.lock() {
             c.insert(name.to_owned(), p);
@@ -560,5 +596,15 @@ fn failure(name: &str, f: ParamFailure) -> ClientError {
             }
             None => format!("{name}: no answer after {tries} tries"),
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The UI shares one handle across tasks and threads.
+    #[test]
+    fn handle_is_send_sync_and_clone() {
+        fn check<T: Send + Sync + Clone + 'static>() {}
+        check::<super::ClientHandle>();
     }
 }

@@ -1,8 +1,8 @@
 //! The parameter protocol as state machines: the whole-table download, one read, and one
 //! verified write.
 //!
-//! Download: PARAM_REQUEST_LIST, then, once the stream has been silent for a round-trip
-//! timeout, the missing indices by PARAM_REQUEST_READ(index), at most [`PULL_WINDOW`]
+//! Download: PARAM_REQUEST_LIST, then, once the stream has ended (its last index arrived, or it
+//! has been silent for a round-trip timeout), the missing indices by PARAM_REQUEST_READ(index), at most [`PULL_WINDOW`]
 //! outstanding: each answer lets the next request go, so the pace follows what the link
 //! carries. A request unanswered for a timeout is sent again. Echoes with index 65535 (a by-name
 //! answer or another client's write) update values by name.
@@ -16,15 +16,20 @@ use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
 
-use super::machine::{Inbound, Machine};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Rtt, retry_wait};
 use crate::params::{Param, ParamSet, stored_value};
 
 /// Index re-requests outstanding at once during a download.
 pub const PULL_WINDOW: usize = 16;
-/// Consecutive timeouts without any new value before a download gives up.
+/// Consecutive timeouts without any new value before a download gives up…
 pub const PULL_STALLS: u32 = 12;
-/// Sends of one write or read before giving up.
-pub const PARAM_TRIES: u8 = 6;
+/// …and at least this long without one: a busy machine can pause a fast link for longer than
+/// twelve short timeouts.
+pub const PULL_GIVE_UP: Duration = Duration::from_secs(3);
+/// Sends of one write or read before giving up. At 30 % loss each way one exchange fails about
+/// half the time, so twelve sends leave a 0.03 % chance of a false "no answer"; with the
+/// timeout at a few round trips that is still well under a second on a fast link.
+pub const PARAM_TRIES: u8 = 12;
 
 fn name_of(id: &mavlink::types::CharArray<16>) -> String {
     id.to_str().unwrap_or("").trim_end_matches('\0').to_owned()
@@ -43,11 +48,18 @@ pub struct PullStalled {
 #[derive(Debug)]
 pub struct PullMachine {
     target: (u8, u8),
+    /// The client's estimate, refined by this download's own samples.
+    rtt: Rtt,
     rto: Duration,
     count: Option<u16>,
     values: BTreeMap<u16, (String, Param)>,
     by_name: HashMap<String, u16>,
-    outstanding: BTreeMap<u16, Instant>,
+    /// Re-requested index -> (answer due, sent at, first send?).
+    outstanding: BTreeMap<u16, (Instant, Instant, bool)>,
+    /// Indices already asked once: a later answer may be to any send (Karn's rule).
+    asked: std::collections::HashSet<u16>,
+    samples: Vec<Duration>,
+    started: Instant,
     last_rx: Instant,
     deadline: Instant,
     stalls: u32,
@@ -58,17 +70,21 @@ pub struct PullMachine {
 }
 
 impl PullMachine {
-    /// A download from `target` with retransmission timeout `rto`.
+    /// A download from `target`, starting from the client's round-trip estimate.
     #[must_use]
-    pub fn new(target: (u8, u8), rto: Duration) -> Self {
+    pub fn new(target: (u8, u8), rtt: Rtt) -> Self {
         let now = Instant::now();
         Self {
             target,
-            rto,
+            rtt,
+            rto: rtt.rto(),
             count: None,
             values: BTreeMap::new(),
             by_name: HashMap::new(),
             outstanding: BTreeMap::new(),
+            asked: std::collections::HashSet::new(),
+            samples: Vec::new(),
+            started: now,
             last_rx: now,
             deadline: now,
             stalls: 0,
@@ -95,7 +111,8 @@ impl PullMachine {
 
     fn read(&mut self, index: u16, now: Instant) -> MavMessage {
         self.rerequests += 1;
-        self.outstanding.insert(index, now + self.rto);
+        let first = self.asked.insert(index);
+        self.outstanding.insert(index, (now + self.rto, now, first));
         MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
             param_index: index as i16,
             target_system: self.target.0,
@@ -135,6 +152,7 @@ impl Machine for PullMachine {
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
         self.last_rx = now;
+        self.started = now;
         vec![self.list(now)]
     }
 
@@ -166,13 +184,30 @@ impl Machine for PullMachine {
         self.stalls = 0;
         self.by_name.insert(name.clone(), index);
         self.values.insert(index, (name, param));
-        let was_asked = self.outstanding.remove(&index).is_some();
+        let mut sample = None;
+        if self.values.len() == 1 && self.list_sends == 1 {
+            sample = Some(now.duration_since(self.started));
+        }
+        let asked = self.outstanding.remove(&index);
+        if let Some((_, sent, true)) = asked {
+            sample = Some(now.duration_since(sent));
+        }
+        if let Some(s) = sample {
+            self.samples.push(s);
+            self.rtt.sample(s);
+            self.rto = self.rtt.rto();
+        }
+        let was_asked = asked.is_some();
+        self.deadline = now + self.rto;
         self.complete();
         if self.done.is_some() {
             return Vec::new();
         }
-        // While re-requesting, each answer frees a window slot for the next request.
-        if was_asked {
+        // While re-requesting, each answer frees a window slot for the next request. The last
+        // index of the list stream (sent in index order) means the stream is over: ask for the
+        // holes now rather than after a silence.
+        let stream_end = !was_asked && self.count == Some(index + 1);
+        if was_asked || stream_end {
             self.refill(now)
         } else {
             Vec::new()
@@ -185,7 +220,7 @@ impl Machine for PullMachine {
         }
         if now.duration_since(self.last_rx) >= self.rto {
             self.stalls += 1;
-            if self.stalls > PULL_STALLS {
+            if self.stalls > PULL_STALLS && now.duration_since(self.last_rx) >= PULL_GIVE_UP {
                 let (received, total) = self.progress();
                 self.done = Some(Err(PullStalled { received, total }));
                 return Vec::new();
@@ -198,7 +233,7 @@ impl Machine for PullMachine {
         let overdue: Vec<u16> = self
             .outstanding
             .iter()
-            .filter(|(_, due)| **due <= now)
+            .filter(|(_, (due, ..))| *due <= now)
             .map(|(i, _)| *i)
             .collect();
         let mut out: Vec<MavMessage> = overdue.into_iter().map(|i| self.read(i, now)).collect();
@@ -212,7 +247,7 @@ impl Machine for PullMachine {
 
     fn deadline(&self) -> Instant {
         let stream_quiet = self.last_rx + self.rto;
-        let next_due = self.outstanding.values().min().copied();
+        let next_due = self.outstanding.values().map(|(due, ..)| *due).min();
         match next_due {
             Some(d) => d.min(self.deadline.max(stream_quiet)),
             None => self.deadline.max(stream_quiet),
@@ -221,6 +256,10 @@ impl Machine for PullMachine {
 
     fn result(&mut self) -> Option<Self::Output> {
         self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        std::mem::take(&mut self.samples)
     }
 }
 
@@ -316,7 +355,7 @@ impl ParamMachine {
 
     fn request(&mut self, now: Instant) -> MavMessage {
         self.tries += 1;
-        self.deadline = now + self.rto;
+        self.deadline = now + retry_wait(self.rto, self.tries);
         match self.write {
             Some((value, ty)) => MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
                 param_value: value,
@@ -372,7 +411,8 @@ impl Machine for ParamMachine {
                 if e.error == MavParamError::MAV_PARAM_ERROR_DOES_NOT_EXIST {
                     self.done = Some(Err(ParamFailure::Unknown));
                 } else if self.write.is_some() && self.refused.is_none() {
-                    self.refused = Some((param_error_text(e.error).to_owned(), now));
+                    let reason = format!("{}: {}", self.name, param_error_text(e.error));
+                    self.refused = Some((reason, now));
                     self.deadline = now + REASON_GRACE;
                 }
             }
@@ -395,7 +435,7 @@ impl Machine for ParamMachine {
             self.done = Some(Err(ParamFailure::Refused(reason)));
             return Vec::new();
         }
-        if self.tries >= PARAM_TRIES {
+        if self.tries >= PARAM_TRIES && now.duration_since(self.started) >= GIVE_UP_AFTER {
             self.done = Some(Err(ParamFailure::NoAnswer {
                 tries: self.tries,
                 last_echo: self.last_echo,
@@ -411,5 +451,191 @@ impl Machine for ParamMachine {
 
     fn result(&mut self) -> Option<Self::Output> {
         self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        self.first_try_rtt.take().into_iter().collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const V: (u8, u8) = (1, 1);
+    const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
+
+    fn value(name: &str, v: f32, index: u16, count: u16, ty: MavParamType) -> Inbound {
+        Inbound {
+            sys: V.0,
+            comp: V.1,
+            msg: MavMessage::PARAM_VALUE(apm::PARAM_VALUE_DATA {
+                param_value: v,
+                param_count: count,
+                param_index: index,
+                param_id: name.into(),
+                param_type: ty,
+            }),
+        }
+    }
+
+    fn rtt(ms: u64) -> Rtt {
+        let mut r = Rtt::default();
+        r.sample(Duration::from_millis(ms));
+        r
+    }
+
+    fn read_indices(out: &[MavMessage]) -> Vec<i16> {
+        out.iter()
+            .filter_map(|m| match m {
+                MavMessage::PARAM_REQUEST_READ(r) => Some(r.param_index),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn pull_rerequests_holes_after_a_silence_and_completes() {
+        let t0 = Instant::now();
+        let mut m = PullMachine::new(V, rtt(10));
+        let first = m.start(t0);
+        assert!(matches!(first[..], [MavMessage::PARAM_REQUEST_LIST(_)]));
+        // 5 parameters; 1 and 3 are lost, and the stream is still going.
+        for i in [0u16, 2] {
+            assert!(
+                m.on_message(t0, &value(&format!("P{i}"), f32::from(i), i, 5, F32))
+                    .is_empty()
+            );
+        }
+        assert!(m.result().is_none());
+        assert_eq!(m.progress(), (2, 5));
+        // The last index ends the stream: the holes are asked for at once.
+        let asks = m.on_message(t0, &value("P4", 4.0, 4, 5, F32));
+        assert_eq!(read_indices(&asks), [1, 3]);
+        assert!(
+            m.on_time(t0 + Duration::from_millis(5)).is_empty(),
+            "nothing overdue yet"
+        );
+        // An echo by name (index 65535) of a known parameter updates it.
+        m.on_message(t0, &value("P2", 7.0, u16::MAX, 5, F32));
+        m.on_message(t0, &value("P1", 1.0, 1, 5, F32));
+        // 3 was lost again: asked again once overdue.
+        let again = m.on_time(m.deadline());
+        assert_eq!(read_indices(&again), [3]);
+        m.on_message(t0, &value("P3", 3.0, 3, 5, F32));
+        let set = m.result().expect("done").expect("complete");
+        assert_eq!(set.len(), 5);
+        assert_eq!(set["P2"].value, 7.0);
+    }
+
+    #[test]
+    fn pull_gives_up_when_nothing_answers() {
+        let t0 = Instant::now();
+        let mut m = PullMachine::new(V, rtt(10));
+        m.start(t0);
+        let mut lists = 0;
+        for _ in 0..1000 {
+            let d = m.deadline();
+            lists += m.on_time(d).len();
+            if let Some(r) = m.result() {
+                assert_eq!(
+                    r,
+                    Err(PullStalled {
+                        received: 0,
+                        total: 0
+                    })
+                );
+                assert!(lists >= 3, "the list request is repeated before giving up");
+                assert!(d.duration_since(t0) >= PULL_GIVE_UP, "gave up too soon");
+                return;
+            }
+        }
+        panic!("never gave up");
+    }
+
+    #[test]
+    fn write_is_confirmed_only_by_the_exact_echo() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "LAT_SAT_A", 0.4, F32, Duration::from_millis(20));
+        m.start(t0);
+        // Another value (an old echo, or a refusal's unchanged value) does not confirm.
+        m.on_message(t0, &value("LAT_SAT_A", 1.2, 6, 38, F32));
+        assert!(m.result().is_none());
+        // A value for another name does not either.
+        m.on_message(t0, &value("LAT_SAT_B", 0.4, 7, 38, F32));
+        assert!(m.result().is_none());
+        m.on_message(t0, &value("LAT_SAT_A", 0.4, u16::MAX, 38, F32));
+        assert_eq!(m.result().expect("done").expect("confirmed").value, 0.4);
+    }
+
+    #[test]
+    fn integer_write_confirms_with_the_vehicle_rounding() {
+        let t0 = Instant::now();
+        let i16t = MavParamType::MAV_PARAM_TYPE_INT16;
+        let mut m = ParamMachine::write(V, "SIM_PUSH_MS", 250.4, i16t, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("SIM_PUSH_MS", 250.0, 34, 38, i16t));
+        assert_eq!(m.result().expect("done").expect("confirmed").value, 250.0);
+    }
+
+    #[test]
+    fn param_error_is_a_refusal_with_the_vehicle_text() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "LAT_SAT_B", 2.0, F32, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("LAT_SAT_B", 0.6, 7, 38, F32));
+        m.on_message(
+            t0,
+            &Inbound {
+                sys: 1,
+                comp: 1,
+                msg: MavMessage::PARAM_ERROR(apm::PARAM_ERROR_DATA {
+                    param_index: 7,
+                    target_system: 255,
+                    target_component: 190,
+                    param_id: "LAT_SAT_B".into(),
+                    error: MavParamError::MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+                }),
+            },
+        );
+        assert!(m.result().is_none(), "waits briefly for the reason");
+        m.on_message(
+            t0,
+            &Inbound {
+                sys: 1,
+                comp: 1,
+                msg: MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
+                    severity: apm::MavSeverity::MAV_SEVERITY_WARNING,
+                    text: "Param write denied (LAT_SAT_B: needs a > b + c + d)".into(),
+                    id: 0,
+                    chunk_seq: 0,
+                }),
+            },
+        );
+        match m.result() {
+            Some(Err(ParamFailure::Refused(r))) => {
+                assert!(r.contains("needs a > b + c + d"), "{r}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn write_retries_then_reports_no_answer() {
+        let t0 = Instant::now();
+        let mut m = ParamMachine::write(V, "ALT_KP", 6.0, F32, Duration::from_millis(20));
+        let mut sends = m.start(t0).len();
+        while m.result_peek_pending() {
+            let d = m.deadline();
+            sends += m.on_time(d).len();
+        }
+        assert!(sends >= usize::from(PARAM_TRIES), "{sends} sends");
+        assert!(m.deadline().duration_since(t0) >= GIVE_UP_AFTER);
+    }
+
+    impl ParamMachine {
+        fn result_peek_pending(&self) -> bool {
+            self.done.is_none()
+        }
     }
 }

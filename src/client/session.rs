@@ -18,13 +18,19 @@ use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
 use super::machine::Inbound;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 5] = [
+const WANTED: [u32; 6] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
     77,  // COMMAND_ACK
+    111, // TIMESYNC
     253, // STATUSTEXT
     345, // PARAM_ERROR
 ];
+
+/// MAV_COMP_ID_AUTOPILOT1.
+const AUTOPILOT1: u8 = 1;
+/// Messages only an autopilot streams (SYS_STATUS, ATTITUDE).
+const TELEMETRY: [u32; 2] = [1, 30];
 
 /// Shared between the session task and every handle.
 #[derive(Debug)]
@@ -47,6 +53,8 @@ pub(crate) struct Session {
     /// The target was given: never replace it by the first heartbeat.
     pub fixed_target: bool,
     pub shared: Arc<Shared>,
+    /// Links up now (a request waits for one before its first send).
+    pub links_up: watch::Sender<usize>,
 }
 
 impl Session {
@@ -63,6 +71,7 @@ impl Session {
             target,
             fixed_target,
             shared,
+            links_up,
         } = self;
         let mut links: HashMap<LinkId, LinkSender> = HashMap::new();
         let mut seq: u8 = 0;
@@ -85,11 +94,23 @@ impl Session {
                     None => return,
                     Some(LinkEvent::Up { id, tx, .. }) => {
                         links.insert(id, tx);
+                        links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Down { id, .. }) => {
                         links.remove(&id);
+                        links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
+                        // The autopilot's own telemetry finds the vehicle as surely as its
+                        // heartbeat, and arrives many times a second: on a lossy link that
+                        // saves waiting for the next 1 Hz heartbeat.
+                        if !fixed_target
+                            && frame.component_id() == AUTOPILOT1
+                            && TELEMETRY.contains(&frame.message_id())
+                            && target.borrow().is_none()
+                        {
+                            target.send_replace(Some((frame.system_id(), AUTOPILOT1)));
+                        }
                         if !WANTED.contains(&frame.message_id()) {
                             continue;
                         }

@@ -356,3 +356,23 @@ mod tests {
         assert_eq!(format_value(-0.0), "-0");
     }
 }
+
+#[cfg(test)]
+mod shipped_gains {
+    use std::path::Path;
+
+    use super::ParamFile;
+
+    /// `config/gains.param` parses and holds exactly the twin's default gains (stored as float32).
+    #[test]
+    fn config_gains_are_the_twins_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/gains.param");
+        let f = ParamFile::load(&path).expect("config/gains.param parses");
+        assert_eq!(f.params.len(), 12);
+        for (name, p) in &f.params {
+            let i = firmware_sim::params::Params::index_of(name).expect("a twin parameter");
+            let d = firmware_sim::params::TABLE[i];
+            assert_eq!(p.value, d.default as f32, "{name}");
+        }
+    }
+}
