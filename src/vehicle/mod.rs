@@ -75,3 +75,56 @@ pub async fn run(
     }
     publish.send_replace(state);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::router::Side;
+    use std::sync::{Arc, Mutex};
+    use vtol_link::{Frame, LinkId, LinkStats};
+
+    fn info(id: LinkId) -> LinkInfo {
+        LinkInfo {
+            id,
+            side: Side::Vehicle,
+            peer: "test".into(),
+            stats: Arc::new(LinkStats::default()),
+        }
+    }
+
+    #[tokio::test]
+    async fn a_link_that_goes_down_leaves_the_state() {
+        let (tap_tx, tap_rx) = mpsc::channel(16);
+        let (links_tx, links_rx) = watch::channel(vec![info(LinkId(7))]);
+        let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
+        let history = Arc::new(Mutex::new(History::new(Instant::now())));
+        let cancel = CancellationToken::new();
+        let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
+        let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        tap_tx
+            .send(Tapped {
+                link: LinkId(7),
+                side: Side::Vehicle,
+                frame,
+            })
+            .await
+            .unwrap();
+        let wait = |rx: &mut watch::Receiver<VehicleState>, present: bool| {
+            let mut rx = rx.clone();
+            async move {
+                tokio::time::timeout(Duration::from_secs(5), async {
+                    while rx.borrow_and_update().links.contains_key(&LinkId(7)) != present {
+                        rx.changed().await.unwrap();
+                    }
+                })
+                .await
+                .expect("state published");
+            }
+        };
+        wait(&mut state_rx, true).await;
+        links_tx.send_replace(Vec::new());
+        wait(&mut state_rx, false).await;
+        cancel.cancel();
+        task.await.unwrap();
+    }
+}

@@ -175,6 +175,10 @@ def test_script_commands_the_vehicle_while_the_ui_is_open(screen_factory, tmp_pa
     s.wait(r"STANDBY", 30)
     with Gcs("tcp:127.0.0.1:5770") as g:
         g.wait_ready(timeout=15)
+        # The UI is an operator: the daemon's own GCS heartbeat (255:190) flows while it is open
+        # (the script's own heartbeats never come back to it).
+        g.recv("HEARTBEAT", lambda h: h.type == 6 and h.get_srcComponent() == 190, timeout=5,
+               sysid=255, what="the daemon's GCS heartbeat")
         g.set_mode("QHOVER")
         s.wait(r"QHOVER")
         g.arm()
