@@ -292,7 +292,7 @@ fn link_lost() {
     // Nothing since 20 s: at 27 s (last heartbeat at 19 s) the link is lost, rates read 0 and the attitude is stale.
     let frame = render(&mut app, &rec, 27_000, (100, 32));
     assert!(frame.contains("LINK LOST 8 s"), "{frame}");
-    assert!(frame.contains("link 0 Hz"), "{frame}");
+    assert!(frame.contains("│ 0 Hz"), "{frame}");
     insta::assert_snapshot!(frame);
     app.view = View::Links;
     insta::assert_snapshot!(

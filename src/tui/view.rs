@@ -287,7 +287,7 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
     for l in snap.links.iter().filter(|l| l.side == Side::Vehicle) {
         if let Some(h) = snap.state.links.get(&l.id) {
             spans.push(Span::raw(format!(
-                " │ link {:.0} Hz {:.1}% loss",
+                " │ {:.0} Hz {:.1}% loss",
                 h.rate_hz(now),
                 h.loss_pct(now)
             )));
@@ -432,7 +432,10 @@ fn setpoint_ned(app: &App, v: &VehicleView) -> Option<[f32; 3]> {
 }
 
 fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
-    let [top, bottom] = Layout::vertical([Constraint::Min(12), Constraint::Length(8)]).areas(area);
+    // On a small terminal the message panes give way to the instruments.
+    let bottom_rows = if area.height < 26 { 5 } else { 8 };
+    let [top, bottom] =
+        Layout::vertical([Constraint::Min(12), Constraint::Length(bottom_rows)]).areas(area);
     let [left, right] =
         Layout::horizontal([Constraint::Percentage(45), Constraint::Percentage(55)]).areas(top);
     let vehicle = first_vehicle(snap.state);
@@ -562,12 +565,17 @@ fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
     if let Some(v) = vehicle {
         let names = servo_names(app);
         let used: Vec<usize> = (0..8).filter(|i| v.servo_us[*i] != 0).collect();
-        let rows = Layout::vertical(vec![Constraint::Length(1); used.len()]).split(inner);
-        for (row, i) in rows.iter().zip(&used) {
+        // One row each, in output order, as many as fit.
+        let rows = (0..inner.height).map(|k| Rect {
+            y: inner.y + k,
+            height: 1,
+            ..inner
+        });
+        for (row, i) in rows.zip(&used) {
             let us = v.servo_us[*i];
             let label = format!("{:<13} {us:>4} µs ", names[*i]);
             let width = usize::from(row.width).saturating_sub(label.chars().count());
-            f.render_widget(Paragraph::new(pwm_bar(label, us, width)), *row);
+            f.render_widget(Paragraph::new(pwm_bar(label, us, width)), row);
         }
     }
 
@@ -691,9 +699,14 @@ fn chart<'a>(title: String, series: &'a [Series], window_s: f64, unit: &str) -> 
     let datasets = series
         .iter()
         .map(|(name, colour, pts)| {
-            Dataset::default()
-                .name(name.clone())
-                .marker(Marker::Braille)
+            // A lone series is named by the chart's title; a legend would only hide data.
+            let d = Dataset::default();
+            let d = if series.len() > 1 {
+                d.name(name.clone())
+            } else {
+                d
+            };
+            d.marker(Marker::Braille)
                 .graph_type(GraphType::Line)
                 .style(Style::new().fg(*colour))
                 .data(pts)
