@@ -512,3 +512,66 @@ fn report_push(r: &PushReport) -> Result<(), Failure> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+
+    fn report(result: PushResult, outcomes: &[(&str, ParamOutcome)]) -> PushReport {
+        PushReport {
+            result,
+            outcomes: outcomes
+                .iter()
+                .map(|(n, o)| ((*n).to_owned(), o.clone()))
+                .collect::<BTreeMap<_, _>>(),
+            changed: 0,
+        }
+    }
+
+    #[test]
+    fn exit_status_follows_the_push_result() {
+        let ok = PushReport {
+            result: PushResult::Applied,
+            outcomes: BTreeMap::new(),
+            changed: 0,
+        };
+        assert!(report_push(&ok).is_ok());
+        let refused = report(
+            PushResult::RolledBack {
+                cause: "LAT_SAT_B refused".into(),
+            },
+            &[(
+                "LAT_SAT_B",
+                ParamOutcome::Refused {
+                    old: 0.6,
+                    reason: "needs a > b + c + d".into(),
+                },
+            )],
+        );
+        let f = report_push(&refused).expect_err("refused");
+        assert_eq!(f.code, EXIT_REFUSED);
+        assert!(f.message.contains("LAT_SAT_B"), "{}", f.message);
+        let stuck = report(
+            PushResult::RollbackIncomplete {
+                cause: "LAT_SAT_B refused".into(),
+            },
+            &[(
+                "LAT_SAT_D",
+                ParamOutcome::RollbackFailed {
+                    old: 0.3,
+                    holds: Some(0.15),
+                    reason: "refused".into(),
+                },
+            )],
+        );
+        let f = report_push(&stuck).expect_err("incomplete");
+        assert_eq!(f.code, EXIT_ROLLBACK);
+        assert!(
+            f.message.contains("now holds LAT_SAT_D = 0.15 (was 0.3)"),
+            "{}",
+            f.message
+        );
+    }
+}

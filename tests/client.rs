@@ -219,3 +219,63 @@ async fn a_rollback_the_vehicle_refuses_is_reported_with_what_it_holds() {
     }
     assert_eq!(c.param_get("LAT_SAT_D").await.expect("read").value, 0.15);
 }
+
+/// Frames from (255, 190) seen on a raw TCP client of the daemon within `window`.
+async fn own_heartbeats(sock: &mut tokio::net::TcpStream, window: Duration) -> usize {
+    use tokio::io::AsyncReadExt;
+    let mut dec = vtol_link::FrameDecoder::new();
+    let mut buf = [0u8; 8192];
+    let end = tokio::time::Instant::now() + window;
+    let mut n = 0;
+    while let Ok(Ok(len)) = tokio::time::timeout_at(end, sock.read(&mut buf)).await {
+        assert!(len > 0, "daemon closed the connection");
+        dec.push(&buf[..len]);
+        n += dec
+            .frames()
+            .filter(|f| (f.system_id(), f.component_id()) == (255, 190) && f.message_id() == 0)
+            .count();
+        if n > 0 {
+            break;
+        }
+    }
+    n
+}
+
+/// The daemon's own client sends its heartbeat only while an operator guard lives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_daemon_heartbeat_flows_only_while_an_operator_is_present() {
+    let cancel = CancellationToken::new();
+    let config = vtol_gcs::config::Config {
+        serve: vec!["tcpin:127.0.0.1:0".parse().expect("url")],
+        log_dir: None,
+        ..vtol_gcs::config::Config::default()
+    };
+    let mut tasks = tokio::task::JoinSet::new();
+    let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks)
+        .await
+        .expect("daemon starts");
+    let addr = running.serving[0].1.expect("bound");
+    let mut sock = tokio::net::TcpStream::connect(addr).await.expect("connect");
+    // No operator: a window longer than the 1 Hz period holds no heartbeat of the daemon's.
+    assert_eq!(
+        own_heartbeats(&mut sock, Duration::from_millis(2500)).await,
+        0
+    );
+    let guard = running.client.operator_present();
+    assert!(
+        own_heartbeats(&mut sock, Duration::from_secs(5)).await > 0,
+        "no heartbeat while an operator is present"
+    );
+    drop(guard);
+    // Allow the one heartbeat that may already be on its way, then none.
+    let _ = own_heartbeats(&mut sock, Duration::from_millis(300)).await;
+    assert_eq!(
+        own_heartbeats(&mut sock, Duration::from_millis(2500)).await,
+        0
+    );
+    // The daemon's client finds the embedded twin and reads a parameter through the router.
+    let p = running.client.param_get("HOVER_ALT").await.expect("read");
+    assert_eq!(p.value, 1.0);
+    cancel.cancel();
+    while tasks.join_next().await.is_some() {}
+}
