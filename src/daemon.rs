@@ -17,7 +17,7 @@ use crate::config::{Config, VehicleSource};
 use crate::router::{Router, RouterHandle};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
-use crate::vehicle::VehicleState;
+use crate::vehicle::{SharedHistory, VehicleState};
 use crate::{gcs, vehicle};
 
 /// Frames buffered between the links and the router.
@@ -68,7 +68,13 @@ pub struct Running {
     pub state: watch::Receiver<VehicleState>,
     /// Router counters and live links.
     pub router: RouterHandle,
+    /// The recent past, for charts.
+    pub history: SharedHistory,
 }
+
+/// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
+/// the UI and the status line do not count it as a client.
+pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 
 /// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
 #[must_use]
@@ -104,7 +110,16 @@ pub async fn start(
 
     let (router, router_handle) = Router::new(tlog, Some(tap_tx));
     tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
-    tasks.spawn(vehicle::run(tap_rx, state_tx, cancel.clone()));
+    let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
+        crate::vehicle::History::new(std::time::Instant::now()),
+    ));
+    tasks.spawn(vehicle::run(
+        tap_rx,
+        router_handle.links.clone(),
+        state_tx,
+        std::sync::Arc::clone(&history),
+        cancel.clone(),
+    ));
 
     // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
     let mut serving = Vec::new();
@@ -122,7 +137,7 @@ pub async fn start(
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
     let (_, link_task) = spawn_stream_link(
         router_end,
-        "vtol-gcs (own traffic)",
+        OWN_TRAFFIC_PEER,
         client_tx,
         config.link.clone(),
         cancel.clone(),
@@ -191,6 +206,7 @@ pub async fn start(
         tlog_path,
         state: state_rx,
         router: router_handle,
+        history,
     })
 }
 

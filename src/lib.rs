@@ -12,4 +12,5 @@ pub mod params;
 pub mod router;
 pub mod status;
 pub mod tlog;
+pub mod tui;
 pub mod vehicle;

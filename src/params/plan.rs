@@ -14,8 +14,9 @@ use std::collections::BTreeMap;
 
 use super::{Change, ParamSet, same_value};
 
-/// A model of what the vehicle accepts, used only to order writes.
-pub trait Rules {
+/// A model of what the vehicle accepts, used only to order writes. `Sync`, so a push can run
+/// as a task on the multi-threaded runtime (the terminal UI spawns its requests).
+pub trait Rules: Sync {
     /// Why the vehicle would refuse setting `name` to `value` when it holds `state`, or `None`
     /// when it would accept (or the model does not know).
     fn refusal(&self, state: &ParamSet, name: &str, value: f32) -> Option<String>;
