@@ -7,6 +7,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use vtol_link::{LinkOptions, LinkUrl};
 
+use crate::log::replay::{ReplaySource, ReplayUrlError};
+
 /// Default client endpoints: a TCP server for scripts and MAVProxy (clear of the twin's 5760 and
 /// SITL's 5760/5762/5763), and a UDP stream to a ground station listening on 14550 (QGC).
 pub const DEFAULT_SERVE: [&str; 2] = ["tcpin:127.0.0.1:5770", "udpout:127.0.0.1:14550"];
@@ -18,15 +20,30 @@ pub enum VehicleSource {
     Embedded,
     /// A real vehicle or a standalone twin at this URL.
     Url(LinkUrl),
+    /// A tlog played back as the vehicle (`replay:FILE[?speed=N]`).
+    Replay(ReplaySource),
+}
+
+/// A `--vehicle` value that is neither `embedded`, a link URL nor a replay.
+#[derive(Debug, thiserror::Error)]
+pub enum VehicleSourceError {
+    /// A bad link URL.
+    #[error(transparent)]
+    Url(#[from] vtol_link::UrlError),
+    /// A bad `replay:` URL.
+    #[error(transparent)]
+    Replay(#[from] ReplayUrlError),
 }
 
 impl std::str::FromStr for VehicleSource {
-    type Err = vtol_link::UrlError;
+    type Err = VehicleSourceError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         if s == "embedded" {
             Ok(Self::Embedded)
+        } else if let Some(rest) = s.strip_prefix("replay:") {
+            Ok(Self::Replay(ReplaySource::parse(rest)?))
         } else {
-            s.parse().map(Self::Url)
+            Ok(Self::Url(s.parse()?))
         }
     }
 }
@@ -36,6 +53,7 @@ impl std::fmt::Display for VehicleSource {
         match self {
             Self::Embedded => f.write_str("embedded twin"),
             Self::Url(u) => write!(f, "{u}"),
+            Self::Replay(r) => write!(f, "{r}"),
         }
     }
 }

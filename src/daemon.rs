@@ -1,6 +1,7 @@
-//! `vtol-gcs run`: wires the links, the router, the tlog writer, the vehicle tracker, the
-//! daemon's own heartbeat and the status line, and runs them until the cancellation token
-//! fires (Ctrl-C or SIGTERM in the binary). On the way out the tlog is flushed and closed.
+//! `vtol-gcs run`: wires the links, the router, the tlog writer, the vehicle tracker and the
+//! daemon's own client, and runs them until the cancellation token fires (Ctrl-C or SIGTERM in
+//! the binary). On the way out the tlog is flushed and closed. Nothing here prints: the binary
+//! owns the terminal (status lines or the terminal UI) and reads what it shows from [`Running`].
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -11,11 +12,13 @@ use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{LinkUrl, spawn_endpoint, spawn_stream_link};
 
+use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
 use crate::router::{Router, RouterHandle};
 use crate::tlog::TlogHandle;
-use crate::vehicle::VehicleState;
-use crate::{gcs, status, vehicle};
+use crate::tlog::TlogStats;
+use crate::vehicle::{SharedHistory, VehicleState};
+use crate::{gcs, vehicle};
 
 /// Frames buffered between the links and the router.
 const EVENT_QUEUE: usize = 8192;
@@ -40,11 +43,23 @@ pub enum DaemonError {
     /// The log could not be created.
     #[error(transparent)]
     Tlog(#[from] crate::tlog::TlogError),
+    /// The log to replay could not be opened.
+    #[error("cannot open {path} for replay: {source}")]
+    Replay {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
 }
 
 /// What a running daemon exposes (to the status line, the UI and tests).
 #[derive(Debug, Clone)]
 pub struct Running {
+    /// The daemon's own MAVLink client (commands, parameters, the operator heartbeat).
+    pub client: ClientHandle,
+    /// Live tlog counters, if logging.
+    pub tlog_stats: Option<std::sync::Arc<TlogStats>>,
     /// Where each serve URL ended up (the real port when 0 was asked for).
     pub serving: Vec<(LinkUrl, Option<SocketAddr>)>,
     /// The tlog file, if logging.
@@ -53,7 +68,13 @@ pub struct Running {
     pub state: watch::Receiver<VehicleState>,
     /// Router counters and live links.
     pub router: RouterHandle,
+    /// The recent past, for charts.
+    pub history: SharedHistory,
 }
+
+/// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
+/// the UI and the status line do not count it as a client.
+pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 
 /// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
 #[must_use]
@@ -89,7 +110,16 @@ pub async fn start(
 
     let (router, router_handle) = Router::new(tlog, Some(tap_tx));
     tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
-    tasks.spawn(vehicle::run(tap_rx, state_tx, cancel.clone()));
+    let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
+        crate::vehicle::History::new(std::time::Instant::now()),
+    ));
+    tasks.spawn(vehicle::run(
+        tap_rx,
+        router_handle.links.clone(),
+        state_tx,
+        std::sync::Arc::clone(&history),
+        cancel.clone(),
+    ));
 
     // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
     let mut serving = Vec::new();
@@ -107,7 +137,7 @@ pub async fn start(
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
     let (_, link_task) = spawn_stream_link(
         router_end,
-        "vtol-gcs (own traffic)",
+        OWN_TRAFFIC_PEER,
         client_tx,
         config.link.clone(),
         cancel.clone(),
@@ -115,12 +145,12 @@ pub async fn start(
     tasks.spawn(async move {
         let _ = link_task.await;
     });
-    tasks.spawn(gcs::run(
+    let client = gcs::attach(
         gcs_end,
         config.system_id,
         config.component_id,
         cancel.clone(),
-    ));
+    );
 
     match &config.vehicle {
         VehicleSource::Embedded => {
@@ -137,6 +167,27 @@ pub async fn start(
             });
             tasks.spawn(embedded_twin(twin_end, cancel.clone()));
         }
+        VehicleSource::Replay(replay) => {
+            let reader = replay.open().map_err(|source| DaemonError::Replay {
+                path: replay.path.clone(),
+                source,
+            })?;
+            let (log_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
+            let (_, link_task) = spawn_stream_link(
+                router_end,
+                "replay",
+                vehicle_tx,
+                config.link.clone(),
+                cancel.clone(),
+            );
+            tasks.spawn(async move {
+                let _ = link_task.await;
+            });
+            let (path, speed, cancel) = (replay.path.clone(), replay.speed, cancel.clone());
+            tasks.spawn(async move {
+                crate::log::replay::run(reader, &path, speed, log_end, cancel).await;
+            });
+        }
         VehicleSource::Url(url) => {
             let h = spawn_endpoint(url, vehicle_tx, config.link.clone(), cancel.clone())
                 .await
@@ -148,31 +199,15 @@ pub async fn start(
         }
     }
 
-    let running = Running {
+    Ok(Running {
+        client,
+        tlog_stats,
         serving,
         tlog_path,
         state: state_rx,
         router: router_handle,
-    };
-    let interval = config.status_interval;
-    let status_running = running.clone();
-    let cancel_status = cancel.clone();
-    tasks.spawn(async move {
-        let mut tick = tokio::time::interval(interval);
-        tick.tick().await;
-        loop {
-            tokio::select! {
-                () = cancel_status.cancelled() => return,
-                _ = tick.tick() => {
-                    let state = status_running.state.borrow().clone();
-                    let links = status_running.router.links.borrow().clone();
-                    let records = tlog_stats.as_ref().map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
-                    println!("{}", status::line(&state, &links, records, std::time::Instant::now()));
-                }
-            }
-        }
-    });
-    Ok(running)
+        history,
+    })
 }
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.
@@ -196,14 +231,7 @@ async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToke
 /// See [`start`].
 pub async fn run(config: Config, cancel: CancellationToken) -> Result<(), DaemonError> {
     let mut tasks = JoinSet::new();
-    let running = start(&config, &cancel, &mut tasks).await?;
-    println!("vehicle {}", config.vehicle);
-    for (url, addr) in &running.serving {
-        println!("serving {}", describe(url, *addr));
-    }
-    if let Some(p) = &running.tlog_path {
-        println!("logging {}", p.display());
-    }
+    start(&config, &cancel, &mut tasks).await?;
     cancel.cancelled().await;
     while tasks.join_next().await.is_some() {}
     Ok(())

@@ -3,10 +3,14 @@
 //! routes raw frames to any number of clients (pymavlink scripts, MAVProxy, QGroundControl),
 //! logs every frame to a `.tlog`, and tracks the vehicle's state for the status line.
 
+pub mod client;
 pub mod config;
 pub mod daemon;
 pub mod gcs;
+pub mod log;
+pub mod params;
 pub mod router;
 pub mod status;
 pub mod tlog;
+pub mod tui;
 pub mod vehicle;

@@ -1,5 +1,9 @@
-//! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the daemon until
-//! Ctrl-C or SIGTERM.
+//! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the terminal UI
+//! (no arguments, or `tui`), the headless daemon (`run`) until Ctrl-C or SIGTERM, or one client
+//! command (`params`, `arm`, `disarm`, `mode`). It owns the terminal: the start-up and status
+//! lines and the UI are drawn here, never by the library.
+
+mod client_cli;
 
 use std::path::PathBuf;
 
@@ -8,6 +12,8 @@ use clap::{Args, Parser, Subcommand};
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, FileConfig, VehicleSource};
 use vtol_link::LinkUrl;
+
+mod log_cli;
 
 /// Terminal ground station and MAVLink bridge for the two-rotor convertible VTOL.
 #[derive(Debug, Parser)]
@@ -19,13 +25,39 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run the daemon: vehicle link, client endpoints, router, tlog, status.
+    /// Run the daemon headless: vehicle link, client endpoints, router, tlog, status lines.
     Run(RunArgs),
+    /// The terminal UI on a daemon in this process (as with no arguments), or attached to a
+    /// running daemon's serve port or straight to a vehicle with `--connect`.
+    Tui(TuiArgs),
+    /// Parameters: pull, push, get, set, diff, save.
+    Params(client_cli::ParamsArgs),
+    /// Arm the vehicle.
+    Arm(client_cli::ArmArgs),
+    /// Disarm the vehicle.
+    Disarm(client_cli::ArmArgs),
+    /// Change the flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND, ...).
+    Mode(client_cli::ModeArgs),
+    /// Look at flight logs: stats, export (CSV, MCAP), plot (PNG).
+    #[command(subcommand)]
+    Log(log_cli::LogCommand),
+}
+
+#[derive(Debug, Args, Default)]
+struct TuiArgs {
+    /// Attach to this URL (a daemon's serve port, e.g. tcp:127.0.0.1:5770, or a vehicle)
+    /// instead of running the embedded twin; nothing is served and no tlog is written unless
+    /// --serve or --log-dir ask for it.
+    #[arg(long)]
+    connect: Option<LinkUrl>,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 #[derive(Debug, Args, Default)]
 struct RunArgs {
-    /// Vehicle link: `embedded` (default) or a URL (tcp:H:P, udpin:H:P, udpout:H:P, serial:DEV[:BAUD]).
+    /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
+    /// serial:DEV[:BAUD]) or a tlog played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
     vehicle: Option<VehicleSource>,
     /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD].
@@ -76,7 +108,32 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
 }
 
 fn main() -> std::process::ExitCode {
-    match run() {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            let _ = e.print();
+            return std::process::ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            // Usage errors exit 2, like every other link or usage error of the client commands.
+            let _ = e.print();
+            return std::process::ExitCode::from(client_cli::EXIT_USAGE);
+        }
+    };
+    if !matches!(cli.command, None | Some(Command::Tui(_))) {
+        init_stderr_tracing();
+    }
+    let result = match cli.command {
+        Some(Command::Params(a)) => return client_cli::params(a),
+        Some(Command::Arm(a)) => return client_cli::arm(a, true),
+        Some(Command::Disarm(a)) => return client_cli::arm(a, false),
+        Some(Command::Mode(a)) => return client_cli::mode(a),
+        Some(Command::Log(cmd)) => log_cli::run(cmd),
+        Some(Command::Run(args)) => run(args),
+        Some(Command::Tui(t)) => ui(t.run, t.connect),
+        None => ui(RunArgs::default(), None),
+    };
+    match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", vtol_link::error_line(e.as_ref()));
@@ -85,19 +142,61 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn run() -> anyhow::Result<()> {
+fn env_filter() -> tracing_subscriber::EnvFilter {
+    tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into())
+}
+
+fn init_stderr_tracing() {
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
+        .with_env_filter(env_filter())
         .with_writer(std::io::stderr)
         .init();
-    let cli = Cli::parse();
-    let args = match cli.command {
-        Some(Command::Run(args)) => args,
-        None => RunArgs::default(),
-    };
-    let config = build_config(args)?;
+}
+
+/// Log lines under the UI, which owns the terminal: to `vtol-gcs.log` beside the tlogs, or
+/// nowhere when not logging.
+fn init_ui_tracing(log_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+    let builder = tracing_subscriber::fmt().with_env_filter(env_filter());
+    match log_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let path = dir.join("vtol-gcs.log");
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&path)
+                .with_context(|| format!("cannot open {}", path.display()))?;
+            builder
+                .with_ansi(false)
+                .with_writer(std::sync::Mutex::new(file))
+                .init();
+        }
+        None => builder.with_writer(std::io::sink).init(),
+    }
+    Ok(())
+}
+
+/// The terminal UI on the daemon in this process: the embedded twin (or `--vehicle`), or
+/// `connect` as the vehicle link. `--headless` falls back to status lines.
+fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
+    let explicit_log = args.log_dir.is_some();
+    let explicit_serve = !args.serve.is_empty();
+    let mut config = build_config(args)?;
+    if config.headless {
+        init_stderr_tracing();
+        return run_config(config);
+    }
+    if let Some(url) = connect {
+        config.vehicle = VehicleSource::Url(url);
+        if !explicit_serve {
+            config.serve.clear();
+        }
+        if !explicit_log {
+            config.log_dir = None;
+        }
+    }
+    init_ui_tracing(config.log_dir.as_deref())?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async move {
         let cancel = CancellationToken::new();
@@ -106,10 +205,83 @@ fn run() -> anyhow::Result<()> {
             wait_for_shutdown_signal().await;
             signal_cancel.cancel();
         });
-        vtol_gcs::daemon::run(config, cancel)
-            .await
-            .map_err(anyhow::Error::from)
+        let mut tasks = tokio::task::JoinSet::new();
+        let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
+        let result = vtol_gcs::tui::run(
+            &running,
+            vtol_gcs::tui::exec::ClientControl::new(running.client.clone()),
+            cancel.clone(),
+        )
+        .await;
+        cancel.cancel();
+        while tasks.join_next().await.is_some() {}
+        result.context("terminal")
     })
+}
+
+fn run(args: RunArgs) -> anyhow::Result<()> {
+    run_config(build_config(args)?)
+}
+
+fn run_config(config: Config) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
+    runtime.block_on(async move {
+        let cancel = CancellationToken::new();
+        let signal_cancel = cancel.clone();
+        tokio::spawn(async move {
+            wait_for_shutdown_signal().await;
+            signal_cancel.cancel();
+        });
+        run_daemon(config, cancel).await
+    })
+}
+
+/// The headless daemon: start-up lines, then a status line per interval.
+async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
+    let mut tasks = tokio::task::JoinSet::new();
+    let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
+    println!("vehicle {}", config.vehicle);
+    for (url, addr) in &running.serving {
+        println!("serving {}", vtol_gcs::daemon::describe(url, *addr));
+    }
+    if let Some(p) = &running.tlog_path {
+        println!("logging {}", p.display());
+    }
+    print_status_lines(&running, config.status_interval, &cancel).await;
+    while tasks.join_next().await.is_some() {}
+    Ok(())
+}
+
+/// One status line per `interval` until `cancel` fires.
+async fn print_status_lines(
+    running: &vtol_gcs::daemon::Running,
+    interval: std::time::Duration,
+    cancel: &CancellationToken,
+) {
+    let mut tick = tokio::time::interval(interval);
+    tick.tick().await;
+    loop {
+        tokio::select! {
+            () = cancel.cancelled() => return,
+            _ = tick.tick() => {
+                let state = running.state.borrow().clone();
+                let links = running.router.links.borrow().clone();
+                let records = running
+                    .tlog_stats
+                    .as_ref()
+                    .map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
+                let unroutable = running
+                    .router
+                    .stats
+                    .unroutable
+                    .load(std::sync::atomic::Ordering::Relaxed);
+                println!(
+                    "{}",
+                    vtol_gcs::status::line(&state, &links, records, unroutable, std::time::Instant::now())
+                );
+            }
+        }
+    }
 }
 
 async fn wait_for_shutdown_signal() {

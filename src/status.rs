@@ -13,11 +13,20 @@ pub fn line(
     state: &VehicleState,
     links: &[LinkInfo],
     tlog_records: Option<u64>,
+    unroutable: u64,
     now: Instant,
 ) -> String {
     let mut s = String::new();
     match state.vehicles.values().next() {
         None => s.push_str("no vehicle heard yet"),
+        Some(v) if state.vehicle_lost(now) => {
+            let _ = write!(
+                s,
+                "sys {} LINK LOST (silent {:.0} s)",
+                v.system_id,
+                now.duration_since(v.last_heartbeat).as_secs_f64()
+            );
+        }
         Some(v) => {
             let _ = write!(
                 s,
@@ -45,16 +54,23 @@ pub fn line(
         let _ = write!(
             s,
             " | vehicle {id} {health} {:.0} Hz loss {:.1}%",
-            h.rate_hz,
-            h.loss_pct()
+            h.rate_hz(now),
+            h.loss_pct(now)
         );
     }
-    let clients = links.iter().filter(|l| l.side == Side::Client).count();
+    // The daemon's own-traffic link is not a client.
+    let clients = links
+        .iter()
+        .filter(|l| l.side == Side::Client && l.peer != crate::daemon::OWN_TRAFFIC_PEER)
+        .count();
     let dropped: u64 = links
         .iter()
         .map(|l| l.stats.snapshot().tx_dropped_queue_full)
         .sum();
-    let _ = write!(s, " | links {clients} client(s), {dropped} dropped");
+    let _ = write!(
+        s,
+        " | links {clients} client(s), {dropped} dropped, {unroutable} unroutable"
+    );
     if let Some(n) = tlog_records {
         let _ = write!(s, " | tlog {n} rec");
     }

@@ -364,36 +364,124 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
     (era * 400 + yoe + i64::from(m <= 2), m, d)
 }
 
-/// Reads the records of a tlog. A torn record at the end (a crash mid-write) ends the
-/// iteration; a record whose frame does not check out is skipped by resynchronising on the
-/// next timestamp-plus-frame that does, and counted.
-#[derive(Debug)]
+/// Bytes read from the file at a time by [`TlogReader`].
+const READ_CHUNK: usize = 256 * 1024;
+/// Largest record: the timestamp and the largest frame.
+const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
+/// While resynchronising, a candidate record's timestamp must lie this close to the last good
+/// one (µs): a CRC-valid frame inside garbage is rare, one with a plausible time rarer still.
+const RESYNC_MAX_JUMP_US: u64 = 24 * 3600 * 1_000_000;
+
+/// Streaming reader of the records of a tlog written by this project, pymavlink or MAVProxy.
+///
+/// It reads the file in chunks (memory stays flat on long logs) and hands out frames that share
+/// the chunk's buffer. A record whose frame does not check out is skipped by resynchronising on
+/// the next timestamp-plus-frame that does; the bytes passed over are counted in
+/// [`skipped_bytes`](Self::skipped_bytes). While resynchronising only frames whose CRC the
+/// dialect can check, with a timestamp within a day of the last good one, are taken, so garbage
+/// is not mistaken for a frame of an unknown message id. An incomplete record at the end of the
+/// file (a crash mid-write, a cut copy) ends the iteration and is reported in
+/// [`truncated_tail_bytes`](Self::truncated_tail_bytes), never as an error.
 pub struct TlogReader {
-    data: Vec<u8>,
+    src: Box<dyn Read + Send>,
+    /// Unconsumed bytes of the file; `buf[pos..]` is still to be parsed.
+    buf: Bytes,
     pos: usize,
-    /// Bytes skipped while resynchronising.
+    eof: bool,
+    /// True after a bad record until a record checks out again.
+    resyncing: bool,
+    last_stamp: Option<u64>,
+    consumed: u64,
+    /// Bytes skipped while resynchronising (garbage between records, damaged records).
     pub skipped_bytes: usize,
+    /// Bytes of an incomplete last record, if the file ends inside one.
+    pub truncated_tail_bytes: usize,
+    /// A read error that ended the iteration early.
+    pub io_error: Option<io::Error>,
+}
+
+impl std::fmt::Debug for TlogReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TlogReader")
+            .field("consumed", &self.consumed)
+            .field("skipped_bytes", &self.skipped_bytes)
+            .field("truncated_tail_bytes", &self.truncated_tail_bytes)
+            .finish_non_exhaustive()
+    }
 }
 
 impl TlogReader {
-    /// Reads a whole file into memory.
+    /// Opens a file for streaming.
     ///
     /// # Errors
-    /// The file cannot be read.
+    /// The file cannot be opened.
     pub fn open(path: &Path) -> io::Result<Self> {
-        let mut data = Vec::new();
-        File::open(path)?.read_to_end(&mut data)?;
-        Ok(Self::from_bytes(data))
+        Ok(Self::new(Box::new(File::open(path)?)))
     }
 
-    /// Reads records from bytes.
+    /// Reads records from any byte source.
+    #[must_use]
+    pub fn new(src: Box<dyn Read + Send>) -> Self {
+        Self {
+            src,
+            buf: Bytes::new(),
+            pos: 0,
+            eof: false,
+            // The first record is found like one after garbage: a file may start with junk.
+            resyncing: true,
+            last_stamp: None,
+            consumed: 0,
+            skipped_bytes: 0,
+            truncated_tail_bytes: 0,
+            io_error: None,
+        }
+    }
+
+    /// Reads records from bytes in memory.
     #[must_use]
     pub fn from_bytes(data: Vec<u8>) -> Self {
-        Self {
-            data,
-            pos: 0,
-            skipped_bytes: 0,
+        Self::new(Box::new(io::Cursor::new(data)))
+    }
+
+    /// Bytes of the file parsed so far (records, skipped bytes and a torn tail): for progress.
+    #[must_use]
+    pub fn bytes_consumed(&self) -> u64 {
+        self.consumed
+    }
+
+    /// Keeps two whole records buffered unless the file ends first (a resync candidate is checked
+    /// against the record behind it).
+    fn fill(&mut self) {
+        if self.eof || self.buf.len() - self.pos >= 2 * MAX_RECORD_LEN {
+            return;
         }
+        let rest = &self.buf[self.pos..];
+        let mut next = Vec::with_capacity(rest.len() + READ_CHUNK);
+        next.extend_from_slice(rest);
+        while next.len() < 2 * MAX_RECORD_LEN && !self.eof {
+            let have = next.len();
+            next.resize(have + READ_CHUNK, 0);
+            match self.src.read(&mut next[have..]) {
+                Ok(0) => {
+                    next.truncate(have);
+                    self.eof = true;
+                }
+                Ok(n) => next.truncate(have + n),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => next.truncate(have),
+                Err(e) => {
+                    next.truncate(have);
+                    self.io_error = Some(e);
+                    self.eof = true;
+                }
+            }
+        }
+        self.buf = Bytes::from(next);
+        self.pos = 0;
+    }
+
+    fn advance(&mut self, n: usize) {
+        self.pos += n;
+        self.consumed += n as u64;
     }
 }
 
@@ -401,25 +489,111 @@ impl Iterator for TlogReader {
     type Item = (u64, Frame);
 
     fn next(&mut self) -> Option<Self::Item> {
-        while self.pos + 8 < self.data.len() {
-            let stamp_bytes: [u8; 8] = self.data[self.pos..self.pos + 8].try_into().ok()?;
-            let start = self.pos + 8;
-            if let Some(len) = vtol_link::frame_len_from_prefix(&self.data[start..]) {
-                if start + len <= self.data.len() {
-                    let bytes = Bytes::copy_from_slice(&self.data[start..start + len]);
-                    if let Ok(frame) = Frame::from_bytes(bytes) {
-                        self.pos = start + len;
-                        return Some((u64::from_be_bytes(stamp_bytes), frame));
-                    }
-                } else {
-                    // A torn last record: nothing more to read.
-                    return None;
-                }
+        loop {
+            self.fill();
+            let avail = &self.buf[self.pos..];
+            if avail.is_empty() {
+                return None;
             }
-            self.pos += 1;
-            self.skipped_bytes += 1;
+            let Some(len) = avail.get(8..).and_then(vtol_link::frame_len_from_prefix) else {
+                if avail.len() < 8 + 3 && self.eof {
+                    // Too short to hold even a header: a torn record if we are in step,
+                    // otherwise more garbage.
+                    return self.end_with_tail(avail.len());
+                }
+                self.skip_one();
+                continue;
+            };
+            if 8 + len > avail.len() {
+                // Only possible at the end of the file (fill keeps whole records buffered). It
+                // is a torn last record only if no whole record starts in the bytes left.
+                if self.resyncing || whole_record_within(&avail[1..]) {
+                    self.skip_one();
+                    continue;
+                }
+                return self.end_with_tail(avail.len());
+            }
+            let stamp = u64::from_be_bytes(avail[..8].try_into().ok()?);
+            let bytes = self.buf.slice(self.pos + 8..self.pos + 8 + len);
+            match Frame::from_bytes(bytes) {
+                Ok(frame) if self.acceptable(stamp, &frame, 8 + len) => {
+                    self.resyncing = false;
+                    // A damaged timestamp in a record that is otherwise whole must not become
+                    // the reference that later candidates are judged by.
+                    if self
+                        .last_stamp
+                        .is_none_or(|l| stamp.abs_diff(l) <= RESYNC_MAX_JUMP_US)
+                    {
+                        self.last_stamp = Some(stamp);
+                    }
+                    self.advance(8 + len);
+                    return Some((stamp, frame));
+                }
+                _ => self.skip_one(),
+            }
         }
+    }
+}
+
+/// Whether a record with a CRC-checked frame starts anywhere in `bytes`.
+fn whole_record_within(bytes: &[u8]) -> bool {
+    (0..bytes.len()).any(|i| {
+        let rest = &bytes[i..];
+        rest.get(8..)
+            .and_then(vtol_link::frame_len_from_prefix)
+            .and_then(|len| rest.get(8..8 + len))
+            .and_then(|b| Frame::from_bytes(Bytes::copy_from_slice(b)).ok())
+            .is_some_and(|f| f.is_verified())
+    })
+}
+
+impl TlogReader {
+    fn skip_one(&mut self) {
+        self.resyncing = true;
+        self.skipped_bytes += 1;
+        self.advance(1);
+    }
+
+    fn end_with_tail(&mut self, n: usize) -> Option<(u64, Frame)> {
+        if self.resyncing {
+            self.skipped_bytes += n;
+        } else {
+            self.truncated_tail_bytes += n;
+        }
+        self.advance(n);
         None
+    }
+
+    /// Whether a whole record at `pos` is taken.
+    ///
+    /// In step (right after a good record), a frame whose CRC checks is taken. A frame of an id
+    /// the dialect does not know has no CRC to check, so it is taken only if another whole,
+    /// CRC-checked record follows right behind it: otherwise garbage right after a record
+    /// could pass as one. (So such a frame as the very last record is counted as skipped.)
+    ///
+    /// While resynchronising (and at the start of the file), two of three must hold: the CRC
+    /// checks, the time is within a day of the last good one, a whole CRC-checked record
+    /// follows. A frame of an unknown id needs both of the others.
+    fn acceptable(&self, stamp: u64, frame: &Frame, record_len: usize) -> bool {
+        let followed = || {
+            let next = &self.buf[self.pos + record_len..];
+            next.get(8..)
+                .and_then(vtol_link::frame_len_from_prefix)
+                .and_then(|len| next.get(8..8 + len))
+                .and_then(|bytes| Frame::from_bytes(Bytes::copy_from_slice(bytes)).ok())
+                .is_some_and(|f| f.is_verified())
+        };
+        if !self.resyncing {
+            return frame.is_verified() || followed();
+        }
+        let near = self
+            .last_stamp
+            .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US);
+        match (frame.is_verified(), near) {
+            (true, true) => true,
+            (true, false) | (false, true) => followed(),
+            (false, false) => false,
+        }
     }
 }
 
@@ -492,9 +666,64 @@ mod tests {
         }
         w.flush().unwrap();
         let mut data = std::fs::read(&path).unwrap();
+        let record_len = data.len() / 3;
         data.truncate(data.len() - 5);
         let mut r = TlogReader::from_bytes(data);
         assert_eq!(r.by_ref().count(), 2);
+        assert_eq!(r.truncated_tail_bytes, record_len - 5);
+        assert_eq!(r.skipped_bytes, 0);
+    }
+
+    fn records_with_garbage(garbage: &[Vec<u8>]) -> (Vec<u8>, Vec<Vec<u8>>) {
+        let mut data = Vec::new();
+        let mut frames = Vec::new();
+        for (i, g) in garbage.iter().enumerate() {
+            data.extend_from_slice(g);
+            let f = Frame::encode_v2(1, 1, i as u8, &vtol_link::gcs_heartbeat());
+            data.extend_from_slice(&(1_000_000 + i as u64 * 1000).to_be_bytes());
+            data.extend_from_slice(f.as_bytes());
+            frames.push(f.as_bytes().to_vec());
+        }
+        (data, frames)
+    }
+
+    #[test]
+    fn garbage_that_looks_like_a_frame_of_an_unknown_id_is_skipped() {
+        // A stamp, then a v2 header of message id 0xABCDEF (not in the dialect, so no CRC to
+        // check) with a short length: in step it would be taken; between records it must not be.
+        let mut fake = vec![0xFFu8; 8];
+        fake.extend_from_slice(&[0xFD, 1, 0, 0, 9, 9, 9, 0xEF, 0xCD, 0xAB, 0, 0, 0]);
+        let mut after_garbage = vec![0x55];
+        after_garbage.extend_from_slice(&fake);
+        let (data, frames) = records_with_garbage(&[
+            vec![],
+            vec![0x55, 0x13],
+            after_garbage,
+            fake.clone(),
+            vec![],
+        ]);
+        let mut r = TlogReader::from_bytes(data);
+        let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+        // in step, with a whole checked record behind them, the same bytes are a record
+        let mut want = frames.clone();
+        want.insert(3, fake[8..].to_vec());
+        assert_eq!(got, want);
+        assert_eq!(r.skipped_bytes, 2 + 1 + 8 + 13);
+        assert_eq!(r.truncated_tail_bytes, 0);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn every_record_survives_garbage_between_records(
+            garbage in proptest::collection::vec(proptest::collection::vec(proptest::num::u8::ANY, 0..40), 1..30),
+        ) {
+            let (data, frames) = records_with_garbage(&garbage);
+            let total: usize = garbage.iter().map(Vec::len).sum();
+            let mut r = TlogReader::new(Box::new(std::io::Cursor::new(data)));
+            let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+            proptest::prop_assert_eq!(got, frames);
+            proptest::prop_assert_eq!(r.skipped_bytes, total);
+        }
     }
 
     #[test]

@@ -107,6 +107,9 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
         vehicle_frames += dec.frames().filter(|f| f.system_id() == 1).count();
     }
     assert!(vehicle_frames >= 20, "only {vehicle_frames} vehicle frames");
+    // A client's own heartbeat, as a script through the daemon sends it.
+    let beat = vtol_link::Frame::encode_v2(255, 0, 0, &vtol_link::gcs_heartbeat());
+    sock.write_all(beat.as_bytes()).unwrap();
     sock.write_all(b"\xfe\x00garbage that is not mavlink")
         .unwrap();
 
@@ -126,8 +129,15 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
     assert!(
         records
             .iter()
-            .any(|(t, f)| t & 3 == 3 && f.system_id() == 255),
-        "own heartbeat logged"
+            .any(|(t, f)| t & 3 == 3 && (f.system_id(), f.component_id()) == (255, 0)),
+        "the client's heartbeat logged"
+    );
+    // Headless, no operator is present: the daemon's own client (255, 190) sends no heartbeat.
+    assert!(
+        !records
+            .iter()
+            .any(|(_, f)| (f.system_id(), f.component_id()) == (255, 190)),
+        "the daemon sent a heartbeat with no operator present"
     );
 }
 

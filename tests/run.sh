@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, lints, the Rust tests, then the pymavlink suite.
-# On a fresh machine it installs what it needs itself (socat, a venv with the pinned Python
+# On a fresh machine it installs what it needs itself (socat, tmux, a venv with the pinned Python
 # packages in .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,6 +10,12 @@ if ! command -v socat >/dev/null 2>&1; then
     export DEBIAN_FRONTEND=noninteractive
     apt-get update
     apt-get install -y socat
+fi
+# The terminal UI's end-to-end test runs the binary in a real terminal.
+if ! command -v tmux >/dev/null 2>&1; then
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update
+    apt-get install -y tmux
 fi
 
 # --- Python venv with the pinned requirements -------------------------------------------------

@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand};
 use firmware_sim::clock::ClockMode;
 use firmware_sim::endpoint::EndpointConfig;
 use firmware_sim::params::Params;
-use firmware_sim::serve::{DEFAULT_LISTEN, ServeConfig, ServeError, Twin};
+use firmware_sim::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError, Twin};
 use firmware_sim::simulate::{self, InitialArg, Push, SimulateConfig};
 use firmware_sim::{FlightMode, ModelMode};
 use nalgebra::Vector3;
@@ -198,6 +198,19 @@ struct ServeArgs {
     /// MAVLink system id (overrides SYSID_THISMAV), 1–255.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     sysid: Option<u8>,
+    /// Fraction of frames dropped in each direction (0 to 1, seeded by --seed).
+    #[arg(long, default_value_t = 0.0, value_parser = parse_loss)]
+    loss: f64,
+    /// Delay of every frame in each direction, milliseconds.
+    #[arg(long, default_value_t = 0, value_name = "MS")]
+    latency: u64,
+}
+
+fn parse_loss(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+        _ => Err(format!("loss must be a fraction in [0, 1), got '{s}'")),
+    }
 }
 
 fn parse_speed(s: &str) -> Result<f64, String> {
@@ -234,6 +247,11 @@ impl ServeArgs {
                 sysid: self.sysid,
             },
             link_options: LinkOptions::default(),
+            impairment: Impairment {
+                loss: self.loss,
+                latency: std::time::Duration::from_millis(self.latency),
+                seed: self.seed,
+            },
         };
         config.load_param_file()?;
         Ok(config)

@@ -6,6 +6,7 @@
 //! ```text
 //! firmware-sim serve [--listen URL]... [--speed N | --fast] [--param-file FILE] [--seed N]
 //!                    [--model paper|physical] [--ideal-sensors] [--sysid N]
+//!                    [--loss FRACTION] [--latency MS]
 //! ```
 //!
 //! - `--listen URL`, repeatable, default `tcpin:127.0.0.1:5760` (SITL's SERIAL0): `tcpin:` accepts
@@ -15,6 +16,9 @@
 //!   `listening <url>` where `<url>` carries the real bound port (so `tcpin:127.0.0.1:0` prints
 //!   e.g. `listening tcpin:127.0.0.1:40121`). Connect-out URLs print as given. Then stdout is
 //!   flushed; logs go to stderr.
+//! - `--loss FRACTION` drops that fraction of frames in each direction, drawn from a generator
+//!   seeded by `--seed`; `--latency MS` delays every frame by that much in each direction. A
+//!   lossy radio is then tested with real frames, retries and all.
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
@@ -72,6 +76,29 @@ pub struct ServeConfig {
     pub endpoint: EndpointConfig,
     /// Queue sizes and timeouts of the links.
     pub link_options: LinkOptions,
+    /// Simulated radio: frame loss and latency in each direction.
+    pub impairment: Impairment,
+}
+
+/// A lossy, slow radio between the twin and its links, in each direction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Impairment {
+    /// Fraction of frames dropped, 0..1.
+    pub loss: f64,
+    /// Delay of every frame.
+    pub latency: std::time::Duration,
+    /// Seed of the loss draws.
+    pub seed: u64,
+}
+
+impl Default for Impairment {
+    fn default() -> Self {
+        Self {
+            loss: 0.0,
+            latency: std::time::Duration::ZERO,
+            seed: 1,
+        }
+    }
 }
 
 impl Default for ServeConfig {
@@ -85,6 +112,7 @@ impl Default for ServeConfig {
             clock: ClockMode::REAL_TIME,
             endpoint: EndpointConfig::default(),
             link_options: LinkOptions::default(),
+            impairment: Impairment::default(),
         }
     }
 }
@@ -192,7 +220,8 @@ impl Twin {
             endpoints.push(handle);
         }
         let endpoint = Endpoint::new(config.endpoint);
-        let task = tokio::spawn(run(endpoint, config.clock, rx, cancel.clone()));
+        let radio = Radio::new(config.impairment);
+        let task = tokio::spawn(run(endpoint, config.clock, radio, rx, cancel.clone()));
         Ok(Self {
             bound,
             events,
@@ -258,6 +287,7 @@ struct LinkEntry {
 async fn run(
     mut endpoint: Endpoint,
     mode: ClockMode,
+    mut radio: Radio,
     mut events: mpsc::Receiver<LinkEvent>,
     cancel: CancellationToken,
 ) -> Endpoint {
@@ -279,8 +309,10 @@ async fn run(
                     endpoint.add_link(key(id));
                 }
                 Some(LinkEvent::Frame { id, frame }) => {
-                    let out = endpoint.handle(key(id), frame.as_bytes());
-                    dispatch(&links, out);
+                    if let Some(frame) = radio.pass(Way::In, id, frame) {
+                        let out = endpoint.handle(key(id), frame.as_bytes());
+                        dispatch(&links, &mut radio, out);
+                    }
                 }
                 Some(LinkEvent::Down { id, reason }) => {
                     tracing::info!(%id, %reason, "link down");
@@ -299,11 +331,77 @@ async fn run(
                 }
                 let due = clock.due_sim_us(Instant::now());
                 let out = endpoint.tick(due);
-                dispatch(&links, out);
+                dispatch(&links, &mut radio, out);
+            }
+            () = radio.next_due() => {
+                let now = tokio::time::Instant::now();
+                while let Some((way, id, frame)) = radio.pop_due(now) {
+                    match way {
+                        Way::In => {
+                            let out = endpoint.handle(key(id), frame.as_bytes());
+                            dispatch(&links, &mut radio, out);
+                        }
+                        Way::Out => send_now(&links, id, frame),
+                    }
+                }
             }
         }
     }
     endpoint
+}
+
+/// Which way a frame goes through the simulated radio.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Way {
+    In,
+    Out,
+}
+
+/// The simulated radio: seeded loss, then a fixed delay (a FIFO, since every frame waits the
+/// same time).
+struct Radio {
+    imp: Impairment,
+    rng: rand_chacha::ChaCha8Rng,
+    delayed: std::collections::VecDeque<(tokio::time::Instant, Way, LinkId, Frame)>,
+}
+
+impl Radio {
+    fn new(imp: Impairment) -> Self {
+        use rand::SeedableRng as _;
+        Self {
+            imp,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(imp.seed),
+            delayed: std::collections::VecDeque::new(),
+        }
+    }
+
+    /// The frame if it goes through now; `None` if lost or delayed.
+    fn pass(&mut self, way: Way, id: LinkId, frame: Frame) -> Option<Frame> {
+        use rand::Rng as _;
+        if self.imp.loss > 0.0 && self.rng.random_bool(self.imp.loss) {
+            return None;
+        }
+        if self.imp.latency.is_zero() {
+            return Some(frame);
+        }
+        let due = tokio::time::Instant::now() + self.imp.latency;
+        self.delayed.push_back((due, way, id, frame));
+        None
+    }
+
+    async fn next_due(&self) {
+        match self.delayed.front() {
+            Some((due, ..)) => tokio::time::sleep_until(*due).await,
+            None => std::future::pending().await,
+        }
+    }
+
+    fn pop_due(&mut self, now: tokio::time::Instant) -> Option<(Way, LinkId, Frame)> {
+        if self.delayed.front()?.0 > now {
+            return None;
+        }
+        self.delayed.pop_front().map(|(_, w, id, f)| (w, id, f))
+    }
 }
 
 async fn next_batch(batch: &mut Option<tokio::time::Interval>) {
@@ -320,17 +418,23 @@ fn key(id: LinkId) -> LinkKey {
     LinkKey(u64::from(id.0))
 }
 
-fn dispatch(links: &HashMap<LinkId, LinkEntry>, out: Vec<Outbound>) {
+fn dispatch(links: &HashMap<LinkId, LinkEntry>, radio: &mut Radio, out: Vec<Outbound>) {
     for o in out {
-        let Some(entry) = links.get(&LinkId(o.link.0 as u32)) else {
-            continue;
-        };
+        let id = LinkId(o.link.0 as u32);
         match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
-            // A full queue is a slow peer: the frame is dropped and counted by the link.
             Ok(f) => {
-                let _ = entry.tx.try_send(f);
+                if let Some(f) = radio.pass(Way::Out, id, f) {
+                    send_now(links, id, f);
+                }
             }
             Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
         }
+    }
+}
+
+fn send_now(links: &HashMap<LinkId, LinkEntry>, id: LinkId, frame: Frame) {
+    if let Some(entry) = links.get(&id) {
+        // A full queue is a slow peer: the frame is dropped and counted by the link.
+        let _ = entry.tx.try_send(frame);
     }
 }

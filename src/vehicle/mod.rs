@@ -1,38 +1,71 @@
 //! The vehicle tracker task: applies every routed frame to a [`VehicleState`] and publishes it
-//! on a `watch` channel for the terminal UI and the headless status line.
+//! on a `watch` channel for the terminal UI and the headless status line, records the recent
+//! past in a [`History`] for the charts, and forgets links the router reports down.
 
+pub mod history;
 pub mod state;
+pub mod window;
 
 use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
-use crate::router::Tapped;
+use crate::router::{LinkInfo, Tapped};
+pub use history::{History, SharedHistory};
 pub use state::{VehicleState, VehicleView};
 
 /// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second.
 const PUBLISH_EVERY: Duration = Duration::from_millis(20);
 
-/// Runs the tracker until the tap closes or `cancel` fires.
+/// Runs the tracker until the tap closes or `cancel` fires. `links` is the router's list of
+/// live links: a link that leaves it is forgotten, so its health does not go stale on screen.
 pub async fn run(
     mut tap: mpsc::Receiver<Tapped>,
+    mut links: watch::Receiver<Vec<LinkInfo>>,
     publish: watch::Sender<VehicleState>,
+    history: SharedHistory,
     cancel: CancellationToken,
 ) {
-    let mut state = VehicleState::default();
+    let epoch = history.lock().map_or_else(|_| Instant::now(), |h| h.epoch);
+    let mut state = VehicleState::new(epoch);
     let mut last_publish = Instant::now();
     let mut dirty = false;
+    let mut links_open = true;
+    let mut batch = Vec::with_capacity(64);
     let mut tick = tokio::time::interval(PUBLISH_EVERY);
     loop {
         tokio::select! {
             () = cancel.cancelled() => break,
-            t = tap.recv() => {
-                let Some(t) = t else { break };
-                state.apply(t.link, t.side, &t.frame, Instant::now());
+            n = tap.recv_many(&mut batch, 64) => {
+                if n == 0 { break }
+                let now = Instant::now();
+                // One lock per run of frames, not per frame.
+                if let Ok(mut h) = history.lock() {
+                    for t in batch.drain(..) {
+                        let msg = state.apply(t.link, t.side, &t.frame, now);
+                        h.record(&t.frame, msg.as_ref(), now);
+                    }
+                }
+                batch.clear();
                 dirty = true;
             }
-            _ = tick.tick() => {}
+            r = links.changed(), if links_open => {
+                if r.is_err() {
+                    links_open = false;
+                    continue;
+                }
+                let live: Vec<_> = links.borrow_and_update().iter().map(|l| l.id).collect();
+                state.retain_links(&live);
+                dirty = true;
+            }
+            _ = tick.tick() => {
+                // Time alone changes rates and the lost state: publish once in a while even
+                // when nothing arrives.
+                if last_publish.elapsed() >= Duration::from_millis(500) {
+                    dirty = true;
+                }
+            }
         }
         if dirty && last_publish.elapsed() >= PUBLISH_EVERY {
             publish.send_replace(state.clone());
@@ -41,4 +74,57 @@ pub async fn run(
         }
     }
     publish.send_replace(state);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::router::Side;
+    use std::sync::{Arc, Mutex};
+    use vtol_link::{Frame, LinkId, LinkStats};
+
+    fn info(id: LinkId) -> LinkInfo {
+        LinkInfo {
+            id,
+            side: Side::Vehicle,
+            peer: "test".into(),
+            stats: Arc::new(LinkStats::default()),
+        }
+    }
+
+    #[tokio::test]
+    async fn a_link_that_goes_down_leaves_the_state() {
+        let (tap_tx, tap_rx) = mpsc::channel(16);
+        let (links_tx, links_rx) = watch::channel(vec![info(LinkId(7))]);
+        let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
+        let history = Arc::new(Mutex::new(History::new(Instant::now())));
+        let cancel = CancellationToken::new();
+        let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
+        let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        tap_tx
+            .send(Tapped {
+                link: LinkId(7),
+                side: Side::Vehicle,
+                frame,
+            })
+            .await
+            .unwrap();
+        let wait = |rx: &mut watch::Receiver<VehicleState>, present: bool| {
+            let mut rx = rx.clone();
+            async move {
+                tokio::time::timeout(Duration::from_secs(5), async {
+                    while rx.borrow_and_update().links.contains_key(&LinkId(7)) != present {
+                        rx.changed().await.unwrap();
+                    }
+                })
+                .await
+                .expect("state published");
+            }
+        };
+        wait(&mut state_rx, true).await;
+        links_tx.send_replace(Vec::new());
+        wait(&mut state_rx, false).await;
+        cancel.cancel();
+        task.await.unwrap();
+    }
 }

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{Frame, LinkId};
 
+use super::window::Window;
 use crate::router::Side;
 
 const MSG_HEARTBEAT: u32 = 0;
@@ -65,6 +66,8 @@ pub struct VehicleView {
     pub status_texts: VecDeque<(u8, String)>,
     /// When the last heartbeat arrived.
     pub last_heartbeat: Instant,
+    /// When the vehicle was last seen to arm (None while disarmed): the flight time's start.
+    pub armed_since: Option<Instant>,
 }
 
 impl VehicleView {
@@ -111,28 +114,27 @@ pub fn plane_mode_name(mode: u32) -> Option<&'static str> {
 pub struct LinkHealth {
     /// Vehicle or client side.
     pub side: Side,
-    /// Frames received.
+    /// Frames received since the link came up.
     pub frames: u64,
-    /// Frames missing by sequence gaps.
+    /// Frames missing by sequence gaps since the link came up.
     pub lost: u64,
-    /// Frames per second over the last full second.
-    pub rate_hz: f64,
     /// When the last frame arrived.
     pub last_heard: Instant,
-    window_start: Instant,
-    window_count: u64,
+    /// Received and lost over the last seconds.
+    pub window: Window,
 }
 
 impl LinkHealth {
-    /// Loss in percent, from sequence gaps.
+    /// Frames per second over the last 2 s (0 when the link is silent).
     #[must_use]
-    pub fn loss_pct(&self) -> f64 {
-        let total = self.frames + self.lost;
-        if total == 0 {
-            0.0
-        } else {
-            100.0 * self.lost as f64 / total as f64
-        }
+    pub fn rate_hz(&self, now: Instant) -> f64 {
+        self.window.rate_hz(now)
+    }
+
+    /// Loss in percent over the last 10 s, from sequence gaps.
+    #[must_use]
+    pub fn loss_pct(&self, now: Instant) -> f64 {
+        self.window.loss_pct(now)
     }
 
     /// Whether the link has been silent for [`LINK_TIMEOUT`].
@@ -142,14 +144,37 @@ impl LinkHealth {
     }
 }
 
+/// One message id from one sender, as a message inspector lists it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MessageStats {
+    /// Frames received.
+    pub count: u64,
+    /// The latest frame (decoded on demand by the view).
+    pub last: Frame,
+    /// When it arrived.
+    pub last_at: Instant,
+    /// Arrivals over the last seconds.
+    pub window: Window,
+}
+
 /// Everything the tracker knows; published as a snapshot.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct VehicleState {
+    /// The time windows count from (when the tracker started).
+    pub epoch: Instant,
     /// Vehicles by (system, component).
     pub vehicles: BTreeMap<(u8, u8), VehicleView>,
     /// Links by id.
     pub links: BTreeMap<LinkId, LinkHealth>,
+    /// Every message seen, by (system, component, message id).
+    pub messages: BTreeMap<(u8, u8, u32), MessageStats>,
     last_seq: HashMap<(LinkId, u8, u8), u8>,
+}
+
+impl Default for VehicleState {
+    fn default() -> Self {
+        Self::new(Instant::now())
+    }
 }
 
 /// Whether a heartbeat comes from a vehicle (pymavlink `probably_vehicle_heartbeat`).
@@ -166,10 +191,48 @@ pub fn is_vehicle_heartbeat(mav_type: MavType, autopilot: MavAutopilot) -> bool 
 }
 
 impl VehicleState {
-    /// Applies one frame that arrived on `link` at `now`.
-    pub fn apply(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
+    /// An empty state whose windows count from `epoch`.
+    #[must_use]
+    pub fn new(epoch: Instant) -> Self {
+        Self {
+            epoch,
+            vehicles: BTreeMap::new(),
+            links: BTreeMap::new(),
+            messages: BTreeMap::new(),
+            last_seq: HashMap::new(),
+        }
+    }
+
+    /// Applies one frame that arrived on `link` at `now`, and returns the message it decoded
+    /// (only the ones the view tracks; the rest stay raw).
+    pub fn apply(
+        &mut self,
+        link: LinkId,
+        side: Side,
+        frame: &Frame,
+        now: Instant,
+    ) -> Option<MavMessage> {
         self.account(link, side, frame, now);
         let key = (frame.system_id(), frame.component_id());
+        let epoch = self.epoch;
+        self.messages
+            .entry((key.0, key.1, frame.message_id()))
+            .and_modify(|m| {
+                m.count += 1;
+                m.last = frame.clone();
+                m.last_at = now;
+                m.window.add(now, 1, 0);
+            })
+            .or_insert_with(|| {
+                let mut window = Window::new(epoch);
+                window.add(now, 1, 0);
+                MessageStats {
+                    count: 1,
+                    last: frame.clone(),
+                    last_at: now,
+                    window,
+                }
+            });
         // Decode only what the view uses, and only from known vehicles (or their heartbeat):
         // the tracker sees every routed frame, and a full decode of each would cost more than
         // routing it.
@@ -180,12 +243,12 @@ impl VehicleState {
             TRACKED.contains(&id) && self.vehicles.contains_key(&key)
         };
         if !wanted {
-            return;
+            return None;
         }
-        let Ok(msg) = frame.decode() else { return };
+        let Ok(msg) = frame.decode() else { return None };
         if let MavMessage::HEARTBEAT(hb) = &msg {
             if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
-                return;
+                return None;
             }
             let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
                 system_id: key.0,
@@ -200,6 +263,7 @@ impl VehicleState {
                 servo_us: [0; 16],
                 status_texts: VecDeque::new(),
                 last_heartbeat: now,
+                armed_since: None,
             });
             v.mav_type = hb.mavtype;
             v.autopilot = hb.autopilot;
@@ -207,14 +271,17 @@ impl VehicleState {
             v.armed = hb
                 .base_mode
                 .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            v.armed_since = match (v.armed, v.armed_since) {
+                (true, None) => Some(now),
+                (true, since) => since,
+                (false, _) => None,
+            };
             v.system_status = hb.system_status;
             v.last_heartbeat = now;
-            return;
+            return Some(msg);
         }
-        let Some(v) = self.vehicles.get_mut(&key) else {
-            return;
-        };
-        match msg {
+        let v = self.vehicles.get_mut(&key)?;
+        match &msg {
             MavMessage::ATTITUDE(a) => {
                 v.attitude = Some(Attitude {
                     rpy_rad: [a.roll, a.pitch, a.yaw],
@@ -257,40 +324,58 @@ impl VehicleState {
             }
             _ => {}
         }
+        Some(msg)
     }
 
     fn account(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
-        let h = self.links.entry(link).or_insert(LinkHealth {
+        let epoch = self.epoch;
+        let h = self.links.entry(link).or_insert_with(|| LinkHealth {
             side,
             frames: 0,
             lost: 0,
-            rate_hz: 0.0,
             last_heard: now,
-            window_start: now,
-            window_count: 0,
+            window: Window::new(epoch),
         });
         h.frames += 1;
         h.last_heard = now;
-        h.window_count += 1;
-        let elapsed = now.duration_since(h.window_start);
-        if elapsed >= Duration::from_secs(1) {
-            h.rate_hz = h.window_count as f64 / elapsed.as_secs_f64();
-            h.window_start = now;
-            h.window_count = 0;
-        }
         let seq = frame.seq();
+        let mut lost = 0;
         if let Some(last) = self
             .last_seq
             .insert((link, frame.system_id(), frame.component_id()), seq)
         {
-            h.lost += u64::from(seq.wrapping_sub(last).wrapping_sub(1));
+            lost = u32::from(seq.wrapping_sub(last).wrapping_sub(1));
+            h.lost += u64::from(lost);
         }
+        h.window.add(now, 1, lost);
     }
 
-    /// Forgets a link that went down.
+    /// Forgets a link that went down: its health and its sequence history (a link that comes
+    /// back starts afresh instead of counting the gap as loss).
     pub fn forget_link(&mut self, link: LinkId) {
         self.links.remove(&link);
         self.last_seq.retain(|(l, _, _), _| *l != link);
+    }
+
+    /// Forgets every link not in `live` (the router's current links).
+    pub fn retain_links(&mut self, live: &[LinkId]) {
+        let gone: Vec<LinkId> = self
+            .links
+            .keys()
+            .filter(|id| !live.contains(id))
+            .copied()
+            .collect();
+        for id in gone {
+            self.forget_link(id);
+        }
+    }
+
+    /// Whether no vehicle has been heard for [`LINK_TIMEOUT`] (or none ever was).
+    #[must_use]
+    pub fn vehicle_lost(&self, now: Instant) -> bool {
+        self.vehicles
+            .values()
+            .all(|v| now.duration_since(v.last_heartbeat) >= LINK_TIMEOUT)
     }
 }
 
@@ -366,6 +451,15 @@ mod tests {
         let h = &s.links[&LinkId(1)];
         assert_eq!(h.frames, 7);
         assert_eq!(h.lost, 3);
-        assert!((h.loss_pct() - 30.0).abs() < 1e-9);
+        assert!((h.loss_pct(now) - 30.0).abs() < 1e-9);
+        // Once the link goes down and comes back, the gap is not loss.
+        s.forget_link(LinkId(1));
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 100, &v),
+            now,
+        );
+        assert_eq!(s.links[&LinkId(1)].lost, 0);
     }
 }

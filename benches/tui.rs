@@ -1,0 +1,398 @@
+//! Terminal UI benchmark (prints tables; figures in BENCHMARKS.md):
+//!
+//! 1. Render cost per frame of each view, 120×40, from a recorded 30 s hover, through the real
+//!    crossterm backend writing its escape sequences into a sink: CPU time per frame.
+//! 2. The live UI on the embedded twin (daemon in this process) at 50 Hz ATTITUDE and 10 Hz
+//!    SERVO_OUTPUT_RAW: the UI's own thread CPU (its event loop on its own thread) as % of one
+//!    core, and the rest of the process (twin, router, tracker) separately.
+//! 3. Keypress to redrawn screen while 5 000 frames/s arrive on a client link: `?` is sent,
+//!    the time until a frame with the help overlay is flushed; p50/p99/max.
+//!
+//! CPU times come from `/proc` (thread: `schedstat`, ns; process: `stat`, clock ticks), so they
+//! are less disturbed by other load than wall time. Run: `cargo bench --bench tui`. Under
+//! `cargo test` (no `--bench` argument) it runs a short smoke version.
+
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use ratatui::Terminal;
+use ratatui::backend::CrosstermBackend;
+use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
+use ratatui::layout::Rect;
+use ratatui::{TerminalOptions, Viewport};
+use tokio::io::AsyncWriteExt;
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+use vtol_gcs::config::Config;
+use vtol_gcs::router::Side;
+use vtol_gcs::tui::app::{App, Outcome, View};
+use vtol_gcs::tui::exec::ClientControl;
+use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
+use vtol_gcs::vehicle::{History, VehicleState};
+use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::{Frame, LinkId, LinkUrl};
+
+const W: u16 = 120;
+const H: u16 = 40;
+
+/// CPU time of the calling thread, ns.
+fn thread_cpu_ns() -> u64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0)
+}
+
+/// CPU time of the whole process, s (utime + stime).
+fn process_cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces) start after the last ')'.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    // utime and stime are fields 14 and 15 (1-based); here 0 is field 3.
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// A writer that records when each frame is flushed and whether it drew the help overlay.
+#[derive(Clone, Default)]
+struct TimedSink {
+    pending: Arc<Mutex<Vec<u8>>>,
+    flushes: Arc<Mutex<Vec<(Instant, bool)>>>,
+}
+
+impl Write for TimedSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if let Ok(mut p) = self.pending.lock() {
+            p.extend_from_slice(buf);
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        let now = Instant::now();
+        if let (Ok(mut p), Ok(mut f)) = (self.pending.lock(), self.flushes.lock()) {
+            // A draw flushes the frame, then hides the cursor with a flush of its own: count
+            // frames, not cursor writes.
+            if p.as_slice() != b"\x1b[?25l" && !p.is_empty() {
+                let help = p.windows(4).any(|w| w == b"Keys");
+                f.push((now, help));
+            }
+            p.clear();
+        }
+        Ok(())
+    }
+}
+
+fn terminal<W2: Write>(w: W2) -> Terminal<CrosstermBackend<W2>> {
+    Terminal::with_options(
+        CrosstermBackend::new(w),
+        TerminalOptions {
+            viewport: Viewport::Fixed(Rect::new(0, 0, W, H)),
+        },
+    )
+    .expect("terminal")
+}
+
+/// 30 s of hover: 50 Hz attitude, 10 Hz outputs and position, 1 Hz heartbeat.
+fn recording() -> (Instant, VehicleState, History) {
+    let t0 = Instant::now();
+    let mut state = VehicleState::new(t0);
+    let mut history = History::new(t0);
+    let mut seq = 0u8;
+    let mut feed = |ms: u64, msg: &MavMessage, state: &mut VehicleState, history: &mut History| {
+        let f = Frame::encode_v2(1, 1, seq, msg);
+        seq = seq.wrapping_add(1);
+        let now = t0 + Duration::from_millis(ms);
+        let d = state.apply(LinkId(1), Side::Vehicle, &f, now);
+        history.record(&f, d.as_ref(), now);
+    };
+    for ms in (0..30_000u64).step_by(20) {
+        let t = ms as f64 / 1000.0;
+        if ms.is_multiple_of(1000) {
+            let hb = MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+                custom_mode: 18,
+                mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                    | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            });
+            feed(ms, &hb, &mut state, &mut history);
+        }
+        let att = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+            time_boot_ms: ms as u32,
+            roll: 0.05 * (t * 2.0).sin() as f32,
+            pitch: -0.03 * (t * 1.3).sin() as f32,
+            yaw: 0.3,
+            rollspeed: 0.1,
+            pitchspeed: 0.0,
+            yawspeed: 0.0,
+        });
+        feed(ms, &att, &mut state, &mut history);
+        if ms.is_multiple_of(100) {
+            let s = MavMessage::SERVO_OUTPUT_RAW(dialect::SERVO_OUTPUT_RAW_DATA {
+                servo1_raw: 1600 + (t * 7.0) as u16 % 50,
+                servo2_raw: 1590,
+                servo3_raw: 1500,
+                servo4_raw: 1510,
+                servo5_raw: 1490,
+                ..Default::default()
+            });
+            feed(ms, &s, &mut state, &mut history);
+            let p = MavMessage::LOCAL_POSITION_NED(dialect::LOCAL_POSITION_NED_DATA {
+                z: -1.0 - 0.01 * (t.sin() as f32),
+                ..Default::default()
+            });
+            feed(ms, &p, &mut state, &mut history);
+        }
+    }
+    (t0, state, history)
+}
+
+fn render_cost(frames: usize) {
+    let (t0, state, history) = recording();
+    println!(
+        "render cost per frame, {W}x{H}, crossterm backend into a sink, {frames} frames per view"
+    );
+    println!(
+        "{:<10} {:>12} {:>12}",
+        "view", "CPU µs/frame", "bytes/frame"
+    );
+    for v in View::all() {
+        let mut app = App::default();
+        app.on_outcome(Outcome::Params(vec![("HOVER_ALT".into(), 1.0)]));
+        app.view = *v;
+        if *v == View::Messages {
+            // One chart of three fields from two messages.
+            app.messages.charts = vec![vec![
+                vtol_gcs::tui::app::SeriesKey {
+                    system: 1,
+                    component: 1,
+                    message: 30,
+                    path: "roll".into(),
+                },
+                vtol_gcs::tui::app::SeriesKey {
+                    system: 1,
+                    component: 1,
+                    message: 30,
+                    path: "pitch".into(),
+                },
+                vtol_gcs::tui::app::SeriesKey {
+                    system: 1,
+                    component: 1,
+                    message: 36,
+                    path: "servo1_raw".into(),
+                },
+            ]];
+        }
+        let bytes = Arc::new(Mutex::new(0usize));
+        let mut term = terminal(CountingSink(Arc::clone(&bytes)));
+        let mut cache = SeriesCache::default();
+        let cpu0 = thread_cpu_ns();
+        for i in 0..frames {
+            // The clock moves a frame (33 ms) each time, so every frame differs like live ones.
+            let now = t0 + Duration::from_millis(29_000 + (i as u64 * 33) % 1000);
+            let snap = Snapshot {
+                now,
+                state: &state,
+                history: &history,
+                links: Vec::new(),
+                router: RouterCounters::default(),
+                tlog: None,
+                serving: Vec::new(),
+            };
+            term.draw(|f| view::draw(f, &mut app, &snap, &mut cache))
+                .expect("draw");
+        }
+        let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;
+        let b = *bytes.lock().unwrap() / frames;
+        println!("{:<10} {cpu:>12.0} {b:>12}", v.title());
+    }
+}
+
+struct CountingSink(Arc<Mutex<usize>>);
+
+impl Write for CountingSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        *self.0.lock().unwrap() += buf.len();
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Frames per second from a client link (a flood of ATTITUDE from system 2), paced per ms.
+async fn flood(addr: std::net::SocketAddr, per_s: u32, cancel: CancellationToken) {
+    let Ok(mut s) = tokio::net::TcpStream::connect(addr).await else {
+        return;
+    };
+    let msg = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA::default());
+    let per_tick = (per_s / 1000).max(1);
+    let mut tick = tokio::time::interval(Duration::from_millis(1));
+    let mut seq = 0u8;
+    let mut buf = Vec::new();
+    loop {
+        tokio::select! {
+            () = cancel.cancelled() => return,
+            _ = tick.tick() => {
+                buf.clear();
+                for _ in 0..per_tick {
+                    buf.extend_from_slice(Frame::encode_v2(2, 1, seq, &msg).as_bytes());
+                    seq = seq.wrapping_add(1);
+                }
+                if s.write_all(&buf).await.is_err() { return; }
+            }
+        }
+    }
+}
+
+fn live(seconds: f64, keypresses: usize) {
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    let cancel = CancellationToken::new();
+    let mut tasks = tokio::task::JoinSet::new();
+    let config = Config {
+        serve: vec!["tcpin:127.0.0.1:0".parse::<LinkUrl>().expect("url")],
+        log_dir: None,
+        ..Config::default()
+    };
+    let running = rt.block_on(async {
+        let r = vtol_gcs::daemon::start(&config, &cancel, &mut tasks)
+            .await
+            .expect("daemon");
+        r.client
+            .wait_target(Duration::from_secs(15))
+            .await
+            .expect("vehicle");
+        for (name, hz) in [("SR0_EXTRA1", 50.0), ("SR0_RC_CHAN", 10.0)] {
+            r.client.param_set(name, hz).await.expect("stream rate");
+        }
+        r
+    });
+    let serve_addr = running.serving[0].1.expect("bound");
+    let control = rt.block_on(async { ClientControl::new(running.client.clone()) });
+
+    // The UI's event loop on its own thread and runtime, so its CPU is its own.
+    let run_ui = |view_key: Option<KeyCode>, keys: Option<(usize, f64)>| {
+        let sink = TimedSink::default();
+        let flushes = Arc::clone(&sink.flushes);
+        let (ev_tx, ev_rx) = mpsc::channel(64);
+        let ui_cancel = CancellationToken::new();
+        let running2 = running.clone();
+        let control2 = control.clone();
+        let c2 = ui_cancel.clone();
+        let ui = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .expect("rt");
+            let mut term = terminal(sink);
+            let cpu0 = thread_cpu_ns();
+            let t0 = Instant::now();
+            rt.block_on(vtol_gcs::tui::event_loop(
+                &mut term, &running2, control2, ev_rx, c2,
+            ))
+            .expect("ui");
+            (
+                (thread_cpu_ns() - cpu0) as f64 / 1e9,
+                t0.elapsed().as_secs_f64(),
+            )
+        });
+        let key = |c| Event::Key(KeyEvent::new(c, KeyModifiers::NONE));
+        if let Some(k) = view_key {
+            ev_tx.blocking_send(key(k)).expect("key");
+        }
+        let mut latencies = Vec::new();
+        let cpu0 = process_cpu_s();
+        let start = Instant::now();
+        match keys {
+            None => std::thread::sleep(Duration::from_secs_f64(seconds)),
+            Some((n, _)) => {
+                for _ in 0..n {
+                    let sent = Instant::now();
+                    ev_tx.blocking_send(key(KeyCode::Char('?'))).expect("key");
+                    let shown = loop {
+                        let hit = flushes
+                            .lock()
+                            .unwrap()
+                            .iter()
+                            .find(|(t, help)| *help && *t >= sent)
+                            .map(|(t, _)| *t);
+                        if let Some(t) = hit {
+                            break t;
+                        }
+                        std::thread::sleep(Duration::from_micros(200));
+                    };
+                    latencies.push(shown - sent);
+                    ev_tx.blocking_send(key(KeyCode::Esc)).expect("key");
+                    // Space the presses like a person typing fast (about 20 a second).
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        }
+        let wall = start.elapsed().as_secs_f64();
+        let proc_cpu = process_cpu_s() - cpu0;
+        ui_cancel.cancel();
+        let (ui_cpu, ui_wall) = ui.join().expect("ui thread");
+        let frames = flushes.lock().unwrap().len();
+        (
+            ui_cpu / ui_wall * 100.0,
+            (proc_cpu - ui_cpu).max(0.0) / wall * 100.0,
+            frames as f64 / ui_wall,
+            latencies,
+        )
+    };
+
+    println!(
+        "\nlive UI on the embedded twin, ATTITUDE 50 Hz + SERVO_OUTPUT_RAW 10 Hz, {seconds:.0} s per view"
+    );
+    println!(
+        "{:<10} {:>14} {:>22} {:>8}",
+        "view", "UI CPU % core", "rest of process % core", "fps"
+    );
+    for (name, k) in [("Flight", None), ("Charts", Some(KeyCode::Tab))] {
+        let (ui, rest, fps, _) = run_ui(k, None);
+        println!("{name:<10} {ui:>14.2} {rest:>22.2} {fps:>8.1}");
+    }
+
+    let flood_cancel = CancellationToken::new();
+    rt.spawn(flood(serve_addr, 5000, flood_cancel.clone()));
+    let frames_in = || {
+        running
+            .router
+            .stats
+            .frames_in
+            .load(std::sync::atomic::Ordering::Relaxed)
+    };
+    let (in0, t_in) = (frames_in(), Instant::now());
+    let (ui, rest, fps, mut lat) = run_ui(None, Some((keypresses, 0.0)));
+    let arrived = (frames_in() - in0) as f64 / t_in.elapsed().as_secs_f64();
+    flood_cancel.cancel();
+    lat.sort();
+    let pct = |p: f64| lat[((lat.len() as f64 - 1.0) * p).round() as usize].as_secs_f64() * 1000.0;
+    println!(
+        "\nkeypress to redrawn screen while 5000 frames/s are sent ({arrived:.0} frames/s reached the router, {} presses)",
+        lat.len()
+    );
+    println!(
+        "p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms   (UI CPU {ui:.1} % core, rest {rest:.1} %, {fps:.1} fps)",
+        pct(0.5),
+        pct(0.99),
+        pct(1.0)
+    );
+    cancel.cancel();
+    rt.block_on(async { while tasks.join_next().await.is_some() {} });
+}
+
+fn main() {
+    let bench = std::env::args().any(|a| a == "--bench");
+    if bench {
+        render_cost(2000);
+        live(10.0, 300);
+    } else {
+        render_cost(20);
+        live(1.0, 10);
+    }
+}

@@ -1,0 +1,610 @@
+//! The ground station's own MAVLink client: system 255, component 190 by default, over any
+//! vtol-link transport (straight to a URL, or inside the daemon over its own-traffic link).
+//!
+//! - [`session`]: the one task that owns the identity, the sequence counter and the link.
+//! - [`machine`], [`command`], [`param`]: the protocol exchanges as pure state machines
+//!   (messages and time in, messages and a result out), tested without sockets.
+//! - [`ClientHandle`]: the async shell that drives those machines, cheap to clone; the
+//!   command line and the terminal UI use it.
+//!
+//! The client sends a GCS heartbeat only while an [`OperatorGuard`] lives, so it never tells a
+//! vehicle that an operator is watching when none is.
+
+pub mod command;
+pub mod machine;
+pub mod param;
+pub mod probe;
+mod session;
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::sync::{broadcast, mpsc, watch};
+use tokio_util::sync::CancellationToken;
+use vtol_link::dialect::{MavCmd, MavMessage, MavResult};
+use vtol_link::{LinkOptions, LinkUrl};
+
+use command::CommandMachine;
+pub use command::CommandOutcome;
+use machine::{Inbound, Machine, Rtt};
+use param::{ParamFailure, ParamMachine, PullMachine};
+
+use crate::params::plan::{Step, StepError, Transaction};
+use crate::params::{ParamSet, PushReport, Rules, TwinRules, order_writes};
+
+/// The force-arm/disarm magic number of MAV_CMD_COMPONENT_ARM_DISARM's param 2.
+pub const FORCE_MAGIC: f32 = 21196.0;
+/// How long a request waits for the first vehicle heartbeat when no target was given.
+pub const FIND_VEHICLE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// ArduPlane's mode numbers, which the twin reuses (pymavlink and MAVProxy name them).
+pub const MODES: &[(&str, u32)] = &[
+    ("MANUAL", 0),
+    ("CIRCLE", 1),
+    ("STABILIZE", 2),
+    ("TRAINING", 3),
+    ("ACRO", 4),
+    ("FBWA", 5),
+    ("FBWB", 6),
+    ("CRUISE", 7),
+    ("AUTOTUNE", 8),
+    ("AUTO", 10),
+    ("RTL", 11),
+    ("LOITER", 12),
+    ("TAKEOFF", 13),
+    ("GUIDED", 15),
+    ("QSTABILIZE", 17),
+    ("QHOVER", 18),
+    ("QLOITER", 19),
+    ("QLAND", 20),
+    ("QRTL", 21),
+    ("QAUTOTUNE", 22),
+    ("QACRO", 23),
+];
+
+/// Why a client request failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ClientError {
+    /// The vehicle answered no.
+    #[error("refused by the vehicle: {reason}")]
+    Refused {
+        /// The vehicle's reason (its STATUSTEXT when it sent one).
+        reason: String,
+    },
+    /// No answer after every retry.
+    #[error("no answer from the vehicle: {0}")]
+    Timeout(String),
+    /// The link failed or the client stopped.
+    #[error("link: {0}")]
+    Link(String),
+    /// No vehicle heartbeat was heard and no target was given.
+    #[error("no vehicle heard (is the link right? try --target)")]
+    NoVehicle,
+    /// The request cannot be made as asked.
+    #[error("{0}")]
+    Usage(String),
+}
+
+/// Identity and target of a client.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClientConfig {
+    /// Our system id (255 = ground station).
+    pub system_id: u8,
+    /// Our component id (190 = MAV_COMP_ID_MISSIONPLANNER, what ground stations use).
+    pub component_id: u8,
+    /// The vehicle, when known in advance; otherwise the first vehicle heartbeat decides.
+    pub target: Option<(u8, u8)>,
+}
+
+impl Default for ClientConfig {
+    fn default() -> Self {
+        Self {
+            system_id: 255,
+            component_id: 190,
+            target: None,
+        }
+    }
+}
+
+/// The client: cheap to clone, `Send + Sync`; every method may run concurrently.
+#[derive(Debug, Clone)]
+pub struct ClientHandle {
+    me: (u8, u8),
+    out: mpsc::Sender<MavMessage>,
+    inbound: broadcast::Sender<Arc<Inbound>>,
+    target: watch::Receiver<Option<(u8, u8)>>,
+    links_up: watch::Receiver<usize>,
+    rtt: Arc<Mutex<Rtt>>,
+    shared: Arc<session::Shared>,
+    cache: Arc<Mutex<ParamSet>>,
+}
+
+/// While alive, the client sends its 1 Hz GCS heartbeat: an operator is watching.
+#[derive(Debug)]
+pub struct OperatorGuard {
+    shared: Arc<session::Shared>,
+}
+
+impl Drop for OperatorGuard {
+    fn drop(&mut self) {
+        self.shared.operators.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Frames buffered from the handles to the session task.
+const OUT_QUEUE: usize = 1024;
+/// Decoded messages buffered per waiting request; a request that falls behind sees a gap,
+/// which its retries cover like a lost frame.
+const INBOUND_QUEUE: usize = 4096;
+
+impl ClientHandle {
+    fn spawn(
+        config: ClientConfig,
+        links_rx: mpsc::Receiver<vtol_link::LinkEvent>,
+        cancel: CancellationToken,
+    ) -> Self {
+        let me = (config.system_id, config.component_id);
+        let (out, out_rx) = mpsc::channel(OUT_QUEUE);
+        let (inbound, _) = broadcast::channel(INBOUND_QUEUE);
+        let (target_tx, target) = watch::channel(config.target);
+        let shared = Arc::new(session::Shared {
+            operators: AtomicUsize::new(0),
+            sent: AtomicUsize::new(0),
+            dropped: AtomicUsize::new(0),
+        });
+        let (links_up_tx, links_up) = watch::channel(0);
+        let session = session::Session {
+            links_up: links_up_tx,
+            me,
+            inbound: inbound.clone(),
+            target: target_tx,
+            fixed_target: config.target.is_some(),
+            shared: Arc::clone(&shared),
+        };
+        tokio::spawn(session.run(links_rx, out_rx, cancel));
+        Self {
+            me,
+            out,
+            inbound,
+            target,
+            links_up,
+            rtt: Arc::new(Mutex::new(Rtt::default())),
+            shared,
+            cache: Arc::new(Mutex::new(ParamSet::new())),
+        }
+    }
+
+    /// A client on its own link to `url` (a vehicle, or a daemon's serve port). Returns once
+    /// the endpoint is open (a `tcp:` client connects and reconnects in the background).
+    ///
+    /// # Errors
+    /// [`ClientError::Link`] when the endpoint cannot be opened.
+    pub async fn connect(
+        url: &LinkUrl,
+        config: ClientConfig,
+        cancel: CancellationToken,
+    ) -> Result<Self, ClientError> {
+        let (tx, rx) = mpsc::channel(INBOUND_QUEUE);
+        let endpoint = vtol_link::spawn_endpoint(url, tx, LinkOptions::default(), cancel.clone())
+            .await
+            .map_err(|e| ClientError::Link(format!("cannot open {url}: {e}")))?;
+        tokio::spawn(endpoint.join());
+        Ok(Self::spawn(config, rx, cancel))
+    }
+
+    /// A client over a byte stream carrying MAVLink frames (the daemon's own-traffic link).
+    pub fn over_stream<S>(stream: S, config: ClientConfig, cancel: CancellationToken) -> Self
+    where
+        S: AsyncRead + AsyncWrite + Send + 'static,
+    {
+        let (tx, rx) = mpsc::channel(INBOUND_QUEUE);
+        let (_, task) = vtol_link::spawn_stream_link(
+            stream,
+            "vtol-gcs client",
+            tx,
+            LinkOptions::default(),
+            cancel.clone(),
+        );
+        drop(task);
+        Self::spawn(config, rx, cancel)
+    }
+
+    /// Our (system, component).
+    #[must_use]
+    pub fn identity(&self) -> (u8, u8) {
+        self.me
+    }
+
+    /// The vehicle the client talks to, once found (first vehicle heartbeat or `--target`).
+    #[must_use]
+    pub fn target(&self) -> Option<(u8, u8)> {
+        *self.target.borrow()
+    }
+
+    /// Waits up to `timeout` for the vehicle to be known.
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`].
+    pub async fn wait_target(&self, timeout: Duration) -> Result<(u8, u8), ClientError> {
+        let mut rx = self.target.clone();
+        match tokio::time::timeout(timeout, rx.wait_for(Option::is_some)).await {
+            Ok(Ok(t)) => (*t).ok_or(ClientError::NoVehicle),
+            Ok(Err(_)) => Err(ClientError::Link("client stopped".into())),
+            Err(_) => Err(ClientError::NoVehicle),
+        }
+    }
+
+    /// The current retransmission timeout (scaled to the measured round trip).
+    #[must_use]
+    pub fn rto(&self) -> Duration {
+        self.rtt.lock().map(|r| r.rto()).unwrap_or(Rtt::INITIAL_RTO)
+    }
+
+    /// The smoothed round trip, once measured.
+    #[must_use]
+    pub fn srtt(&self) -> Option<Duration> {
+        self.rtt.lock().ok().and_then(|r| r.srtt())
+    }
+
+    fn sample_rtt(&self, rtt: Option<Duration>) {
+        if let (Some(s), Ok(mut r)) = (rtt, self.rtt.lock()) {
+            r.sample(s);
+        }
+    }
+
+    /// Marks an operator as present: the 1 Hz GCS heartbeat flows while any guard lives.
+    #[must_use]
+    pub fn operator_present(&self) -> OperatorGuard {
+        self.shared.operators.fetch_add(1, Ordering::Relaxed);
+        OperatorGuard {
+            shared: Arc::clone(&self.shared),
+        }
+    }
+
+    /// Fire-and-forget frame from the client's identity (e.g. SET_POSITION_TARGET_LOCAL_NED).
+    ///
+    /// # Errors
+    /// [`ClientError::Link`] when the client has stopped.
+    pub async fn send(&self, msg: MavMessage) -> Result<(), ClientError> {
+        self.out
+            .send(msg)
+            .await
+            .map_err(|_| ClientError::Link("client stopped".into()))
+    }
+
+    /// Waits up to `timeout` for a link to be up (a `tcp:` client connects in the background).
+    ///
+    /// # Errors
+    /// [`ClientError::Link`].
+    pub async fn wait_connected(&self, timeout: Duration) -> Result<(), ClientError> {
+        let mut rx = self.links_up.clone();
+        match tokio::time::timeout(timeout, rx.wait_for(|n| *n > 0)).await {
+            Ok(Ok(_)) => Ok(()),
+            Ok(Err(_)) => Err(ClientError::Link("client stopped".into())),
+            Err(_) => Err(ClientError::Link(format!(
+                "not connected after {} s",
+                timeout.as_secs()
+            ))),
+        }
+    }
+
+    /// Runs a machine to its result: subscribe first, then send what it asks, feed it every
+    /// inbound message and its deadlines.
+    async fn drive<M: Machine>(
+        &self,
+        m: &mut M,
+        mut on_step: impl FnMut(&M),
+    ) -> Result<M::Output, ClientError> {
+        // A first send with no link up would only be lost and cost a timeout.
+        self.wait_connected(FIND_VEHICLE_TIMEOUT).await?;
+        let mut rx = self.inbound.subscribe();
+        for msg in m.start(std::time::Instant::now()) {
+            self.send(msg).await?;
+        }
+        loop {
+            if let Some(out) = m.result() {
+                return Ok(out);
+            }
+            let deadline = tokio::time::Instant::from_std(m.deadline());
+            let sends = tokio::select! {
+                r = rx.recv() => match r {
+                    Ok(inb) => m.on_message(std::time::Instant::now(), &inb),
+                    Err(broadcast::error::RecvError::Lagged(_)) => Vec::new(),
+                    Err(broadcast::error::RecvError::Closed) => {
+                        return Err(ClientError::Link("client stopped".into()));
+                    }
+                },
+                () = tokio::time::sleep_until(deadline) => m.on_time(std::time::Instant::now()),
+            };
+            for s in m.take_rtt_samples() {
+                self.sample_rtt(Some(s));
+            }
+            on_step(m);
+            for msg in sends {
+                self.send(msg).await?;
+            }
+        }
+    }
+
+    async fn vehicle(&self) -> Result<(u8, u8), ClientError> {
+        match self.target() {
+            Some(t) => Ok(t),
+            None => self.wait_target(FIND_VEHICLE_TIMEOUT).await,
+        }
+    }
+
+    /// Measures the round trip with TIMESYNC probes, so the first real request already has a
+    /// timeout scaled to the link. `None` when the vehicle did not answer (the timeouts then
+    /// start from [`Rtt::INITIAL_RTO`] and adapt as answers come).
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn probe_rtt(&self) -> Result<Option<Duration>, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = probe::ProbeMachine::new(target);
+        self.drive(&mut m, |_| {}).await
+    }
+
+    /// COMMAND_LONG with retries (confirmation incremented), ACK matched by command and target,
+    /// IN_PROGRESS extends the wait, a refusal carries the vehicle's STATUSTEXT reason.
+    ///
+    /// # Errors
+    /// [`ClientError::Timeout`] without a final ACK; [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn command_long(
+        &self,
+        command: MavCmd,
+        params: [f32; 7],
+    ) -> Result<CommandOutcome, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = CommandMachine::new(self.me, target, command, params, self.rto());
+        let out = self.drive(&mut m, |_| {}).await?;
+        out.map_err(|e| {
+            ClientError::Timeout(format!(
+                "{command:?}: no COMMAND_ACK after {} tries",
+                e.tries
+            ))
+        })
+    }
+
+    async fn command_ok(&self, command: MavCmd, params: [f32; 7]) -> Result<(), ClientError> {
+        let o = self.command_long(command, params).await?;
+        if o.accepted() {
+            return Ok(());
+        }
+        let result = match o.result {
+            MavResult::MAV_RESULT_TEMPORARILY_REJECTED => "temporarily rejected",
+            MavResult::MAV_RESULT_DENIED => "denied",
+            MavResult::MAV_RESULT_UNSUPPORTED => "unsupported",
+            MavResult::MAV_RESULT_FAILED => "failed",
+            _ => "not accepted",
+        };
+        Err(ClientError::Refused {
+            reason: match o.reason {
+                Some(r) => format!("{result}: {r}"),
+                None => result.to_owned(),
+            },
+        })
+    }
+
+    /// Arms (`force` skips the pre-arm checks).
+    ///
+    /// # Errors
+    /// [`ClientError::Refused`] with the vehicle's reason, or a link error.
+    pub async fn arm(&self, force: bool) -> Result<(), ClientError> {
+        let p2 = if force { FORCE_MAGIC } else { 0.0 };
+        self.command_ok(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, p2, 0., 0., 0., 0., 0.],
+        )
+        .await
+    }
+
+    /// Disarms (`force` allows it in flight).
+    ///
+    /// # Errors
+    /// As [`ClientHandle::arm`].
+    pub async fn disarm(&self, force: bool) -> Result<(), ClientError> {
+        let p2 = if force { FORCE_MAGIC } else { 0.0 };
+        self.command_ok(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [0.0, p2, 0., 0., 0., 0., 0.],
+        )
+        .await
+    }
+
+    /// Mode by name ("QHOVER", "QLAND", ...) as ArduPlane numbers them.
+    ///
+    /// # Errors
+    /// [`ClientError::Usage`] for an unknown name; otherwise as [`ClientHandle::arm`].
+    pub async fn set_mode(&self, name: &str) -> Result<(), ClientError> {
+        let upper = name.to_ascii_uppercase();
+        let Some(&(_, number)) = MODES.iter().find(|(n, _)| *n == upper) else {
+            let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
+            return Err(ClientError::Usage(format!(
+                "unknown mode '{name}' (one of {})",
+                names.join(", ")
+            )));
+        };
+        // p1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, p2 = the custom mode (what pymavlink sends).
+        self.command_ok(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, number as f32, 0., 0., 0., 0., 0.],
+        )
+        .await
+    }
+
+    /// Whole table; progress reports (received, total).
+    ///
+    /// # Errors
+    /// [`ClientError::Timeout`] when the download stalls; link errors.
+    pub async fn params_pull(
+        &self,
+        progress: Option<watch::Sender<(usize, usize)>>,
+    ) -> Result<ParamSet, ClientError> {
+        let target = self.vehicle().await?;
+        let rtt = self.rtt.lock().map(|r| *r).unwrap_or_default();
+        let mut m = PullMachine::new(target, rtt);
+        let out = self
+            .drive(&mut m, |m| {
+                if let Some(p) = &progress {
+                    p.send_if_modified(|v| {
+                        let now = m.progress();
+                        let changed = *v != now;
+                        *v = now;
+                        changed
+                    });
+                }
+            })
+            .await?;
+        let set = out.map_err(|s| {
+            ClientError::Timeout(format!(
+                "download stalled at {} of {} parameters",
+                s.received, s.total
+            ))
+        })?;
+        if let Ok(mut c) = self.cache.lock() {
+            c.clone_from(&set);
+        }
+        Ok(set)
+    }
+
+    /// One read by name.
+    ///
+    /// # Errors
+    /// [`ClientError::Refused`] for a name the vehicle does not have; timeouts; link errors.
+    pub async fn param_get(&self, name: &str) -> Result<crate::params::Param, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = ParamMachine::read(target, name, self.rto());
+        let out = self.drive(&mut m, |_| {}).await?;
+        let p = out.map_err(|f| failure(name, f))?;
+        if let Ok(mut c) = self.cache.lock() {
+            c.insert(name.to_owned(), p);
+        }
+        Ok(p)
+    }
+
+    /// One verified write: `Ok(confirmed value)` only when the echo matches the request after
+    /// the vehicle's type conversion; a refusal carries the reason.
+    ///
+    /// # Errors
+    /// [`ClientError::Refused`], [`ClientError::Timeout`], [`ClientError::Usage`] for a
+    /// non-finite value, link errors.
+    pub async fn param_set(&self, name: &str, value: f32) -> Result<f32, ClientError> {
+        if !value.is_finite() {
+            return Err(ClientError::Usage(format!(
+                "{name}: {value} is not a finite number"
+            )));
+        }
+        let known = self.cache.lock().ok().and_then(|c| c.get(name).copied());
+        let ty = match known {
+            Some(p) => p.ty,
+            // The type decides what echo confirms the write: learn it first.
+            None => self.param_get(name).await?.ty,
+        };
+        let target = self.vehicle().await?;
+        let mut m = ParamMachine::write(target, name, value, ty, self.rto());
+        let out = self.drive(&mut m, |_| {}).await?;
+        let p = out.map_err(|f| failure(name, f))?;
+        if let Ok(mut c) = self.cache.lock() {
+            c.insert(name.to_owned(), p);
+        }
+        Ok(p.value)
+    }
+
+    /// Transactional upload of a set: pull, diff, write only what changed in an order that
+    /// keeps every intermediate set acceptable, retry refused writes after any progress,
+    /// verify every value by read-back, and on failure restore every value already changed.
+    /// Progress reports (steps done, changes).
+    ///
+    /// # Errors
+    /// [`ClientError::Usage`] when `wanted` names parameters the vehicle does not have (nothing
+    /// is sent); pull errors. A refused or rolled-back push is `Ok` with the report saying so.
+    pub async fn params_push(
+        &self,
+        wanted: &ParamSet,
+        progress: Option<watch::Sender<(usize, usize)>>,
+    ) -> Result<PushReport, ClientError> {
+        let current = self.params_pull(None).await?;
+        self.push_onto(&current, wanted, &TwinRules, progress).await
+    }
+
+    /// [`ClientHandle::params_push`] against a table already pulled, with a given rule model.
+    ///
+    /// # Errors
+    /// As [`ClientHandle::params_push`].
+    pub async fn push_onto(
+        &self,
+        current: &ParamSet,
+        wanted: &ParamSet,
+        rules: &dyn Rules,
+        progress: Option<watch::Sender<(usize, usize)>>,
+    ) -> Result<PushReport, ClientError> {
+        let unknown = crate::params::unknown_names(current, wanted);
+        if !unknown.is_empty() {
+            return Err(ClientError::Usage(format!(
+                "the vehicle has no parameter {}",
+                unknown.join(", ")
+            )));
+        }
+        let changes = crate::params::diff(current, wanted);
+        let total = changes.len();
+        let mut t = Transaction::new(order_writes(current, &changes, rules));
+        let mut steps = 0;
+        loop {
+            let step = t.next_step();
+            match step {
+                Step::Done(report) => return Ok(report),
+                Step::Write { name, value } => {
+                    let r = self.param_set(&name, value).await;
+                    t.written(step_result(r)?);
+                }
+                Step::Read { name } => {
+                    let r = self.param_get(&name).await.map(|p| p.value);
+                    t.read(step_result(r)?);
+                }
+            }
+            steps += 1;
+            if let Some(p) = &progress {
+                p.send_replace((steps.min(total), total));
+            }
+        }
+    }
+}
+
+/// A write's or read's result as the transaction sees it. A stopped client is no step result:
+/// it ends the push with an error.
+fn step_result(r: Result<f32, ClientError>) -> Result<Result<f32, StepError>, ClientError> {
+    match r {
+        Ok(v) => Ok(Ok(v)),
+        Err(ClientError::Refused { reason }) => Ok(Err(StepError::Refused(reason))),
+        Err(ClientError::Timeout(t)) => Ok(Err(StepError::Lost(t))),
+        Err(e) => Err(e),
+    }
+}
+
+fn failure(name: &str, f: ParamFailure) -> ClientError {
+    match f {
+        ParamFailure::Refused(reason) => ClientError::Refused { reason },
+        ParamFailure::Unknown => ClientError::Refused {
+            reason: format!("the vehicle has no parameter {name}"),
+        },
+        ParamFailure::NoAnswer { tries, last_echo } => ClientError::Timeout(match last_echo {
+            Some(v) => {
+                format!("{name}: no confirming echo after {tries} tries (vehicle reports {v})")
+            }
+            None => format!("{name}: no answer after {tries} tries"),
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The UI shares one handle across tasks and threads.
+    #[test]
+    fn handle_is_send_sync_and_clone() {
+        fn check<T: Send + Sync + Clone + 'static>() {}
+        check::<super::ClientHandle>();
+    }
+}

@@ -1,0 +1,139 @@
+//! Parameter sets as a ground station holds them: the value table ([`ParamSet`]), the three
+//! file formats ([`file`]), the difference between two sets ([`diff`]) and the transactional
+//! upload planner ([`plan`]). Everything here is pure: no I/O beyond reading and writing files.
+
+pub mod file;
+pub mod plan;
+
+use std::collections::BTreeMap;
+
+pub use file::{FileError, Format};
+pub use plan::{ParamOutcome, PushReport, Rules, TwinRules, order_writes};
+pub use vtol_link::dialect::MavParamType;
+
+/// One parameter: its value as the vehicle sends it (a float32, integers C-cast) and its type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Param {
+    /// The value on the wire.
+    pub value: f32,
+    /// How the vehicle stores it.
+    pub ty: MavParamType,
+}
+
+/// A parameter table, ordered by name: what a pull returns and what a file holds.
+pub type ParamSet = BTreeMap<String, Param>;
+
+/// The value a vehicle stores for a write of `value` to a parameter of type `ty`: integers are
+/// rounded to nearest (the C cast ArduPilot and the twin apply), floats are kept bit for bit.
+/// A write is confirmed only by an echo equal to this.
+#[must_use]
+pub fn stored_value(ty: MavParamType, value: f32) -> f32 {
+    if is_integer(ty) { value.round() } else { value }
+}
+
+/// Whether a parameter type holds integers.
+#[must_use]
+pub fn is_integer(ty: MavParamType) -> bool {
+    !matches!(
+        ty,
+        MavParamType::MAV_PARAM_TYPE_REAL32 | MavParamType::MAV_PARAM_TYPE_REAL64
+    )
+}
+
+/// Two wire values are the same parameter value: bit-exact for floats (so 0.1 written as the
+/// float32 nearest 0.1 matches only that float32), numeric for integers.
+#[must_use]
+pub fn same_value(a: f32, b: f32) -> bool {
+    // `==` alone would also do for every value a vehicle can echo (NaN is refused before
+    // sending); the bit test documents that floats are compared exactly, never with a tolerance.
+    a.to_bits() == b.to_bits() || a == b
+}
+
+/// One difference between the vehicle and a wanted set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Change {
+    /// Parameter id.
+    pub name: String,
+    /// Value now on the vehicle.
+    pub old: f32,
+    /// Wanted value (already as the vehicle will store it).
+    pub new: f32,
+    /// The vehicle's type for it.
+    pub ty: MavParamType,
+}
+
+/// The changes that turn `current` into `wanted`, in name order. Names in `wanted` that
+/// `current` lacks are not changes: [`unknown_names`] reports them (a push refuses them).
+/// The wanted value is compared after the vehicle's type conversion, so `5.0` for an integer
+/// parameter holding 5 is no change.
+#[must_use]
+pub fn diff(current: &ParamSet, wanted: &ParamSet) -> Vec<Change> {
+    wanted
+        .iter()
+        .filter_map(|(name, w)| {
+            let c = current.get(name)?;
+            let new = stored_value(c.ty, w.value);
+            (!same_value(c.value, new)).then(|| Change {
+                name: name.clone(),
+                old: c.value,
+                new,
+                ty: c.ty,
+            })
+        })
+        .collect()
+}
+
+/// Names of `wanted` the vehicle (`current`) does not have.
+#[must_use]
+pub fn unknown_names(current: &ParamSet, wanted: &ParamSet) -> Vec<String> {
+    wanted
+        .keys()
+        .filter(|n| !current.contains_key(*n))
+        .cloned()
+        .collect()
+}
+
+/// A parameter name the vehicle can carry: 1–16 printable ASCII characters, no spaces.
+#[must_use]
+pub fn valid_name(name: &str) -> bool {
+    (1..=16).contains(&name.len()) && name.bytes().all(|b| b.is_ascii_graphic())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(items: &[(&str, f32, MavParamType)]) -> ParamSet {
+        items
+            .iter()
+            .map(|(n, v, t)| ((*n).to_owned(), Param { value: *v, ty: *t }))
+            .collect()
+    }
+
+    #[test]
+    fn diff_compares_after_the_vehicle_conversion() {
+        use MavParamType::{MAV_PARAM_TYPE_INT16 as I16, MAV_PARAM_TYPE_REAL32 as F32};
+        let current = set(&[("A", 5.0, I16), ("B", 0.1, F32), ("C", 1.0, F32)]);
+        let wanted = set(&[
+            ("A", 5.2, F32),
+            ("B", 0.1, F32),
+            ("C", 1.5, F32),
+            ("X", 1.0, F32),
+        ]);
+        let d = diff(&current, &wanted);
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert_eq!(d[0].name, "C");
+        assert_eq!((d[0].old, d[0].new), (1.0, 1.5));
+        assert_eq!(unknown_names(&current, &wanted), vec!["X".to_owned()]);
+    }
+
+    #[test]
+    fn integer_writes_round_like_the_vehicle() {
+        assert_eq!(stored_value(MavParamType::MAV_PARAM_TYPE_INT8, 0.6), 1.0);
+        let v = 0.1f32;
+        assert_eq!(
+            stored_value(MavParamType::MAV_PARAM_TYPE_REAL32, v).to_bits(),
+            v.to_bits()
+        );
+    }
+}

@@ -1,0 +1,698 @@
+//! The UI's own state and the key → action logic, pure: a key and the current vehicle
+//! snapshot go in, the state changes and zero or more [`Request`]s for the client come out.
+//! Outcomes of requests come back through [`App::on_outcome`]. Nothing here touches a terminal
+//! or a socket, so it tests on its own.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Instant;
+
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
+
+use crate::vehicle::{VehicleState, VehicleView};
+
+/// Step of the QLOITER position target per arrow key, m.
+pub const TARGET_STEP_M: f32 = 0.5;
+/// Torque of a push (`SIM_PUSH_*`), N·m: a clear, recoverable disturbance of the twin in
+/// hover (about 20° of roll for the default 200 ms; 0.2 N·m reaches about 50°).
+pub const PUSH_NM: f32 = 0.1;
+/// Chart window bounds and step, s.
+pub const WINDOW_MIN_S: f64 = 5.0;
+/// Longest chart window (the history keeps 120 s).
+pub const WINDOW_MAX_S: f64 = 120.0;
+/// Default chart window.
+pub const WINDOW_DEFAULT_S: f64 = 30.0;
+/// Lines kept in the event log.
+const LOG_KEPT: usize = 64;
+
+/// The views, in tab order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum View {
+    /// Horizon, attitude, altitude, PWM bars, messages.
+    Flight,
+    /// Roll/pitch/yaw, PWM and position over time.
+    Charts,
+    /// Links, router counters, tlog.
+    Links,
+    /// Every message id with its rate and fields; field charts.
+    Messages,
+    /// The parameter table.
+    Params,
+}
+
+impl View {
+    const ALL: [View; 5] = [
+        View::Flight,
+        View::Charts,
+        View::Links,
+        View::Messages,
+        View::Params,
+    ];
+
+    /// Tab title.
+    #[must_use]
+    pub fn title(self) -> &'static str {
+        match self {
+            View::Flight => "Flight",
+            View::Charts => "Charts",
+            View::Links => "Links",
+            View::Messages => "Messages",
+            View::Params => "Params",
+        }
+    }
+
+    fn index(self) -> usize {
+        View::ALL.iter().position(|v| *v == self).unwrap_or(0)
+    }
+
+    /// All views in tab order.
+    #[must_use]
+    pub fn all() -> &'static [View] {
+        &View::ALL
+    }
+}
+
+/// A step waiting for `y`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Confirm {
+    /// Arm (force skips the pre-arm checks).
+    Arm {
+        /// Force.
+        force: bool,
+    },
+    /// Disarm.
+    Disarm,
+    /// Upload the loaded gains file (the diff is shown).
+    Upload,
+}
+
+/// What the UI asks the client to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Arm the vehicle.
+    Arm {
+        /// Skip pre-arm checks.
+        force: bool,
+    },
+    /// Disarm the vehicle.
+    Disarm,
+    /// Switch mode by name.
+    SetMode(&'static str),
+    /// SET_POSITION_TARGET_LOCAL_NED to this north, east, down position, m.
+    PositionTarget([f32; 3]),
+    /// Write one parameter (SIM_PUSH_* included), shown confirmed only on a matching echo.
+    ParamSet {
+        /// Name.
+        name: String,
+        /// Value.
+        value: f32,
+    },
+    /// Download the parameter table.
+    ParamsPull,
+    /// Read a gains file and compute its diff against the vehicle.
+    LoadGains(String),
+    /// Upload the loaded gains as one transaction.
+    PushGains,
+}
+
+/// What came back from a request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// A command finished: what it was, and Ok or the vehicle's reason.
+    Command {
+        /// What was asked ("arm", "mode QHOVER" …).
+        what: String,
+        /// Ok, or why not.
+        result: Result<(), String>,
+    },
+    /// The table arrived (name, value), in the vehicle's order.
+    Params(Vec<(String, f32)>),
+    /// Progress of a pull or a push: (done, total).
+    Progress {
+        /// What is in progress.
+        what: String,
+        /// Done so far.
+        done: usize,
+        /// Total.
+        total: usize,
+    },
+    /// A parameter write finished: Ok(the value the vehicle confirmed) or its reason.
+    ParamSet {
+        /// Name.
+        name: String,
+        /// Confirmed value or refusal reason.
+        result: Result<f32, String>,
+    },
+    /// A gains file was read: the changes it would make (name, now, wanted), or why not.
+    GainsLoaded(Result<Vec<(String, Option<f32>, f32)>, String>),
+    /// The upload finished: a summary line, Ok when every value was verified.
+    GainsPushed(Result<String, String>),
+}
+
+/// Where a parameter stands in the UI.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParamStatus {
+    /// Sent, no echo yet.
+    Pending(f32),
+    /// The vehicle's echo matched.
+    Confirmed,
+    /// The vehicle refused, with its reason.
+    Refused(String),
+}
+
+/// Severity of an event-log line (colours like STATUSTEXT).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Level {
+    /// Informational.
+    Info,
+    /// Done.
+    Ok,
+    /// Refused or failed.
+    Error,
+}
+
+/// The parameter view's state.
+#[derive(Debug, Clone, Default)]
+pub struct ParamsState {
+    /// The vehicle's table in its order (empty until pulled).
+    pub table: Vec<(String, f32)>,
+    /// Filter typed after `/`.
+    pub filter: String,
+    /// Selected row among the filtered ones.
+    pub selected: usize,
+    /// The value being typed for the selected parameter.
+    pub edit: Option<String>,
+    /// The gains-file path being typed.
+    pub file_prompt: Option<String>,
+    /// Per-parameter status of the last writes.
+    pub status: BTreeMap<String, ParamStatus>,
+    /// The loaded gains file's changes (name, now, wanted), waiting for the upload.
+    pub diff: Option<Vec<(String, Option<f32>, f32)>>,
+    /// Progress of a pull or push: (what, done, total).
+    pub progress: Option<(String, usize, usize)>,
+}
+
+impl ParamsState {
+    /// Rows that match the filter (case-insensitive substring), with their table index.
+    #[must_use]
+    pub fn filtered(&self) -> Vec<(usize, &(String, f32))> {
+        let f = self.filter.to_ascii_uppercase();
+        self.table
+            .iter()
+            .enumerate()
+            .filter(|(_, (n, _))| n.contains(&f))
+            .collect()
+    }
+
+    /// Value of a parameter in the table.
+    #[must_use]
+    pub fn value(&self, name: &str) -> Option<f32> {
+        self.table.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
+}
+
+/// A chart series: one numeric field of one message from one sender.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SeriesKey {
+    /// Sender system id.
+    pub system: u8,
+    /// Sender component id.
+    pub component: u8,
+    /// Message id.
+    pub message: u32,
+    /// Field path (`roll`, `q[2]`).
+    pub path: String,
+}
+
+/// The message inspector's state.
+#[derive(Debug, Clone, Default)]
+pub struct MessagesState {
+    /// Filter typed after `/` (message names, case-insensitive).
+    pub filter: String,
+    /// Selected message row.
+    pub selected: usize,
+    /// Selected field row of the selected message.
+    pub field: usize,
+    /// Whether the arrow keys move in the field list.
+    pub in_fields: bool,
+    /// Charts of chosen fields: each a list of series, no fixed cap.
+    pub charts: Vec<Vec<SeriesKey>>,
+    /// The message keys as last listed (so a key press knows what is selected).
+    pub listed: Vec<(u8, u8, u32)>,
+    /// The selected message's numeric field paths as last listed.
+    pub listed_fields: Vec<String>,
+}
+
+/// The whole UI state.
+#[derive(Debug, Clone)]
+pub struct App {
+    /// Current view.
+    pub view: View,
+    /// `?` overlay.
+    pub help: bool,
+    /// A step waiting for `y`.
+    pub confirm: Option<Confirm>,
+    /// Whether a text field has the keyboard (filters, values, paths).
+    pub typing: bool,
+    /// Chart window, s.
+    pub window_s: f64,
+    /// Parameters.
+    pub params: ParamsState,
+    /// Message inspector.
+    pub messages: MessagesState,
+    /// QLOITER position target (north, east, down), once one was sent.
+    pub target_ned: Option<[f32; 3]>,
+    /// What the operator did and what came of it, newest last.
+    pub log: VecDeque<(Level, String)>,
+    /// Set by `q`.
+    pub quit: bool,
+}
+
+impl Default for App {
+    fn default() -> Self {
+        Self {
+            view: View::Flight,
+            help: false,
+            confirm: None,
+            typing: false,
+            window_s: WINDOW_DEFAULT_S,
+            params: ParamsState::default(),
+            messages: MessagesState::default(),
+            target_ned: None,
+            log: VecDeque::new(),
+            quit: false,
+        }
+    }
+}
+
+/// The vehicle the UI commands: the first one heard.
+#[must_use]
+pub fn first_vehicle(state: &VehicleState) -> Option<&VehicleView> {
+    state.vehicles.values().next()
+}
+
+impl App {
+    /// Adds a line to the event log.
+    pub fn note(&mut self, level: Level, text: impl Into<String>) {
+        if self.log.len() == LOG_KEPT {
+            self.log.pop_front();
+        }
+        self.log.push_back((level, text.into()));
+    }
+
+    /// Applies one key; returns the requests it makes.
+    pub fn on_key(&mut self, key: KeyEvent, state: &VehicleState, now: Instant) -> Vec<Request> {
+        let _ = now;
+        if key.kind == KeyEventKind::Release {
+            return Vec::new();
+        }
+        let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
+        if ctrl && key.code == KeyCode::Char('c') {
+            self.quit = true;
+            return Vec::new();
+        }
+        if let Some(c) = self.confirm.take() {
+            return self.on_confirm(c, key);
+        }
+        if self.typing {
+            return self.on_text(key);
+        }
+        if self.help {
+            // Any key closes the overlay; `q` still quits.
+            self.help = false;
+            if key.code == KeyCode::Char('q') {
+                self.quit = true;
+            }
+            return Vec::new();
+        }
+        match key.code {
+            KeyCode::Char('q') => {
+                self.quit = true;
+                return Vec::new();
+            }
+            KeyCode::Char('?') => {
+                self.help = true;
+                return Vec::new();
+            }
+            KeyCode::Tab => {
+                self.view = View::ALL[(self.view.index() + 1) % View::ALL.len()];
+                return Vec::new();
+            }
+            KeyCode::BackTab => {
+                self.view = View::ALL[(self.view.index() + View::ALL.len() - 1) % View::ALL.len()];
+                return Vec::new();
+            }
+            _ => {}
+        }
+        // View keys first (lists take the arrows), then the flight commands.
+        if let Some(reqs) = match self.view {
+            View::Messages => self.on_messages_key(key),
+            View::Params => self.on_params_key(key),
+            View::Flight | View::Charts | View::Links => None,
+        } {
+            return reqs;
+        }
+        self.on_command_key(key, state)
+    }
+
+    fn on_confirm(&mut self, c: Confirm, key: KeyEvent) -> Vec<Request> {
+        let yes = matches!(key.code, KeyCode::Char('y' | 'Y'));
+        match (c, yes) {
+            (Confirm::Arm { force }, true) => {
+                self.note(
+                    Level::Info,
+                    if force { "force arm sent" } else { "arm sent" },
+                );
+                vec![Request::Arm { force }]
+            }
+            (Confirm::Disarm, true) => {
+                self.note(Level::Info, "disarm sent");
+                vec![Request::Disarm]
+            }
+            (Confirm::Upload, true) => {
+                self.params.progress = Some(("upload".into(), 0, 0));
+                vec![Request::PushGains]
+            }
+            (Confirm::Upload, false) => {
+                self.params.diff = None;
+                self.note(Level::Info, "upload cancelled");
+                Vec::new()
+            }
+            (_, false) => {
+                self.note(Level::Info, "cancelled");
+                Vec::new()
+            }
+        }
+    }
+
+    /// Text entry: filters, a parameter value, a file path.
+    fn on_text(&mut self, key: KeyEvent) -> Vec<Request> {
+        let is_filter = self.params.edit.is_none() && self.params.file_prompt.is_none();
+        let view = self.view;
+        let buf: &mut String = if let Some(e) = self.params.edit.as_mut() {
+            e
+        } else if let Some(p) = self.params.file_prompt.as_mut() {
+            p
+        } else if view == View::Params {
+            &mut self.params.filter
+        } else {
+            &mut self.messages.filter
+        };
+        match key.code {
+            KeyCode::Char(c) => {
+                buf.push(c);
+                // The list under a filter changes: start from its top.
+                if is_filter {
+                    match view {
+                        View::Params => self.params.selected = 0,
+                        _ => self.messages.selected = 0,
+                    }
+                }
+                Vec::new()
+            }
+            KeyCode::Backspace => {
+                buf.pop();
+                Vec::new()
+            }
+            KeyCode::Esc => {
+                if is_filter {
+                    buf.clear();
+                }
+                self.typing = false;
+                self.params.edit = None;
+                self.params.file_prompt = None;
+                Vec::new()
+            }
+            KeyCode::Enter => {
+                self.typing = false;
+                if let Some(text) = self.params.edit.take() {
+                    return self.submit_param(&text);
+                }
+                if let Some(path) = self.params.file_prompt.take() {
+                    let path = path.trim().to_owned();
+                    if path.is_empty() {
+                        return Vec::new();
+                    }
+                    self.note(Level::Info, format!("reading {path}"));
+                    return vec![Request::LoadGains(path)];
+                }
+                Vec::new()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// Validates a typed value for the selected parameter and asks for the write.
+    fn submit_param(&mut self, text: &str) -> Vec<Request> {
+        let rows = self.params.filtered();
+        let Some((_, (name, _))) = rows.get(self.params.selected) else {
+            return Vec::new();
+        };
+        let name = name.clone();
+        match text.trim().parse::<f32>() {
+            Ok(v) if v.is_finite() => {
+                self.params
+                    .status
+                    .insert(name.clone(), ParamStatus::Pending(v));
+                vec![Request::ParamSet { name, value: v }]
+            }
+            _ => {
+                let reason = format!("{text:?} is not a finite number");
+                self.note(Level::Error, format!("{name}: {reason}"));
+                self.params
+                    .status
+                    .insert(name, ParamStatus::Refused(reason));
+                Vec::new()
+            }
+        }
+    }
+
+    fn on_params_key(&mut self, key: KeyEvent) -> Option<Vec<Request>> {
+        let n = self.params.filtered().len();
+        match key.code {
+            KeyCode::Up => self.params.selected = self.params.selected.saturating_sub(1),
+            KeyCode::Down => {
+                self.params.selected = (self.params.selected + 1).min(n.saturating_sub(1));
+            }
+            KeyCode::PageUp => self.params.selected = self.params.selected.saturating_sub(10),
+            KeyCode::PageDown => {
+                self.params.selected = (self.params.selected + 10).min(n.saturating_sub(1));
+            }
+            KeyCode::Char('/') => {
+                self.params.filter.clear();
+                self.typing = true;
+            }
+            KeyCode::Esc => self.params.filter.clear(),
+            KeyCode::Enter if n > 0 => {
+                self.params.edit = Some(String::new());
+                self.typing = true;
+            }
+            KeyCode::Char('f') => {
+                self.params.file_prompt = Some("config/gains.param".into());
+                self.typing = true;
+            }
+            KeyCode::Char('r') => {
+                self.params.progress = Some(("download".into(), 0, 0));
+                return Some(vec![Request::ParamsPull]);
+            }
+            _ => return None,
+        }
+        Some(Vec::new())
+    }
+
+    fn on_messages_key(&mut self, key: KeyEvent) -> Option<Vec<Request>> {
+        let m = &mut self.messages;
+        match key.code {
+            KeyCode::Up if m.in_fields => m.field = m.field.saturating_sub(1),
+            KeyCode::Down if m.in_fields => {
+                m.field = (m.field + 1).min(m.listed_fields.len().saturating_sub(1));
+            }
+            KeyCode::Up => {
+                m.selected = m.selected.saturating_sub(1);
+                m.field = 0;
+            }
+            KeyCode::Down => {
+                m.selected = (m.selected + 1).min(m.listed.len().saturating_sub(1));
+                m.field = 0;
+            }
+            KeyCode::Right => m.in_fields = true,
+            KeyCode::Left => m.in_fields = false,
+            KeyCode::Char('/') => {
+                m.filter.clear();
+                self.typing = true;
+            }
+            KeyCode::Esc => m.filter.clear(),
+            KeyCode::Enter => {
+                let (Some(&(system, component, message)), Some(path)) =
+                    (m.listed.get(m.selected), m.listed_fields.get(m.field))
+                else {
+                    return Some(Vec::new());
+                };
+                let key = SeriesKey {
+                    system,
+                    component,
+                    message,
+                    path: path.clone(),
+                };
+                if m.charts.is_empty() {
+                    m.charts.push(Vec::new());
+                }
+                let chart = m.charts.last_mut().unwrap_or_else(|| unreachable!());
+                if !chart.contains(&key) {
+                    chart.push(key);
+                }
+            }
+            KeyCode::Char('n') => m.charts.push(Vec::new()),
+            KeyCode::Delete | KeyCode::Backspace => {
+                if let Some(chart) = m.charts.last_mut() {
+                    chart.pop();
+                    if chart.is_empty() {
+                        m.charts.pop();
+                    }
+                }
+            }
+            _ => return None,
+        }
+        Some(Vec::new())
+    }
+
+    /// Flight commands: arm, modes, QLOITER target, pushes, chart window.
+    fn on_command_key(&mut self, key: KeyEvent, state: &VehicleState) -> Vec<Request> {
+        let vehicle = first_vehicle(state);
+        match key.code {
+            KeyCode::Char('a') => self.confirm = Some(Confirm::Arm { force: false }),
+            KeyCode::Char('A') => self.confirm = Some(Confirm::Arm { force: true }),
+            KeyCode::Char('d') => self.confirm = Some(Confirm::Disarm),
+            KeyCode::Char('t') => return self.mode("QHOVER"),
+            KeyCode::Char('l') => return self.mode("QLAND"),
+            KeyCode::Char('p') => return self.mode("QLOITER"),
+            KeyCode::Char('s') => return self.mode("QSTABILIZE"),
+            KeyCode::Char(c @ ('x' | 'X' | 'c' | 'C' | 'z' | 'Z')) => {
+                let (axis, sign) = match c {
+                    'x' => ("ROLL", 1.0),
+                    'X' => ("ROLL", -1.0),
+                    'c' => ("PITCH", 1.0),
+                    'C' => ("PITCH", -1.0),
+                    'z' => ("YAW", 1.0),
+                    _ => ("YAW", -1.0),
+                };
+                let name = format!("SIM_PUSH_{axis}");
+                let value = sign * PUSH_NM;
+                self.note(Level::Info, format!("push {name} = {value:+} N·m"));
+                return vec![Request::ParamSet { name, value }];
+            }
+            KeyCode::Char('+' | '=') => self.window_s = (self.window_s * 2.0).min(WINDOW_MAX_S),
+            KeyCode::Char('-') => self.window_s = (self.window_s / 2.0).max(WINDOW_MIN_S),
+            KeyCode::Up | KeyCode::Down | KeyCode::Left | KeyCode::Right => {
+                let (dn, de) = match key.code {
+                    KeyCode::Up => (TARGET_STEP_M, 0.0),
+                    KeyCode::Down => (-TARGET_STEP_M, 0.0),
+                    KeyCode::Right => (0.0, TARGET_STEP_M),
+                    _ => (0.0, -TARGET_STEP_M),
+                };
+                return self.move_target(vehicle, dn, de, 0.0);
+            }
+            KeyCode::PageUp => return self.move_target(vehicle, 0.0, 0.0, -TARGET_STEP_M),
+            KeyCode::PageDown => return self.move_target(vehicle, 0.0, 0.0, TARGET_STEP_M),
+            _ => {}
+        }
+        Vec::new()
+    }
+
+    fn mode(&mut self, name: &'static str) -> Vec<Request> {
+        self.note(Level::Info, format!("mode {name} sent"));
+        if name != "QLOITER" {
+            self.target_ned = None;
+        }
+        vec![Request::SetMode(name)]
+    }
+
+    /// Moves the QLOITER target; the first move starts from where the vehicle is.
+    fn move_target(
+        &mut self,
+        vehicle: Option<&VehicleView>,
+        dn: f32,
+        de: f32,
+        dd: f32,
+    ) -> Vec<Request> {
+        let Some(v) = vehicle else {
+            self.note(Level::Error, "no vehicle");
+            return Vec::new();
+        };
+        if v.mode_name() != "QLOITER" {
+            self.note(
+                Level::Error,
+                "arrows and PgUp/PgDn move the target in QLOITER only (p)",
+            );
+            return Vec::new();
+        }
+        let start = self.target_ned.or_else(|| v.position.map(|p| p.pos_ned_m));
+        let Some(mut t) = start else {
+            self.note(Level::Error, "no position from the vehicle yet");
+            return Vec::new();
+        };
+        t[0] += dn;
+        t[1] += de;
+        // Down is negative up; never below the ground (z = 0).
+        t[2] = (t[2] + dd).min(0.0);
+        self.target_ned = Some(t);
+        vec![Request::PositionTarget(t)]
+    }
+
+    /// Applies what came back from the client.
+    pub fn on_outcome(&mut self, outcome: Outcome) {
+        match outcome {
+            Outcome::Command { what, result } => match result {
+                Ok(()) => self.note(Level::Ok, format!("{what}: done")),
+                Err(e) => self.note(Level::Error, format!("{what}: {e}")),
+            },
+            Outcome::Params(table) => {
+                self.params.table = table;
+                self.params.progress = None;
+                let n = self.params.table.len();
+                self.note(Level::Ok, format!("{n} parameters"));
+            }
+            Outcome::Progress { what, done, total } => {
+                self.params.progress = Some((what, done, total));
+            }
+            Outcome::ParamSet { name, result } => match result {
+                Ok(v) => {
+                    if let Some(row) = self.params.table.iter_mut().find(|(n, _)| *n == name) {
+                        row.1 = v;
+                    }
+                    // A push resets itself; the log says it went out.
+                    if !name.starts_with("SIM_PUSH_") {
+                        self.note(Level::Ok, format!("{name} = {v} confirmed"));
+                    }
+                    self.params.status.insert(name, ParamStatus::Confirmed);
+                }
+                Err(reason) => {
+                    self.note(Level::Error, format!("{name} refused: {reason}"));
+                    self.params
+                        .status
+                        .insert(name, ParamStatus::Refused(reason));
+                }
+            },
+            Outcome::GainsLoaded(Ok(diff)) => {
+                if diff.is_empty() {
+                    self.note(
+                        Level::Ok,
+                        "the vehicle already holds every value in the file",
+                    );
+                    self.params.diff = None;
+                } else {
+                    self.params.diff = Some(diff);
+                    self.confirm = Some(Confirm::Upload);
+                }
+            }
+            Outcome::GainsLoaded(Err(e)) => self.note(Level::Error, e),
+            Outcome::GainsPushed(result) => {
+                self.params.progress = None;
+                self.params.diff = None;
+                match result {
+                    Ok(s) => self.note(Level::Ok, s),
+                    Err(e) => self.note(Level::Error, e),
+                }
+            }
+        }
+    }
+}

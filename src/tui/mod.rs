@@ -1,0 +1,237 @@
+//! The terminal ground station: ratatui over crossterm. [`app`] holds the UI state and turns
+//! keys into [`app::Request`]s (pure), [`view`] draws a [`view::Snapshot`] (pure), and [`run`]
+//! is the thin shell: terminal set-up and restore, input on its own thread, redraws capped at
+//! 30 fps and only when something changed, requests handed to a [`Control`] (the client).
+//!
+//! The terminal is restored on every way out: a normal return, an error, a panic (ratatui's
+//! hook), and SIGTERM/Ctrl-C (the caller's cancellation token ends the loop).
+
+pub mod app;
+pub mod exec;
+pub mod fields;
+pub mod view;
+
+use std::future::Future;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use ratatui::crossterm::event::{self, Event, KeyEventKind};
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+
+use crate::daemon::{OWN_TRAFFIC_PEER, Running, describe};
+use app::{App, Outcome, Request};
+use view::{LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
+
+/// Shortest time between two redraws driven by vehicle data (30 fps). Keys redraw at once.
+pub const FRAME_INTERVAL: Duration = Duration::from_millis(33);
+/// Redraw at least this often, so ages and the lost state move on a silent link.
+const IDLE_REDRAW: Duration = Duration::from_millis(500);
+
+/// Carries out the UI's requests (the ground station's client) and reports what came of them.
+pub trait Control: Clone + Send + Sync + 'static {
+    /// Carries out one request, sending its outcome(s) on `out`.
+    fn execute(
+        &self,
+        request: Request,
+        out: mpsc::Sender<Outcome>,
+    ) -> impl Future<Output = ()> + Send;
+}
+
+/// Builds what one frame shows from the running daemon.
+#[must_use]
+pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, Option<TlogInfo>) {
+    let links = running
+        .router
+        .links
+        .borrow()
+        .iter()
+        .map(|l| LinkRow {
+            id: l.id,
+            side: l.side,
+            peer: l.peer.clone(),
+            own: l.peer == OWN_TRAFFIC_PEER,
+            stats: l.stats.snapshot(),
+        })
+        .collect();
+    let s = &running.router.stats;
+    let counters = RouterCounters {
+        frames_in: s.frames_in.load(Ordering::Relaxed),
+        frames_out: s.frames_out.load(Ordering::Relaxed),
+        unroutable: s.unroutable.load(Ordering::Relaxed),
+        withheld_signing: s.withheld_signing.load(Ordering::Relaxed),
+        dropped_link_closed: s.dropped_link_closed.load(Ordering::Relaxed),
+        dropped_tap: s.dropped_tap.load(Ordering::Relaxed),
+    };
+    let tlog = running.tlog_path.as_ref().map(|p| {
+        let st = running.tlog_stats.as_deref();
+        let get = |f: fn(&crate::tlog::TlogStats) -> &std::sync::atomic::AtomicU64| {
+            st.map_or(0, |s| f(s).load(Ordering::Relaxed))
+        };
+        TlogInfo {
+            path: p.display().to_string(),
+            bytes: get(|s| &s.bytes),
+            records: get(|s| &s.records),
+            dropped: get(|s| &s.dropped_queue_full),
+            errors: get(|s| &s.write_errors),
+        }
+    });
+    (links, counters, tlog)
+}
+
+/// Draws one frame of the running daemon's state on any ratatui backend.
+///
+/// # Errors
+/// The backend's write error.
+pub fn draw_running<B: ratatui::backend::Backend>(
+    terminal: &mut ratatui::Terminal<B>,
+    app: &mut App,
+    running: &Running,
+    cache: &mut SeriesCache,
+    now: Instant,
+) -> Result<(), B::Error> {
+    let state = running.state.borrow().clone();
+    let (links, router, tlog) = links_and_counters(running);
+    let serving = running
+        .serving
+        .iter()
+        .map(|(u, a)| describe(u, *a))
+        .collect();
+    let history = running
+        .history
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let snap = Snapshot {
+        now,
+        state: &state,
+        history: &history,
+        links,
+        router,
+        tlog,
+        serving,
+    };
+    terminal.draw(|f| view::draw(f, app, &snap, cache))?;
+    Ok(())
+}
+
+/// Reads terminal events on a plain thread (crossterm's read blocks) until `stop` is set.
+fn spawn_input(tx: mpsc::Sender<Event>, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        while !stop.load(Ordering::Relaxed) {
+            match event::poll(Duration::from_millis(100)) {
+                Ok(true) => match event::read() {
+                    Ok(ev) => {
+                        if tx.blocking_send(ev).is_err() {
+                            return;
+                        }
+                    }
+                    Err(_) => return,
+                },
+                Ok(false) => {}
+                Err(_) => return,
+            }
+        }
+    })
+}
+
+/// Runs the UI on the terminal until `q` or `cancel`; restores the terminal on the way out.
+///
+/// # Errors
+/// The terminal could not be set up or written.
+pub async fn run<C: Control>(
+    running: &Running,
+    control: C,
+    cancel: CancellationToken,
+) -> std::io::Result<()> {
+    let mut terminal = ratatui::try_init()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let (key_tx, keys) = mpsc::channel(64);
+    let input = spawn_input(key_tx, Arc::clone(&stop));
+    let result = event_loop(&mut terminal, running, control, keys, cancel).await;
+    stop.store(true, Ordering::Relaxed);
+    let _ = tokio::task::spawn_blocking(move || input.join()).await;
+    ratatui::try_restore()?;
+    result
+}
+
+/// The UI's loop on any backend and any event source (the terminal's, or a benchmark's):
+/// keys become requests carried out by `control` as tasks, outcomes update the state, and the
+/// screen is redrawn at once after a key or an outcome, and at most every [`FRAME_INTERVAL`]
+/// for vehicle data. Returns on `q`, when `events` closes, or when `cancel` fires.
+///
+/// # Errors
+/// The backend's write error.
+pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
+    terminal: &mut ratatui::Terminal<B>,
+    running: &Running,
+    control: C,
+    mut events: mpsc::Receiver<Event>,
+    cancel: CancellationToken,
+) -> Result<(), B::Error> {
+    let (out_tx, mut outcomes) = mpsc::channel(64);
+    let mut app = App::default();
+    let mut cache = SeriesCache::default();
+    let mut state_rx = running.state.clone();
+    let mut tick = tokio::time::interval(FRAME_INTERVAL);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut dirty = true;
+    let mut last_draw = Instant::now()
+        .checked_sub(IDLE_REDRAW)
+        .unwrap_or_else(Instant::now);
+    // The table names the outputs and holds HOVER_ALT: fetch it once at start.
+    {
+        let c = control.clone();
+        let out = out_tx.clone();
+        app.params.progress = Some(("download".into(), 0, 0));
+        tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
+    }
+    loop {
+        let mut now_draw = false;
+        tokio::select! {
+            () = cancel.cancelled() => return Ok(()),
+            ev = events.recv() => {
+                let Some(ev) = ev else { return Ok(()) };
+                match ev {
+                    Event::Key(k) if k.kind != KeyEventKind::Release => {
+                        let state = running.state.borrow().clone();
+                        for req in app.on_key(k, &state, Instant::now()) {
+                            let c = control.clone();
+                            let out = out_tx.clone();
+                            tokio::spawn(async move { c.execute(req, out).await });
+                        }
+                        if app.quit {
+                            return Ok(());
+                        }
+                        now_draw = true;
+                    }
+                    Event::Resize(_, _) => now_draw = true,
+                    _ => {}
+                }
+            }
+            o = outcomes.recv() => {
+                if let Some(o) = o {
+                    app.on_outcome(o);
+                    now_draw = true;
+                }
+            }
+            r = state_rx.changed() => {
+                if r.is_err() {
+                    return Ok(());
+                }
+                dirty = true;
+            }
+            _ = tick.tick() => {
+                if last_draw.elapsed() >= IDLE_REDRAW {
+                    dirty = true;
+                }
+            }
+        }
+        // Keys and outcomes draw at once (a person is waiting); vehicle data at most at 30 fps.
+        if now_draw || (dirty && last_draw.elapsed() >= FRAME_INTERVAL) {
+            draw_running(terminal, &mut app, running, &mut cache, Instant::now())?;
+            last_draw = Instant::now();
+            dirty = false;
+        }
+    }
+}

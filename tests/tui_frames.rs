@@ -1,0 +1,420 @@
+//! Whole frames of the terminal UI rendered into ratatui's `TestBackend` from recorded vehicle
+//! states (real MAVLink frames applied to the tracker at fixed times), compared with insta
+//! snapshots: hover, armed climb, link lost, parameter edit, refused parameter, help overlay,
+//! a terminal too small, and the charts, links and messages views.
+
+use std::time::{Duration, Instant};
+
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+use vtol_gcs::router::Side;
+use vtol_gcs::tui::app::{App, Outcome, View};
+use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
+use vtol_gcs::vehicle::{History, VehicleState};
+use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::{Frame, LinkId, LinkStatsSnapshot};
+
+const VEHICLE_LINK: LinkId = LinkId(1);
+const OWN_LINK: LinkId = LinkId(2);
+
+/// A recording: the tracker state and history after frames applied at known times.
+struct Recording {
+    t0: Instant,
+    state: VehicleState,
+    history: History,
+    seq: u8,
+}
+
+impl Recording {
+    fn new() -> Self {
+        let t0 = Instant::now();
+        Self {
+            t0,
+            state: VehicleState::new(t0),
+            history: History::new(t0),
+            seq: 0,
+        }
+    }
+
+    fn at(&self, ms: u64) -> Instant {
+        self.t0 + Duration::from_millis(ms)
+    }
+
+    fn feed(&mut self, ms: u64, msg: &MavMessage) {
+        let frame = Frame::encode_v2(1, 1, self.seq, msg);
+        self.seq = self.seq.wrapping_add(1);
+        let now = self.at(ms);
+        let decoded = self.state.apply(VEHICLE_LINK, Side::Vehicle, &frame, now);
+        self.history.record(&frame, decoded.as_ref(), now);
+    }
+
+    fn feed_gcs(&mut self, ms: u64) {
+        let frame = Frame::encode_v2(255, 190, (ms / 1000) as u8, &vtol_link::gcs_heartbeat());
+        let now = self.at(ms);
+        let decoded = self.state.apply(OWN_LINK, Side::Client, &frame, now);
+        self.history.record(&frame, decoded.as_ref(), now);
+    }
+
+    /// A flight from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
+    /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
+    fn fly(
+        &mut self,
+        from_ms: u64,
+        to_ms: u64,
+        f: impl Fn(f64) -> (u32, bool, f32, f32, f32, f32),
+    ) {
+        let mut ms = from_ms;
+        while ms < to_ms {
+            let t = ms as f64 / 1000.0;
+            let (mode, armed, roll, pitch, yaw, alt) = f(t);
+            if ms.is_multiple_of(1000) {
+                self.feed(ms, &heartbeat(mode, armed));
+                self.feed_gcs(ms);
+            }
+            self.feed(
+                ms,
+                &MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+                    time_boot_ms: ms as u32,
+                    roll,
+                    pitch,
+                    yaw,
+                    rollspeed: 0.01,
+                    pitchspeed: -0.02,
+                    yawspeed: 0.0,
+                }),
+            );
+            if ms.is_multiple_of(100) {
+                let esc = if armed {
+                    1450 + (alt * 40.0) as u16
+                } else {
+                    1000
+                };
+                self.feed(
+                    ms,
+                    &MavMessage::SERVO_OUTPUT_RAW(dialect::SERVO_OUTPUT_RAW_DATA {
+                        time_usec: 0,
+                        servo1_raw: esc + 12,
+                        servo2_raw: esc - 12,
+                        servo3_raw: 1500 + (roll * 500.0) as u16,
+                        servo4_raw: 1500 - (roll * 500.0) as u16,
+                        servo5_raw: 1520,
+                        ..Default::default()
+                    }),
+                );
+                self.feed(
+                    ms,
+                    &MavMessage::LOCAL_POSITION_NED(dialect::LOCAL_POSITION_NED_DATA {
+                        time_boot_ms: ms as u32,
+                        x: 0.05,
+                        y: -0.02,
+                        z: -alt,
+                        vx: 0.0,
+                        vy: 0.0,
+                        vz: 0.0,
+                    }),
+                );
+            }
+            ms += 20;
+        }
+    }
+
+    fn status(&mut self, ms: u64, severity: dialect::MavSeverity, text: &str) {
+        let mut data = dialect::STATUSTEXT_DATA {
+            severity,
+            ..Default::default()
+        };
+        data.text = text.into();
+        self.feed(ms, &MavMessage::STATUSTEXT(data));
+    }
+}
+
+fn heartbeat(mode: u32, armed: bool) -> MavMessage {
+    let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+    if armed {
+        base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+    }
+    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+        custom_mode: mode,
+        mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode,
+        system_status: if armed {
+            MavState::MAV_STATE_ACTIVE
+        } else {
+            MavState::MAV_STATE_STANDBY
+        },
+        mavlink_version: 3,
+    })
+}
+
+fn links(rec: &Recording) -> Vec<LinkRow> {
+    let vehicle = &rec.state.links[&VEHICLE_LINK];
+    let own = &rec.state.links[&OWN_LINK];
+    vec![
+        LinkRow {
+            id: VEHICLE_LINK,
+            side: Side::Vehicle,
+            peer: "embedded twin".into(),
+            own: false,
+            stats: LinkStatsSnapshot {
+                rx_frames: vehicle.frames,
+                tx_frames: own.frames,
+                ..Default::default()
+            },
+        },
+        LinkRow {
+            id: OWN_LINK,
+            side: Side::Client,
+            peer: vtol_gcs::daemon::OWN_TRAFFIC_PEER.into(),
+            own: true,
+            stats: LinkStatsSnapshot {
+                rx_frames: own.frames,
+                tx_frames: vehicle.frames,
+                ..Default::default()
+            },
+        },
+    ]
+}
+
+/// The twin's parameter table, as far as the views use it.
+fn params() -> Vec<(String, f32)> {
+    [
+        ("HOVER_ALT", 1.0),
+        ("LAT_SAT_A", 1.2),
+        ("LAT_SAT_B", 0.6),
+        ("LAT_SAT_C", 0.22),
+        ("LAT_SAT_D", 0.18),
+        ("SERVO1_FUNCTION", 74.0),
+        ("SERVO2_FUNCTION", 73.0),
+        ("SERVO3_FUNCTION", 4.0),
+        ("SERVO4_FUNCTION", 4.0),
+        ("SERVO5_FUNCTION", 19.0),
+        ("SIM_PUSH_ROLL", 0.0),
+    ]
+    .into_iter()
+    .map(|(n, v)| (n.to_owned(), v))
+    .collect()
+}
+
+fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
+    let snap = Snapshot {
+        now: rec.at(at_ms),
+        state: &rec.state,
+        history: &rec.history,
+        links: links(rec),
+        router: RouterCounters {
+            frames_in: 1234,
+            frames_out: 1200,
+            unroutable: 3,
+            ..Default::default()
+        },
+        tlog: Some(TlogInfo {
+            path: "logs/2026-11-23T11-00-00.tlog".into(),
+            bytes: 123_456,
+            records: 2345,
+            dropped: 0,
+            errors: 0,
+        }),
+        serving: vec![
+            "tcpin:127.0.0.1:5770".into(),
+            "udpout:127.0.0.1:14550".into(),
+        ],
+    };
+    let mut cache = SeriesCache::default();
+    terminal
+        .draw(|f| view::draw(f, app, &snap, &mut cache))
+        .expect("draw");
+    format!("{}", terminal.backend())
+}
+
+fn app_with_params() -> App {
+    let mut app = App::default();
+    app.on_outcome(Outcome::Params(params()));
+    app
+}
+
+fn key(c: KeyCode) -> KeyEvent {
+    KeyEvent::new(c, KeyModifiers::NONE)
+}
+
+fn hover() -> Recording {
+    let mut rec = Recording::new();
+    rec.fly(0, 20_000, |t| {
+        let wobble = (t * 2.0).sin() as f32;
+        (18, true, 0.05 * wobble, -0.03 * wobble, 0.3, 1.0)
+    });
+    rec.status(
+        5_000,
+        dialect::MavSeverity::MAV_SEVERITY_INFO,
+        "Mode QHOVER",
+    );
+    rec.status(
+        6_000,
+        dialect::MavSeverity::MAV_SEVERITY_WARNING,
+        "push on roll 0.2 N.m",
+    );
+    rec
+}
+
+#[test]
+fn hover_flight_view() {
+    let rec = hover();
+    let mut app = app_with_params();
+    insta::assert_snapshot!(render(&mut app, &rec, 20_000, (100, 32)));
+}
+
+#[test]
+fn armed_climb_flight_and_charts() {
+    let mut rec = Recording::new();
+    rec.fly(0, 4_000, |_| (18, false, 0.0, 0.0, 1.5, 0.0));
+    rec.fly(4_000, 12_000, |t| {
+        let alt = ((t - 4.0) / 6.0).min(1.0) as f32 * 0.8;
+        (18, true, 0.02, -0.01, 1.5, alt)
+    });
+    let mut app = app_with_params();
+    insta::assert_snapshot!(
+        "armed_climb_flight",
+        render(&mut app, &rec, 12_000, (100, 32))
+    );
+    app.view = View::Charts;
+    insta::assert_snapshot!(
+        "armed_climb_charts",
+        render(&mut app, &rec, 12_000, (120, 40))
+    );
+}
+
+#[test]
+fn link_lost() {
+    let rec = hover();
+    let mut app = app_with_params();
+    // Nothing since 20 s: at 27 s (last heartbeat at 19 s) the link is lost, rates read 0 and the attitude is stale.
+    let frame = render(&mut app, &rec, 27_000, (100, 32));
+    assert!(frame.contains("LINK LOST 8 s"), "{frame}");
+    assert!(frame.contains("│ 0 Hz"), "{frame}");
+    insta::assert_snapshot!(frame);
+    app.view = View::Links;
+    insta::assert_snapshot!(
+        "link_lost_links_view",
+        render(&mut app, &rec, 27_000, (100, 32))
+    );
+}
+
+#[test]
+fn parameter_edit_and_refusal() {
+    let rec = hover();
+    let mut app = app_with_params();
+    app.view = View::Params;
+    let state = rec.state.clone();
+    let now = rec.at(20_000);
+    // Filter to the lateral levels, pick LAT_SAT_B, type 0.7.
+    for k in [
+        KeyCode::Char('/'),
+        KeyCode::Char('l'),
+        KeyCode::Char('a'),
+        KeyCode::Char('t'),
+        KeyCode::Enter,
+        KeyCode::Down,
+        KeyCode::Enter,
+    ] {
+        assert!(app.on_key(key(k), &state, now).is_empty());
+    }
+    for c in "0.7".chars() {
+        app.on_key(key(KeyCode::Char(c)), &state, now);
+    }
+    insta::assert_snapshot!(
+        "parameter_edit_typing",
+        render(&mut app, &rec, 20_000, (100, 30))
+    );
+    let reqs = app.on_key(key(KeyCode::Enter), &state, now);
+    assert_eq!(
+        reqs,
+        [vtol_gcs::tui::app::Request::ParamSet {
+            name: "LAT_SAT_B".into(),
+            value: 0.7
+        }]
+    );
+    insta::assert_snapshot!(
+        "parameter_edit_sent",
+        render(&mut app, &rec, 20_000, (100, 30))
+    );
+    app.on_outcome(Outcome::ParamSet {
+        name: "LAT_SAT_B".into(),
+        result: Err("LAT_SAT_B: saturation levels need a > b + c + d".into()),
+    });
+    insta::assert_snapshot!(
+        "parameter_refused",
+        render(&mut app, &rec, 20_000, (100, 30))
+    );
+    // A confirmed write shows the vehicle's value.
+    app.on_outcome(Outcome::ParamSet {
+        name: "LAT_SAT_A".into(),
+        result: Ok(1.5),
+    });
+    insta::assert_snapshot!(
+        "parameter_confirmed",
+        render(&mut app, &rec, 20_000, (100, 30))
+    );
+}
+
+#[test]
+fn help_overlay() {
+    let rec = hover();
+    let mut app = app_with_params();
+    app.on_key(key(KeyCode::Char('?')), &rec.state, rec.at(20_000));
+    insta::assert_snapshot!(render(&mut app, &rec, 20_000, (100, 32)));
+}
+
+#[test]
+fn tiny_terminal_says_so() {
+    let rec = hover();
+    let mut app = app_with_params();
+    let frame = render(&mut app, &rec, 20_000, (40, 10));
+    assert!(frame.contains("too small"), "{frame}");
+    insta::assert_snapshot!(frame);
+}
+
+#[test]
+fn messages_view_charts_array_elements() {
+    let mut rec = hover();
+    // SERVO_OUTPUT_RAW has no array, ATTITUDE_QUATERNION has `repr_offset_q[4]`.
+    for i in 0..100u64 {
+        let q = dialect::ATTITUDE_QUATERNION_DATA {
+            repr_offset_q: [0.0, (i as f32) / 100.0, 0.0, 0.0],
+            ..Default::default()
+        };
+        rec.feed(10_000 + i * 100, &MavMessage::ATTITUDE_QUATERNION(q));
+    }
+    let mut app = app_with_params();
+    app.view = View::Messages;
+    let state = rec.state.clone();
+    let now = rec.at(20_000);
+    // Draw once so the list is known, then filter to the quaternion and chart repr_offset_q[1].
+    render(&mut app, &rec, 20_000, (120, 40));
+    for k in [
+        KeyCode::Char('/'),
+        KeyCode::Char('q'),
+        KeyCode::Char('u'),
+        KeyCode::Char('a'),
+        KeyCode::Enter,
+    ] {
+        app.on_key(key(k), &state, now);
+    }
+    render(&mut app, &rec, 20_000, (120, 40));
+    app.on_key(key(KeyCode::Right), &state, now);
+    let numeric = app.messages.listed_fields.clone();
+    let idx = numeric
+        .iter()
+        .position(|p| p == "repr_offset_q[1]")
+        .expect("array element listed");
+    for _ in 0..idx {
+        app.on_key(key(KeyCode::Down), &state, now);
+    }
+    app.on_key(key(KeyCode::Enter), &state, now);
+    // A second series from another message on the same chart.
+    app.on_key(key(KeyCode::Esc), &state, now);
+    assert_eq!(app.messages.charts.len(), 1);
+    assert_eq!(app.messages.charts[0][0].path, "repr_offset_q[1]");
+    insta::assert_snapshot!(render(&mut app, &rec, 20_000, (120, 40)));
+}
