@@ -197,14 +197,7 @@ fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
         }
     }
     init_ui_tracing(config.log_dir.as_deref())?;
-    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
-    runtime.block_on(async move {
-        let cancel = CancellationToken::new();
-        let signal_cancel = cancel.clone();
-        tokio::spawn(async move {
-            wait_for_shutdown_signal().await;
-            signal_cancel.cancel();
-        });
+    until_shutdown(|cancel| async move {
         let mut tasks = tokio::task::JoinSet::new();
         let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
         let result = vtol_gcs::tui::run(
@@ -224,16 +217,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
 }
 
 fn run_config(config: Config) -> anyhow::Result<()> {
-    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
-    runtime.block_on(async move {
-        let cancel = CancellationToken::new();
-        let signal_cancel = cancel.clone();
-        tokio::spawn(async move {
-            wait_for_shutdown_signal().await;
-            signal_cancel.cancel();
-        });
-        run_daemon(config, cancel).await
-    })
+    until_shutdown(|cancel| async move { run_daemon(config, cancel).await })
 }
 
 /// The headless daemon: start-up lines, then a status line per interval.
@@ -282,6 +266,24 @@ async fn print_status_lines(
             }
         }
     }
+}
+
+/// Runs `body` on a new runtime with a cancellation token that Ctrl-C or SIGTERM fires.
+fn until_shutdown<F, Fut>(body: F) -> anyhow::Result<()>
+where
+    F: FnOnce(CancellationToken) -> Fut,
+    Fut: std::future::Future<Output = anyhow::Result<()>>,
+{
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
+    runtime.block_on(async move {
+        let cancel = CancellationToken::new();
+        let signal_cancel = cancel.clone();
+        tokio::spawn(async move {
+            wait_for_shutdown_signal().await;
+            signal_cancel.cancel();
+        });
+        body(cancel).await
+    })
 }
 
 async fn wait_for_shutdown_signal() {

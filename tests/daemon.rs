@@ -71,6 +71,20 @@ impl Daemon {
     }
 }
 
+/// Runs the binary expecting it to fail at start; returns its one line of standard error.
+fn failing_start(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    lines[0].to_owned()
+}
+
 impl Drop for Daemon {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -162,23 +176,15 @@ fn a_broken_config_file_is_one_clear_error() {
 fn a_serve_port_in_use_is_one_clear_line() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = taken.local_addr().unwrap().port();
-    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
-        .args([
-            "run",
-            "--no-log",
-            "--serve",
-            &format!("tcpin:127.0.0.1:{port}"),
-        ])
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "{err}");
+    let line = failing_start(&[
+        "run",
+        "--no-log",
+        "--serve",
+        &format!("tcpin:127.0.0.1:{port}"),
+    ]);
     assert!(
-        lines[0].starts_with("error: cannot open tcpin:") && lines[0].contains("in use"),
-        "{err}"
+        line.starts_with("error: cannot open tcpin:") && line.contains("in use"),
+        "{line}"
     );
 }
 
@@ -238,24 +244,16 @@ fn two_daemons_sharing_a_log_dir_keep_two_whole_logs() {
 fn a_serial_vehicle_that_does_not_exist_is_one_clear_line() {
     let dir = tempfile::tempdir().unwrap();
     let device = dir.path().join("ttyUSB-missing");
-    let out = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
-        .args([
-            "run",
-            "--no-log",
-            "--serve",
-            "tcpin:127.0.0.1:0",
-            "--vehicle",
-            &format!("serial:{}:57600", device.display()),
-        ])
-        .env_remove("RUST_BACKTRACE")
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "{err}");
+    let line = failing_start(&[
+        "run",
+        "--no-log",
+        "--serve",
+        "tcpin:127.0.0.1:0",
+        "--vehicle",
+        &format!("serial:{}:57600", device.display()),
+    ]);
     assert!(
-        lines[0].contains("ttyUSB-missing") && lines[0].contains("does not exist"),
-        "{err}"
+        line.contains("ttyUSB-missing") && line.contains("does not exist"),
+        "{line}"
     );
 }
