@@ -371,6 +371,8 @@ const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
 /// While resynchronising, a candidate record's timestamp must lie this close to the last good
 /// one (µs): a CRC-valid frame inside garbage is rare, one with a plausible time rarer still.
 const RESYNC_MAX_JUMP_US: u64 = 24 * 3600 * 1_000_000;
+/// 2000-01-01 to 2100-01-01 in Unix µs: where a logger's timestamp can be.
+const PLAUSIBLE_UNIX_US: std::ops::Range<u64> = 946_684_800_000_000..4_102_444_800_000_000;
 
 /// Streaming reader of the records of a tlog written by this project, pymavlink or MAVProxy.
 ///
@@ -537,14 +539,17 @@ impl Iterator for TlogReader {
 
 /// Whether a record with a CRC-checked frame starts anywhere in `bytes`.
 fn whole_record_within(bytes: &[u8]) -> bool {
-    (0..bytes.len()).any(|i| {
-        let rest = &bytes[i..];
-        rest.get(8..)
-            .and_then(vtol_link::frame_len_from_prefix)
-            .and_then(|len| rest.get(8..8 + len))
-            .and_then(|b| Frame::from_bytes(Bytes::copy_from_slice(b)).ok())
-            .is_some_and(|f| f.is_verified())
-    })
+    (0..bytes.len()).any(|i| checked_record_at(&bytes[i..]))
+}
+
+/// Whether `bytes` starts with a whole record whose frame's CRC checks.
+fn checked_record_at(bytes: &[u8]) -> bool {
+    bytes
+        .get(8..)
+        .and_then(vtol_link::frame_len_from_prefix)
+        .and_then(|len| bytes.get(8..8 + len))
+        .and_then(|b| Frame::from_bytes(Bytes::copy_from_slice(b)).ok())
+        .is_some_and(|f| f.is_verified())
 }
 
 impl TlogReader {
@@ -567,28 +572,35 @@ impl TlogReader {
     /// Whether a whole record at `pos` is taken.
     ///
     /// In step (right after a good record), a frame whose CRC checks is taken. A frame of an id
-    /// the dialect does not know has no CRC to check, so it is taken only if another whole,
-    /// CRC-checked record follows right behind it: otherwise garbage right after a record
-    /// could pass as one. (So such a frame as the very last record is counted as skipped.)
+    /// the dialect does not know has no CRC to check, so it is taken only if its time is within
+    /// a day of the last good one and another whole, CRC-checked record follows right behind
+    /// it: otherwise garbage right after a record could pass as one. (So such a frame as the very last record is counted as skipped.)
     ///
     /// While resynchronising (and at the start of the file), two of three must hold: the CRC
     /// checks, the time is within a day of the last good one, a whole CRC-checked record
-    /// follows. A frame of an unknown id needs both of the others.
+    /// follows. A frame of an unknown id needs both of the others (before any good record, a
+    /// plausible Unix time stands in for the first), and never swallows the start of a checked
+    /// record.
     fn acceptable(&self, stamp: u64, frame: &Frame, record_len: usize) -> bool {
-        let followed = || {
-            let next = &self.buf[self.pos + record_len..];
-            next.get(8..)
-                .and_then(vtol_link::frame_len_from_prefix)
-                .and_then(|len| next.get(8..8 + len))
-                .and_then(|bytes| Frame::from_bytes(Bytes::copy_from_slice(bytes)).ok())
-                .is_some_and(|f| f.is_verified())
+        let followed = || checked_record_at(&self.buf[self.pos + record_len..]);
+        // An unchecked frame that would swallow the start of a checked record is garbage that
+        // happens to look like a header: the checked record wins.
+        if !frame.is_verified()
+            && (1..record_len).any(|i| checked_record_at(&self.buf[self.pos + i..]))
+        {
+            return false;
+        }
+        let near = match self.last_stamp {
+            Some(last) => stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US,
+            // Nothing to compare with yet: a checked frame passes, but a frame nobody can check
+            // must at least carry a plausible wall-clock time (loggers stamp Unix µs).
+            None => frame.is_verified() || PLAUSIBLE_UNIX_US.contains(&stamp),
         };
         if !self.resyncing {
-            return frame.is_verified() || followed();
+            // In step an unchecked frame also needs a time that fits: garbage right after a
+            // record can form a whole frame of an unknown id, but rarely its time.
+            return frame.is_verified() || (near && followed());
         }
-        let near = self
-            .last_stamp
-            .is_none_or(|last| stamp.abs_diff(last) <= RESYNC_MAX_JUMP_US);
         match (frame.is_verified(), near) {
             (true, true) => true,
             (true, false) | (false, true) => followed(),
@@ -680,7 +692,8 @@ mod tests {
         for (i, g) in garbage.iter().enumerate() {
             data.extend_from_slice(g);
             let f = Frame::encode_v2(1, 1, i as u8, &vtol_link::gcs_heartbeat());
-            data.extend_from_slice(&(1_000_000 + i as u64 * 1000).to_be_bytes());
+            // Unix µs, as loggers stamp records (2026-11-22), 1 ms apart.
+            data.extend_from_slice(&(1_795_346_880_000_000 + i as u64 * 1000).to_be_bytes());
             data.extend_from_slice(f.as_bytes());
             frames.push(f.as_bytes().to_vec());
         }
@@ -690,26 +703,57 @@ mod tests {
     #[test]
     fn garbage_that_looks_like_a_frame_of_an_unknown_id_is_skipped() {
         // A stamp, then a v2 header of message id 0xABCDEF (not in the dialect, so no CRC to
-        // check) with a short length: in step it would be taken; between records it must not be.
-        let mut fake = vec![0xFFu8; 8];
-        fake.extend_from_slice(&[0xFD, 1, 0, 0, 9, 9, 9, 0xEF, 0xCD, 0xAB, 0, 0, 0]);
+        // check) with a short length. With a time far from the log's it is garbage, between
+        // records and in step; with a time that fits, in step and with a whole checked record
+        // behind it, the same frame is a record.
+        let header = [0xFD, 1, 0, 0, 9, 9, 9, 0xEF, 0xCD, 0xAB, 0, 0, 0];
+        let mut far = vec![0xFFu8; 8];
+        far.extend_from_slice(&header);
+        let mut near = 1_795_346_880_003_500u64.to_be_bytes().to_vec();
+        near.extend_from_slice(&header);
         let mut after_garbage = vec![0x55];
-        after_garbage.extend_from_slice(&fake);
+        after_garbage.extend_from_slice(&far);
         let (data, frames) = records_with_garbage(&[
             vec![],
             vec![0x55, 0x13],
             after_garbage,
-            fake.clone(),
+            far.clone(),
+            near.clone(),
             vec![],
         ]);
         let mut r = TlogReader::from_bytes(data);
         let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
-        // in step, with a whole checked record behind them, the same bytes are a record
         let mut want = frames.clone();
-        want.insert(3, fake[8..].to_vec());
+        want.insert(4, near[8..].to_vec());
         assert_eq!(got, want);
-        assert_eq!(r.skipped_bytes, 2 + 1 + 8 + 13);
+        assert_eq!(r.skipped_bytes, 2 + 1 + 21 + 21);
         assert_eq!(r.truncated_tail_bytes, 0);
+    }
+
+    #[test]
+    fn a_whole_unchecked_frame_stamped_zero_at_the_start_is_garbage() {
+        // Found by the property test below: garbage that forms a whole frame of an unknown id
+        // (v1, id 52) right before the first record, stamped 0.
+        let mut g = vec![0u8; 8];
+        g.extend_from_slice(&[254, 12, 0, 0, 0, 52]);
+        g.extend_from_slice(&[0; 14]);
+        let (data, frames) = records_with_garbage(&[g]);
+        let mut r = TlogReader::from_bytes(data);
+        let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+        assert_eq!(got, frames);
+        assert_eq!(r.skipped_bytes, 28);
+    }
+
+    #[test]
+    fn an_unchecked_header_in_garbage_does_not_swallow_the_record_behind_it() {
+        // Found by the property test below: a v2 header of an unknown id (no CRC) whose length
+        // reaches over the next record. The record's own CRC-checked frame must win.
+        let (data, frames) =
+            records_with_garbage(&[vec![0, 0, 0, 0, 0, 0, 0, 0, 253, 52], vec![0; 33]]);
+        let mut r = TlogReader::from_bytes(data);
+        let got: Vec<Vec<u8>> = r.by_ref().map(|(_, f)| f.as_bytes().to_vec()).collect();
+        assert_eq!(got, frames);
+        assert_eq!(r.skipped_bytes, 10 + 33);
     }
 
     proptest::proptest! {
