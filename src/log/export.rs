@@ -99,21 +99,14 @@ pub fn csv_per_type(
     let mut report = ExportReport::default();
     let mut writers: HashMap<&'static str, (PathBuf, csv::Writer<BufWriter<File>>)> =
         HashMap::new();
-    let mut start = None;
-    let mut n = 0u64;
-    while let Some((stamp, frame)) = reader.next() {
-        let start = *start.get_or_insert(stamp);
-        n += 1;
-        if n.is_multiple_of(16_384) {
-            progress(reader.bytes_consumed());
-        }
-        if !selection.wants_id(frame.message_id()) {
-            continue;
-        }
-        let Some((name, fields)) = fields::decode(&frame) else {
-            report.undecodable += 1;
-            continue;
-        };
+    for_each_selected(&mut reader, selection, progress, &mut report, |m| {
+        let Selected {
+            stamp,
+            start,
+            frame,
+            name,
+            fields,
+        } = m;
         let (path, w) = match writers.entry(name) {
             std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
             std::collections::hash_map::Entry::Vacant(v) => {
@@ -135,10 +128,8 @@ pub fn csv_per_type(
         ]
         .into_iter()
         .chain(fields.iter().map(|(_, v)| fields::csv_text(v)));
-        w.write_record(row).map_err(|e| write_err(path, e))?;
-        *report.rows.entry(name.to_owned()).or_default() += 1;
-    }
-    progress(reader.bytes_consumed());
+        w.write_record(row).map_err(|e| write_err(path, e))
+    })?;
     finish_read(&mut reader, input)?;
     let mut files = Vec::new();
     for (_, (path, mut w)) in writers {
@@ -202,6 +193,54 @@ fn wide_layout(input: &Path, selection: &Selection) -> Result<WideLayout, LogErr
 
 /// One CSV table sampled every 1/`rate_hz` s from t = 0 to the log's last record: each column holds the latest value of
 /// its field at or before the row's time (zero-order hold; empty before the first message).
+/// One selected, decoded message of the log.
+struct Selected<'a> {
+    stamp: u64,
+    /// The first record's stamp (of the whole log, selected or not).
+    start: u64,
+    frame: &'a vtol_link::Frame,
+    name: &'static str,
+    fields: Fields,
+}
+
+/// The exports' one pass over the log: reports progress, keeps the log's start time, skips what
+/// the selection leaves out, counts what does not decode, and counts a row per message `each`
+/// writes.
+fn for_each_selected(
+    reader: &mut crate::tlog::TlogReader,
+    selection: &Selection,
+    progress: &mut dyn FnMut(u64),
+    report: &mut ExportReport,
+    mut each: impl FnMut(Selected<'_>) -> Result<(), LogError>,
+) -> Result<(), LogError> {
+    let mut start = None;
+    let mut n = 0u64;
+    while let Some((stamp, frame)) = reader.next() {
+        let start = *start.get_or_insert(stamp);
+        n += 1;
+        if n.is_multiple_of(16_384) {
+            progress(reader.bytes_consumed());
+        }
+        if !selection.wants_id(frame.message_id()) {
+            continue;
+        }
+        let Some((name, fields)) = fields::decode(&frame) else {
+            report.undecodable += 1;
+            continue;
+        };
+        each(Selected {
+            stamp,
+            start,
+            frame: &frame,
+            name,
+            fields,
+        })?;
+        *report.rows.entry(name.to_owned()).or_default() += 1;
+    }
+    progress(reader.bytes_consumed());
+    Ok(())
+}
+
 /// Columns are `NAME.field`, or `NAME[sys:comp].field` when several sources send that type.
 ///
 /// # Errors
@@ -330,19 +369,14 @@ pub fn mcap(
     let mut report = ExportReport::default();
     let mut schemas: HashMap<&'static str, u16> = HashMap::new();
     let mut channels: HashMap<SourceKey, (u16, u32)> = HashMap::new();
-    let mut n = 0u64;
-    while let Some((stamp, frame)) = reader.next() {
-        n += 1;
-        if n.is_multiple_of(16_384) {
-            progress(reader.bytes_consumed());
-        }
-        if !selection.wants_id(frame.message_id()) {
-            continue;
-        }
-        let Some((name, f)) = fields::decode(&frame) else {
-            report.undecodable += 1;
-            continue;
-        };
+    for_each_selected(&mut reader, selection, progress, &mut report, |m| {
+        let Selected {
+            stamp,
+            frame,
+            name,
+            fields: f,
+            ..
+        } = m;
         let schema = match schemas.get(name) {
             Some(&id) => id,
             None => {
@@ -382,9 +416,8 @@ pub fn mcap(
         )
         .map_err(|e| write_err(out, e))?;
         *seq += 1;
-        *report.rows.entry(name.to_owned()).or_default() += 1;
-    }
-    progress(reader.bytes_consumed());
+        Ok(())
+    })?;
     finish_read(&mut reader, input)?;
     w.finish().map_err(|e| write_err(out, e))?;
     report.files = vec![out.to_owned()];
