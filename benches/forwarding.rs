@@ -1,12 +1,14 @@
 //! Forwarding load test: the `vtol-gcs` daemon against a bare UDP forwarder, side by side.
 //!
 //! ```text
-//! cargo bench --bench forwarding              # full run (~1.5 min), prints the tables
-//! cargo bench --bench forwarding -- --quick   # smoke run, a few seconds
-//! cargo test  --bench forwarding              # the same smoke run, in the test profile
+//! cargo bench --bench forwarding                # one full run (~1.5 min), prints the tables
+//! cargo bench --bench forwarding -- --runs 3     # three runs; every figure is the median
+//! cargo bench --bench forwarding -- --quick      # smoke run, a few seconds
+//! cargo test  --bench forwarding                 # the same smoke run, in the test profile
 //! ```
-//! (`FORWARDING_QUICK=1` also selects the smoke run; so does running without cargo bench's
-//! `--bench` argument, which is how `cargo test` runs a `harness = false` target.)
+//! (`FORWARDING_RUNS=N` sets the number of runs too; `FORWARDING_QUICK=1` also selects the
+//! smoke run; so does running without cargo bench's `--bench` argument, which is how
+//! `cargo test` runs a `harness = false` target.)
 //!
 //! Set-up, all on loopback UDP:
 //! - a load generator (this process, one thread) sends MAVLink 2 ATTITUDE frames from sysid 1
@@ -25,7 +27,13 @@
 //! generator can; delivered/s = frames received by all sinks / (last receive − first send)),
 //! then open-loop paced 1k, 10k and 50k msgs/s (sleep-paced on a fixed schedule, so a late
 //! wake-up sends the frames that are due back to back). Loss = 1 − delivered/(sent × clients).
-//! Latency percentiles come from the 1k phase. CPU % is of one core (100 % = one core busy).
+//! Latency percentiles are per phase. CPU % is of one core (100 % = one core busy); CPU
+//! ns/frame is the forwarder's CPU time over the phase divided by the frames it forwarded
+//! (delivered copies / clients); context switches per frame are summed over all of the
+//! forwarder's threads (`/proc/<pid>/task/*/status`, voluntary and non-voluntary); peak RSS is
+//! the forwarder's `VmHWM` at the end of its scenario. With several runs, each figure is the
+//! median over the runs and each daemon/bare ratio the median of the per-run ratios (the two
+//! forwarders of a run share its machine load).
 
 use std::io::{BufRead, BufReader, Write as _};
 use std::net::{SocketAddr, UdpSocket};
@@ -245,26 +253,47 @@ impl Kind {
     }
 }
 
-/// Run time of each thread of a process, ns.
-struct CpuSample(Vec<(String, u64)>);
+/// Per-thread counters of a process: run time (ns) and voluntary / non-voluntary context
+/// switches, keyed by thread id.
+struct CpuSample(Vec<(String, [u64; 3])>);
+
+/// What a process used between two samples.
+#[derive(Clone, Copy, Default)]
+struct Used {
+    cpu_s: f64,
+    voluntary: u64,
+    involuntary: u64,
+}
 
 impl CpuSample {
-    /// Seconds of CPU between `before` and `self`; a thread that started since counts from 0
-    /// (threads that ended in between are lost, which only tokio's idle blocking threads do).
-    fn since(&self, before: &CpuSample) -> f64 {
-        let ns: u64 = self
-            .0
-            .iter()
-            .map(|(tid, ns)| {
-                ns - before
-                    .0
-                    .iter()
-                    .find(|(t, _)| t == tid)
-                    .map_or(0, |(_, b)| (*b).min(*ns))
-            })
-            .sum();
-        ns as f64 / 1e9
+    /// Use between `before` and `self`; a thread that started since counts from 0 (threads that
+    /// ended in between are lost, which only tokio's idle blocking threads do).
+    fn since(&self, before: &CpuSample) -> Used {
+        let mut sum = [0u64; 3];
+        for (tid, now) in &self.0 {
+            let then = before
+                .0
+                .iter()
+                .find(|(t, _)| t == tid)
+                .map_or([0; 3], |(_, b)| *b);
+            for i in 0..3 {
+                sum[i] += now[i] - then[i].min(now[i]);
+            }
+        }
+        Used {
+            cpu_s: sum[0] as f64 / 1e9,
+            voluntary: sum[1],
+            involuntary: sum[2],
+        }
     }
+}
+
+/// A `Key:   value` line of a `/proc/.../status` file.
+fn status_field(status: &str, key: &str) -> Option<u64> {
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix(key)?.strip_prefix(':'))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
 }
 
 /// Datagrams the kernel dropped on the UDP socket bound to `port` (receive buffer full), from
@@ -371,9 +400,10 @@ impl Forwarder {
         }
     }
 
-    /// CPU time of the process in seconds: per-thread run time from
-    /// `/proc/<pid>/task/<tid>/schedstat` (ns resolution; utime + stime in /proc/<pid>/stat
-    /// only has 10 ms ticks, too coarse for a sub-second saturation phase).
+    /// Counters of every thread of the process: run time from
+    /// `/proc/<pid>/task/<tid>/schedstat` (ns resolution; utime + stime in /proc/<pid>/stat only
+    /// has 10 ms ticks, too coarse for a sub-second saturation phase) and context switches from
+    /// `/proc/<pid>/task/<tid>/status` (`/proc/<pid>/status` alone counts the main thread only).
     fn cpu(&self) -> CpuSample {
         let mut per_thread = Vec::new();
         if let Ok(dir) = std::fs::read_dir(format!("/proc/{}/task", self.child.id())) {
@@ -387,10 +417,20 @@ impl Forwarder {
                             .and_then(|v| v.parse::<u64>().ok())
                     })
                     .unwrap_or(0);
-                per_thread.push((tid, ns));
+                let status = std::fs::read_to_string(e.path().join("status")).unwrap_or_default();
+                let vol = status_field(&status, "voluntary_ctxt_switches").unwrap_or(0);
+                let invol = status_field(&status, "nonvoluntary_ctxt_switches").unwrap_or(0);
+                per_thread.push((tid, [ns, vol, invol]));
             }
         }
         CpuSample(per_thread)
+    }
+
+    /// Peak resident set size of the process (`VmHWM`), bytes.
+    fn peak_rss(&self) -> u64 {
+        let status =
+            std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).unwrap_or_default();
+        status_field(&status, "VmHWM").unwrap_or(0) * 1024
     }
 
     fn threads(&self) -> usize {
@@ -473,6 +513,12 @@ struct PhaseResult {
     p99_us: f64,
     max_us: f64,
     cpu_pct: f64,
+    /// ns of the forwarder's CPU per frame forwarded (delivered copies / clients).
+    cpu_ns_per_frame: f64,
+    /// The forwarder's voluntary context switches per frame forwarded.
+    vcsw_per_frame: f64,
+    /// The forwarder's non-voluntary context switches per frame forwarded.
+    ivcsw_per_frame: f64,
     /// Datagrams dropped by the kernel at the forwarder's ingress socket (buffer full).
     ingress_drops: u64,
     /// Datagrams dropped by the kernel at the sinks' sockets (should stay 0).
@@ -524,9 +570,11 @@ fn run_phase(
     let (sent, first_send, last_send) = generate(gen_sock, phase, load);
     let accs = sinks.settle(sent * n, Duration::from_millis(300));
     let wall = t0.elapsed().as_secs_f64();
-    let cpu = fwd.cpu().since(&cpu0);
+    let used = fwd.cpu().since(&cpu0);
     let (in1, sink1) = drops(fwd);
     let delivered: u64 = accs.iter().map(|a| a.count).sum();
+    // Frames forwarded to every client (on average): the unit of work of a forwarder.
+    let frames = (delivered as f64 / n as f64).max(1.0);
     let last_rx = accs.iter().map(|a| a.last_ns).max().unwrap_or(first_send);
     let mut lat: Vec<u32> = accs.iter().flat_map(|a| a.lat_ns.iter().copied()).collect();
     lat.sort_unstable();
@@ -549,7 +597,10 @@ fn run_phase(
         max_us: pct(1.0),
         // The settle wait is part of the window: a forwarder still draining its backlog then
         // is charged for it; an idle one costs (almost) nothing.
-        cpu_pct: 100.0 * cpu / wall,
+        cpu_pct: 100.0 * used.cpu_s / wall,
+        cpu_ns_per_frame: used.cpu_s * 1e9 / frames,
+        vcsw_per_frame: used.voluntary as f64 / frames,
+        ivcsw_per_frame: used.involuntary as f64 / frames,
         ingress_drops: in1 - in0,
         sink_drops: sink1 - sink0,
     }
@@ -561,6 +612,8 @@ struct Scenario {
     sat: PhaseResult,
     paced: Vec<(u32, PhaseResult)>,
     threads: usize,
+    /// Peak resident set size of the forwarder process, bytes.
+    peak_rss: u64,
     tlog_bytes: Option<u64>,
     last_status: String,
 }
@@ -619,6 +672,7 @@ fn run_forwarder(kind: Kind, sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> 
         ));
     }
     let threads = fwd.threads();
+    let peak_rss = fwd.peak_rss();
     let last_status = fwd.last_status.lock().unwrap().clone();
     let tlog_bytes = fwd.stop();
     Scenario {
@@ -627,6 +681,7 @@ fn run_forwarder(kind: Kind, sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> 
         sat,
         paced,
         threads,
+        peak_rss,
         tlog_bytes,
         last_status,
     }
@@ -687,7 +742,78 @@ fn own_jiffies() -> u64 {
         .sum()
 }
 
-fn print_report(cfg: &Cfg, runs: &[Scenario], background_pct: f64) {
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| !x.is_nan());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 0 {
+        (v[m - 1] + v[m]) / 2.0
+    } else {
+        v[m]
+    }
+}
+
+/// Field-by-field median of the same phase over several runs.
+fn median_phase(rs: &[PhaseResult]) -> PhaseResult {
+    let m = |f: fn(&PhaseResult) -> f64| median(rs.iter().map(f).collect());
+    let mu = |f: fn(&PhaseResult) -> u64| m_u64(rs.iter().map(f).collect());
+    PhaseResult {
+        sent: mu(|r| r.sent),
+        delivered: mu(|r| r.delivered),
+        delivered_per_s: m(|r| r.delivered_per_s),
+        offered_per_s: m(|r| r.offered_per_s),
+        loss: m(|r| r.loss),
+        p50_us: m(|r| r.p50_us),
+        p99_us: m(|r| r.p99_us),
+        max_us: m(|r| r.max_us),
+        cpu_pct: m(|r| r.cpu_pct),
+        cpu_ns_per_frame: m(|r| r.cpu_ns_per_frame),
+        vcsw_per_frame: m(|r| r.vcsw_per_frame),
+        ivcsw_per_frame: m(|r| r.ivcsw_per_frame),
+        ingress_drops: mu(|r| r.ingress_drops),
+        sink_drops: mu(|r| r.sink_drops),
+    }
+}
+
+fn m_u64(v: Vec<u64>) -> u64 {
+    median(v.into_iter().map(|x| x as f64).collect()).round() as u64
+}
+
+/// The scenarios of one pass over every forwarder and client count.
+struct Run {
+    scenarios: Vec<Scenario>,
+    /// CPU other processes used during the pass, % of the whole machine.
+    background_pct: f64,
+}
+
+impl Run {
+    fn find(&self, kind: Kind, clients: usize) -> Option<&Scenario> {
+        self.scenarios
+            .iter()
+            .find(|s| s.kind == kind && s.clients == clients)
+    }
+}
+
+impl Scenario {
+    /// The paced phase at `rate` frames/s.
+    fn at(&self, rate: u32) -> PhaseResult {
+        self.paced
+            .iter()
+            .find(|(r, _)| *r == rate)
+            .map(|(_, r)| *r)
+            .unwrap_or_default()
+    }
+}
+
+fn list(v: &[f64], digits: usize) -> String {
+    let parts: Vec<String> = v.iter().map(|x| format!("{x:.digits$}")).collect();
+    format!("[{}]", parts.join(", "))
+}
+
+fn print_report(cfg: &Cfg, runs: &[Run]) {
     let nproc = std::thread::available_parallelism().map_or(0, std::num::NonZero::get);
     println!();
     println!(
@@ -697,28 +823,39 @@ fn print_report(cfg: &Cfg, runs: &[Scenario], background_pct: f64) {
             .unwrap_or_default()
             .trim()
     );
+    let bg: Vec<f64> = runs.iter().map(|r| r.background_pct).collect();
     println!(
-        "background: other processes used {background_pct:.0} % of the machine's CPU during the run (0 % = quiet machine)"
+        "background: other processes used {} % of the machine's CPU during each run (0 % = quiet machine)",
+        list(&bg, 0)
     );
     println!(
-        "mode: {}; saturation = {} frames as fast as possible; paced phases {:.1} s each; frame = 40-byte MAVLink 2 ATTITUDE",
+        "mode: {}; {} run(s), figures are medians over the runs; saturation = {} frames as fast as possible; paced phases {:.1} s each; frame = 40-byte MAVLink 2 ATTITUDE",
         if cfg.quick {
             "QUICK (smoke run, numbers are not meaningful)"
         } else {
             "full"
         },
+        runs.len(),
         cfg.sat_count,
         cfg.paced_s
     );
+    println!(
+        "per frame = per frame forwarded (delivered copies / clients); csw = context switches of all the forwarder's threads (voluntary + non-voluntary)"
+    );
     println!();
     println!(
-        "| forwarder | clients | phase | sent | delivered/s (all clients) | per client/s | loss | p50 µs | p99 µs | max µs | CPU % | ingress drops | sink drops |"
+        "| forwarder | clients | phase | sent | delivered/s (all clients) | per client/s | loss | p50 µs | p99 µs | max µs | CPU % | CPU ns/frame | csw/frame (vol + invol) | ingress drops | sink drops |"
     );
-    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for s in runs {
+    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let Some(first) = runs.first() else { return };
+    for s in &first.scenarios {
+        let same: Vec<&Scenario> = runs
+            .iter()
+            .filter_map(|r| r.find(s.kind, s.clients))
+            .collect();
         let row = |label: String, r: &PhaseResult| {
             println!(
-                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.2} ({:.2} + {:.2}) | {} | {} |",
                 s.kind.name(),
                 s.clients,
                 label,
@@ -730,61 +867,140 @@ fn print_report(cfg: &Cfg, runs: &[Scenario], background_pct: f64) {
                 r.p99_us,
                 r.max_us,
                 r.cpu_pct,
+                r.cpu_ns_per_frame,
+                r.vcsw_per_frame + r.ivcsw_per_frame,
+                r.vcsw_per_frame,
+                r.ivcsw_per_frame,
                 r.ingress_drops,
                 r.sink_drops
             );
         };
+        let sat: Vec<PhaseResult> = same.iter().map(|x| x.sat).collect();
+        let sat = median_phase(&sat);
         row(
-            format!("saturation (offered {}/s)", kmsg(s.sat.offered_per_s)),
-            &s.sat,
+            format!("saturation (offered {}/s)", kmsg(sat.offered_per_s)),
+            &sat,
         );
-        for (rate, r) in &s.paced {
-            row(format!("paced {}/s", kmsg(f64::from(*rate))), r);
+        for (rate, _) in &s.paced {
+            let at: Vec<PhaseResult> = same.iter().map(|x| x.at(*rate)).collect();
+            row(format!("paced {}/s", kmsg(f64::from(*rate))), &median_phase(&at));
         }
     }
+    print_targets(runs);
+}
+
+/// The issue's targets: the daemon (tlog on) against the bare forwarder of the same run; each
+/// figure is the median over the runs, each ratio the median of the per-run ratios.
+fn print_targets(runs: &[Run]) {
+    let pass = |ok: bool| if ok { "ok" } else { "MISS" };
     println!();
-    println!("targets (vtol-gcs daemon, tlog on):");
+    println!(
+        "targets (vtol-gcs daemon with tlog vs bare forwarder, same run; median of {} run(s), per-run ratios in brackets):",
+        runs.len()
+    );
     for clients in [1usize, 4] {
-        let find = |k: Kind| runs.iter().find(|s| s.kind == k && s.clients == clients);
-        let (Some(b), Some(d)) = (find(Kind::Bare), find(Kind::Daemon)) else {
+        let pairs: Vec<(&Scenario, &Scenario)> = runs
+            .iter()
+            .filter_map(|r| Some((r.find(Kind::Daemon, clients)?, r.find(Kind::Bare, clients)?)))
+            .collect();
+        if pairs.is_empty() {
             continue;
+        }
+        let each = |f: &dyn Fn(&Scenario) -> f64| -> (f64, f64, f64, Vec<f64>) {
+            let ratios: Vec<f64> = pairs.iter().map(|(d, b)| f(d) / f(b)).collect();
+            (
+                median(pairs.iter().map(|(d, _)| f(d)).collect()),
+                median(pairs.iter().map(|(_, b)| f(b)).collect()),
+                median(ratios.clone()),
+                ratios,
+            )
         };
-        let ratio = d.sat.delivered_per_s / b.sat.delivered_per_s;
-        let pass = |ok: bool| if ok { "ok" } else { "MISS" };
+        let c = if clients == 1 { "client" } else { "clients" };
+        let (d, b, r, rs) = each(&|s| s.at(10_000).cpu_pct);
+        let (dn, bn, rn, _) = each(&|s| s.at(10_000).cpu_ns_per_frame);
         println!(
-            "  {clients} client(s): saturation {} / {} = {ratio:.2}x bare (target >= 0.8x: {})",
-            kmsg(d.sat.delivered_per_s),
-            kmsg(b.sat.delivered_per_s),
-            pass(ratio >= 0.8)
+            "  {clients} {c}: CPU at 10k/s: daemon {d:.1} % ({dn:.0} ns/frame), bare {b:.1} % ({bn:.0} ns/frame) = {r:.2}x {} (ns/frame {rn:.2}x; target <= 1.2x: {})",
+            list(&rs, 2),
+            pass(r <= 1.2)
         );
-        let at = |s: &Scenario, rate: u32| {
-            s.paced
-                .iter()
-                .find(|(r, _)| *r == rate)
-                .map(|(_, r)| *r)
-                .unwrap_or_default()
-        };
-        let l10 = at(d, 10_000).loss;
+        let (dv, bv, _, _) = each(&|s| s.at(10_000).vcsw_per_frame);
+        let (di, bi, _, _) = each(&|s| s.at(10_000).ivcsw_per_frame);
         println!(
-            "  {clients} client(s): loss at 10k/s {:.2} % (target 0 % with 4 clients: {})",
-            100.0 * l10,
-            if clients == 4 { pass(l10 <= 0.0) } else { "-" }
+            "  {clients} {c}: context switches per frame at 10k/s: daemon {:.2} ({dv:.2} + {di:.2}), bare {:.2} ({bv:.2} + {bi:.2})",
+            dv + di,
+            bv + bi
         );
-        let p99 = at(d, 1_000).p99_us;
+        let want = if clients == 1 { 0.9 } else { 1.0 };
+        let (d, b, r, rs) = each(&|s| s.sat.delivered_per_s / s.clients as f64);
         println!(
-            "  {clients} client(s): p99 at 1k/s {p99:.0} µs (target <= 150 µs: {})",
-            pass(p99 <= 150.0)
+            "  {clients} {c}: delivered per client at saturation: daemon {}/s, bare {}/s = {r:.2}x {} (target >= {want:.1}x: {})",
+            kmsg(d),
+            kmsg(b),
+            list(&rs, 2),
+            pass(r >= want)
+        );
+        for rate in [1_000u32, 10_000] {
+            let (d, b, r, rs) = each(&|s| s.at(rate).p99_us);
+            println!(
+                "  {clients} {c}: p99 at {}/s: daemon {d:.0} µs, bare {b:.0} µs = {r:.2}x {} (target <= 1.2x: {})",
+                kmsg(f64::from(rate)),
+                list(&rs, 2),
+                pass(r <= 1.2)
+            );
+        }
+        let losses: Vec<f64> = pairs
+            .iter()
+            .map(|(d, _)| 100.0 * d.at(10_000).loss)
+            .collect();
+        let worst = losses.iter().copied().fold(0.0, f64::max);
+        println!(
+            "  {clients} {c}: loss at 10k/s: daemon {:.2} % {}{}",
+            median(losses.clone()),
+            list(&losses, 2),
+            if clients == 4 {
+                format!(" (target 0 % in every run: {})", pass(worst <= 0.0))
+            } else {
+                String::new()
+            }
+        );
+        let rss: Vec<f64> = pairs
+            .iter()
+            .map(|(d, _)| d.peak_rss as f64 / 1e6)
+            .collect();
+        let worst = rss.iter().copied().fold(0.0, f64::max);
+        println!(
+            "  {clients} {c}: peak RSS of the daemon: {:.1} MB {} (bare {:.1} MB; target < 15 MB in every run: {})",
+            median(rss.clone()),
+            list(&rss, 1),
+            median(pairs.iter().map(|(_, b)| b.peak_rss as f64 / 1e6).collect()),
+            pass(worst < 15.0)
         );
     }
-    for s in runs.iter().filter(|s| s.kind == Kind::Daemon) {
-        println!(
-            "daemon, {} client(s): {} threads, tlog {} bytes; last status: {}",
-            s.clients,
-            s.threads,
-            s.tlog_bytes.unwrap_or(0),
-            s.last_status
-        );
+    for (i, run) in runs.iter().enumerate() {
+        for s in run.scenarios.iter().filter(|s| s.kind == Kind::Daemon) {
+            println!(
+                "run {}: daemon, {} client(s): {} threads, tlog {} bytes; last status: {}",
+                i + 1,
+                s.clients,
+                s.threads,
+                s.tlog_bytes.unwrap_or(0),
+                s.last_status
+            );
+        }
     }
+}
+
+/// `--runs N` (after `--` with cargo bench) or `FORWARDING_RUNS=N`; default 1.
+fn run_count(args: &[String]) -> usize {
+    let from_args = args
+        .iter()
+        .position(|a| a == "--runs")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok());
+    let from_env = std::env::var("FORWARDING_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok());
+    from_args.or(from_env).unwrap_or(1usize).max(1)
 }
 
 fn main() {
@@ -810,34 +1026,45 @@ fn main() {
             paced_s: 2.5,
         }
     };
+    let n_runs = run_count(&args);
     let mut runs = Vec::new();
     let mut phase = 0;
-    let (busy0, total0) = machine_jiffies();
-    let own0 = own_jiffies();
     // For profiling one case: FORWARDING_ONLY=bare|daemon, FORWARDING_CLIENTS=1|4.
     let only = std::env::var("FORWARDING_ONLY").unwrap_or_default();
     let only_clients: Option<usize> = std::env::var("FORWARDING_CLIENTS")
         .ok()
         .and_then(|v| v.parse().ok());
-    for clients in [1usize, 4]
-        .into_iter()
-        .filter(|c| only_clients.is_none_or(|o| o == *c))
-    {
-        let sinks = Sinks::start(clients);
-        for kind in [Kind::Bare, Kind::Daemon]
+    for run in 0..n_runs {
+        let (busy0, total0) = machine_jiffies();
+        let own0 = own_jiffies();
+        let mut scenarios = Vec::new();
+        for clients in [1usize, 4]
             .into_iter()
-            .filter(|k| only.is_empty() || only == k.tag())
+            .filter(|c| only_clients.is_none_or(|o| o == *c))
         {
-            eprintln!("running: {} with {clients} client(s)…", kind.name());
-            runs.push(run_forwarder(kind, &sinks, &cfg, &mut phase));
+            let sinks = Sinks::start(clients);
+            for kind in [Kind::Bare, Kind::Daemon]
+                .into_iter()
+                .filter(|k| only.is_empty() || only == k.tag())
+            {
+                eprintln!(
+                    "run {}/{n_runs}: {} with {clients} client(s)…",
+                    run + 1,
+                    kind.name()
+                );
+                scenarios.push(run_forwarder(kind, &sinks, &cfg, &mut phase));
+            }
         }
+        let (busy1, total1) = machine_jiffies();
+        let other = (busy1 - busy0).saturating_sub(own_jiffies() - own0);
+        runs.push(Run {
+            scenarios,
+            background_pct: 100.0 * other as f64 / (total1 - total0).max(1) as f64,
+        });
     }
-    let (busy1, total1) = machine_jiffies();
-    let other = (busy1 - busy0).saturating_sub(own_jiffies() - own0);
-    let background_pct = 100.0 * other as f64 / (total1 - total0).max(1) as f64;
-    print_report(&cfg, &runs, background_pct);
+    print_report(&cfg, &runs);
     // Smoke check: both forwarders move traffic to every client at a modest rate.
-    for s in &runs {
+    for s in runs.iter().flat_map(|r| &r.scenarios) {
         let (_, r) = s.paced[0];
         assert!(
             r.delivered * 2 >= r.sent * s.clients as u64,
