@@ -428,8 +428,8 @@ impl Forwarder {
 
     /// Peak resident set size of the process (`VmHWM`), bytes.
     fn peak_rss(&self) -> u64 {
-        let status =
-            std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).unwrap_or_default();
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .unwrap_or_default();
         status_field(&status, "VmHWM").unwrap_or(0) * 1024
     }
 
@@ -479,6 +479,25 @@ fn bare_forwarder(targets: &str) -> ! {
         while std::io::Read::read(&mut std::io::stdin(), &mut sink).is_ok_and(|n| n > 0) {}
         std::process::exit(0);
     });
+    if std::env::var_os("BARE_TOKIO").is_some() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async move {
+            sock.set_nonblocking(true).unwrap();
+            let sock = tokio::net::UdpSocket::from_std(sock).unwrap();
+            let mut buf = [0u8; 65_536];
+            loop {
+                let Ok((n, _)) = sock.recv_from(&mut buf).await else {
+                    continue;
+                };
+                for c in &clients {
+                    let _ = sock.try_send_to(&buf[..n], *c);
+                }
+            }
+        });
+    }
     let mut buf = [0u8; 65_536];
     loop {
         let Ok((n, _)) = sock.recv_from(&mut buf) else {
@@ -655,7 +674,7 @@ fn run_forwarder(kind: Kind, sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> 
         },
     );
     let mut paced = Vec::new();
-    for &rate in &[1_000u32, 10_000, 50_000] {
+    for &rate in &cfg.rates {
         let count = (f64::from(rate) * cfg.paced_s) as u32;
         paced.push((
             rate,
@@ -694,6 +713,8 @@ struct Cfg {
     quick: bool,
     sat_count: u32,
     paced_s: f64,
+    /// Paced phases, frames/s.
+    rates: Vec<u32>,
 }
 
 fn cpu_model() -> String {
@@ -749,7 +770,7 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
     v.sort_by(f64::total_cmp);
     let m = v.len() / 2;
-    if v.len() % 2 == 0 {
+    if v.len().is_multiple_of(2) {
         (v[m - 1] + v[m]) / 2.0
     } else {
         v[m]
@@ -883,7 +904,10 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
         );
         for (rate, _) in &s.paced {
             let at: Vec<PhaseResult> = same.iter().map(|x| x.at(*rate)).collect();
-            row(format!("paced {}/s", kmsg(f64::from(*rate))), &median_phase(&at));
+            row(
+                format!("paced {}/s", kmsg(f64::from(*rate))),
+                &median_phase(&at),
+            );
         }
     }
     print_targets(runs);
@@ -963,10 +987,7 @@ fn print_targets(runs: &[Run]) {
                 String::new()
             }
         );
-        let rss: Vec<f64> = pairs
-            .iter()
-            .map(|(d, _)| d.peak_rss as f64 / 1e6)
-            .collect();
+        let rss: Vec<f64> = pairs.iter().map(|(d, _)| d.peak_rss as f64 / 1e6).collect();
         let worst = rss.iter().copied().fold(0.0, f64::max);
         println!(
             "  {clients} {c}: peak RSS of the daemon: {:.1} MB {} (bare {:.1} MB; target < 15 MB in every run: {})",
@@ -1013,23 +1034,35 @@ fn main() {
     let quick = args.iter().any(|a| a == "--quick")
         || std::env::var_os("FORWARDING_QUICK").is_some_and(|v| v != "0")
         || !args.iter().any(|a| a == "--bench");
+    // For profiling one phase: FORWARDING_RATES=10000 FORWARDING_PACED_S=20.
+    let rates: Vec<u32> = std::env::var("FORWARDING_RATES")
+        .ok()
+        .map(|v| v.split(',').filter_map(|r| r.trim().parse().ok()).collect())
+        .filter(|r: &Vec<u32>| !r.is_empty())
+        .unwrap_or_else(|| vec![1_000, 10_000, 50_000]);
     let cfg = if quick {
         Cfg {
             quick,
             sat_count: 5_000,
             paced_s: 0.2,
+            rates: rates.clone(),
         }
     } else {
         Cfg {
             quick,
             sat_count: 100_000,
-            paced_s: 2.5,
+            paced_s: std::env::var("FORWARDING_PACED_S")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(2.5),
+            rates,
         }
     };
     let n_runs = run_count(&args);
     let mut runs = Vec::new();
     let mut phase = 0;
-    // For profiling one case: FORWARDING_ONLY=bare|daemon, FORWARDING_CLIENTS=1|4.
+    // For profiling one case: FORWARDING_ONLY=bare|daemon, FORWARDING_CLIENTS=1|4 (with the
+    // rates above).
     let only = std::env::var("FORWARDING_ONLY").unwrap_or_default();
     let only_clients: Option<usize> = std::env::var("FORWARDING_CLIENTS")
         .ok()

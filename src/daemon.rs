@@ -10,21 +10,20 @@ use firmware_sim::serve::{ServeConfig, Twin};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{LinkUrl, spawn_endpoint, spawn_stream_link};
+use vtol_link::{LinkOptions, LinkUrl, spawn_endpoint, spawn_stream_link};
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
-use crate::router::{Router, RouterHandle};
+use crate::router::{Router, RouterHandle, Side};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
 use crate::vehicle::{SharedHistory, VehicleState};
 use crate::{gcs, vehicle};
 
-/// Frames buffered between the links and the router.
-const EVENT_QUEUE: usize = 8192;
-/// Frames buffered for the tracker; it is fast, and a drop only loses a display update.
+/// Frames buffered for the tracker, which takes them every 20 ms; a drop only loses a display
+/// update.
 const TAP_QUEUE: usize = 8192;
-/// Records buffered for the tlog writer thread.
+/// Records waiting for the tlog writer thread at most (it writes every 50 ms).
 const TLOG_QUEUE: usize = 65_536;
 /// In-memory link buffer between the daemon and the embedded twin or its own heartbeat.
 const DUPLEX_BYTES: usize = 256 * 1024;
@@ -103,13 +102,23 @@ pub async fn start(
     let tlog_path = tlog.as_ref().map(|t| t.path.clone());
     let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
 
-    let (vehicle_tx, vehicle_rx) = mpsc::channel(EVENT_QUEUE);
-    let (client_tx, client_rx) = mpsc::channel(EVENT_QUEUE);
     let (tap_tx, tap_rx) = mpsc::channel(TAP_QUEUE);
     let (state_tx, state_rx) = watch::channel(VehicleState::default());
 
+    // The hot path: each link task routes what it receives itself (no router task, no queue
+    // between a link and the router).
     let (router, router_handle) = Router::new(tlog, Some(tap_tx));
-    tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
+    let router = router.inline();
+    let vehicle_tx = router.events(Side::Vehicle);
+    let client_tx = router.events(Side::Client);
+    {
+        let (router, cancel) = (router.clone(), cancel.clone());
+        tasks.spawn(async move {
+            cancel.cancelled().await;
+            // Later frames are refused; the tlog is flushed and closed.
+            router.close();
+        });
+    }
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
         crate::vehicle::History::new(std::time::Instant::now()),
     ));
@@ -135,22 +144,28 @@ pub async fn start(
     }
 
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
-    let (_, link_task) = spawn_stream_link(
-        router_end,
-        OWN_TRAFFIC_PEER,
-        client_tx,
-        config.link.clone(),
-        cancel.clone(),
-    );
-    tasks.spawn(async move {
-        let _ = link_task.await;
-    });
     let client = gcs::attach(
         gcs_end,
         config.system_id,
         config.component_id,
         cancel.clone(),
     );
+    // The own-traffic link carries only what the client reads: the vehicle's telemetry at
+    // thousands of frames a second would otherwise cross two tasks and be parsed twice to be
+    // thrown away.
+    let (_, link_task) = spawn_stream_link(
+        router_end,
+        OWN_TRAFFIC_PEER,
+        client_tx,
+        LinkOptions {
+            accept: Some(client.read_filter()),
+            ..config.link.clone()
+        },
+        cancel.clone(),
+    );
+    tasks.spawn(async move {
+        let _ = link_task.await;
+    });
 
     match &config.vehicle {
         VehicleSource::Embedded => {

@@ -2,18 +2,21 @@
 //! records of an 8-byte big-endian timestamp (µs since the Unix epoch, low 2 bits = link
 //! number) followed by one complete MAVLink frame, no file header, no padding.
 //!
-//! The writer runs on its own thread, fed through a bounded queue, so a slow disk never stalls
-//! routing; it flushes at most 100 ms after a record arrives, so a `kill -9` loses at most the
-//! last 100 ms and never leaves a torn record behind (each record is written whole into the
-//! buffer, and the buffer is only ever written out whole). SETUP_SIGNING is never logged: it
-//! carries the signing key.
+//! The writer runs on its own thread, so a slow disk never stalls routing. Producers encode
+//! records into a shared, bounded buffer (a full buffer drops the record and counts it) and do
+//! not wake the thread for each one: the thread sleeps until the oldest waiting record is
+//! [`WRITE_DELAY`] old, then writes everything waiting in one write and flushes. So a record
+//! reaches the file at most 100 ms ([`FLUSH_INTERVAL`]) after it arrives, a `kill -9` loses at
+//! most the last 100 ms, and no torn record is left behind (each record is encoded whole into
+//! the buffer, and the buffer is only ever written out whole). An idle log costs no wake-ups;
+//! under load the thread wakes about twice per [`WRITE_DELAY`], whatever the frame rate.
+//! SETUP_SIGNING is never logged: it carries the signing key.
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -24,6 +27,11 @@ use vtol_link::Frame;
 const SETUP_SIGNING_ID: u32 = 256;
 /// How long a record may sit in the buffer before it reaches the file.
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(100);
+/// How long the writer thread lets records gather before it writes them: half the bound, so
+/// the write itself has the other half.
+pub const WRITE_DELAY: Duration = Duration::from_millis(50);
+/// Largest record: the timestamp and the largest frame.
+const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
 
 /// Which way a frame travelled, as the low 2 bits of the timestamp (MAVProxy's convention).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -66,6 +74,24 @@ impl Record {
     }
 }
 
+impl Record {
+    /// The record's 8-byte timestamp: µs with the direction in the low 2 bits.
+    fn stamp(&self) -> u64 {
+        (self.t_us & !3) | self.direction.link_bits()
+    }
+
+    /// Appends the record as it goes into the file (stamp, then the frame); false, and nothing
+    /// appended, for SETUP_SIGNING.
+    fn encode_into(&self, out: &mut Vec<u8>) -> bool {
+        if self.frame.message_id() == SETUP_SIGNING_ID {
+            return false;
+        }
+        out.extend_from_slice(&self.stamp().to_be_bytes());
+        out.extend_from_slice(self.frame.as_bytes());
+        true
+    }
+}
+
 /// µs since the Unix epoch.
 #[must_use]
 pub fn unix_time_us() -> u64 {
@@ -81,9 +107,9 @@ pub struct TlogStats {
     pub records: AtomicU64,
     /// Bytes written to the buffer.
     pub bytes: AtomicU64,
-    /// Records dropped because the writer's queue was full.
+    /// Records dropped because the writer's buffer was full (the disk did not keep up).
     pub dropped_queue_full: AtomicU64,
-    /// Records lost to write errors (full disk, I/O error).
+    /// Records lost to write errors (full disk, I/O error), or logged after the log closed.
     pub write_errors: AtomicU64,
     /// SETUP_SIGNING frames withheld.
     pub withheld_signing: AtomicU64,
@@ -139,11 +165,10 @@ impl TlogWriter {
         if record.frame.message_id() == SETUP_SIGNING_ID {
             return Ok(false);
         }
-        let stamp = (record.t_us & !3) | record.direction.link_bits();
         // One contiguous record, so the buffer never holds half of one when it is written out.
         let frame = record.frame.as_bytes();
-        let mut buf = [0u8; 8 + 300];
-        buf[..8].copy_from_slice(&stamp.to_be_bytes());
+        let mut buf = [0u8; MAX_RECORD_LEN];
+        buf[..8].copy_from_slice(&record.stamp().to_be_bytes());
         buf[8..8 + frame.len()].copy_from_slice(frame);
         self.out.write_all(&buf[..8 + frame.len()])?;
         Ok(true)
@@ -156,12 +181,46 @@ impl TlogWriter {
     pub fn flush(&mut self) -> io::Result<()> {
         self.out.flush()
     }
+
+    /// The file, for the writer thread, which writes whole batches itself (nothing is buffered
+    /// yet when it takes over).
+    fn into_file(self) -> File {
+        self.out.into_parts().0
+    }
+}
+
+/// Records waiting for the writer thread, encoded as they go into the file.
+#[derive(Debug, Default)]
+struct Pending {
+    bytes: Vec<u8>,
+    records: u64,
+    /// When the oldest waiting record arrived; `None` while nothing waits.
+    oldest: Option<Instant>,
+    /// The writer sleeps with no deadline (nothing was waiting): the next record must wake it.
+    writer_idle: bool,
+    /// No more records: the writer writes what waits, flushes and ends.
+    closed: bool,
+}
+
+#[derive(Debug)]
+struct Shared {
+    pending: Mutex<Pending>,
+    /// Most records waiting at once; more are dropped and counted.
+    capacity: u64,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Pending> {
+        // A panic elsewhere while holding the lock leaves consistent bytes (records are
+        // appended whole), so the log goes on.
+        self.pending.lock().unwrap_or_else(PoisonError::into_inner)
+    }
 }
 
 /// Handle to a running writer thread.
 #[derive(Debug)]
 pub struct TlogHandle {
-    tx: SyncSender<Record>,
+    shared: Arc<Shared>,
     /// Where the log is written.
     pub path: PathBuf,
     /// Live counters.
@@ -170,9 +229,9 @@ pub struct TlogHandle {
 }
 
 impl TlogHandle {
-    /// Creates a new `dir/<start time>.tlog` and starts the writer thread with a queue of
-    /// `queue_len` records. A name already taken (a restart within the same second, or another
-    /// daemon logging to the same directory) gets a `-2`, `-3` … suffix: no log is ever
+    /// Creates a new `dir/<start time>.tlog` and starts the writer thread with room for
+    /// `queue_len` waiting records. A name already taken (a restart within the same second, or
+    /// another daemon logging to the same directory) gets a `-2`, `-3` … suffix: no log is ever
     /// overwritten or shared.
     ///
     /// # Errors
@@ -192,49 +251,74 @@ impl TlogHandle {
     }
 
     fn spawn(path: PathBuf, writer: TlogWriter, queue_len: usize) -> Result<Self, TlogError> {
-        let (tx, rx) = sync_channel(queue_len);
+        let shared = Arc::new(Shared {
+            pending: Mutex::new(Pending::default()),
+            capacity: queue_len.max(1) as u64,
+        });
         let stats = Arc::new(TlogStats::default());
-        let thread_stats = Arc::clone(&stats);
+        let (thread_shared, thread_stats) = (Arc::clone(&shared), Arc::clone(&stats));
         let thread = std::thread::Builder::new()
             .name("tlog-writer".into())
-            .spawn(move || writer_loop(writer, &rx, &thread_stats))
+            .spawn(move || writer_loop(writer, &thread_shared, &thread_stats))
             .map_err(|source| TlogError::Create {
                 path: path.clone(),
                 source,
             })?;
         Ok(Self {
-            tx,
+            shared,
             path,
             stats,
             thread: Some(thread),
         })
     }
 
-    /// Queues a record without blocking; a full queue drops it and counts the drop.
+    /// Hands a record to the writer without blocking; a full buffer drops it and counts the
+    /// drop.
     pub fn log(&self, record: Record) {
-        match self.tx.try_send(record) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) => {
-                self.stats
-                    .dropped_queue_full
-                    .fetch_add(1, Ordering::Relaxed);
+        self.log_many(std::iter::once(record));
+    }
+
+    /// Hands a run of records to the writer under one lock, waking the writer thread only if
+    /// it sleeps with nothing to do.
+    pub fn log_many(&self, records: impl IntoIterator<Item = Record>) {
+        let mut wake = false;
+        {
+            let mut p = self.shared.lock();
+            for record in records {
+                if p.closed {
+                    self.stats.write_errors.fetch_add(1, Ordering::Relaxed);
+                } else if p.records >= self.shared.capacity {
+                    self.stats
+                        .dropped_queue_full
+                        .fetch_add(1, Ordering::Relaxed);
+                } else if record.encode_into(&mut p.bytes) {
+                    p.records += 1;
+                    if p.oldest.is_none() {
+                        p.oldest = Some(Instant::now());
+                    }
+                } else {
+                    self.stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
+                }
             }
-            Err(TrySendError::Disconnected(_)) => {
-                self.stats.write_errors.fetch_add(1, Ordering::Relaxed);
+            if p.writer_idle && p.oldest.is_some() {
+                p.writer_idle = false;
+                wake = true;
             }
+        }
+        if wake && let Some(t) = &self.thread {
+            t.thread().unpark();
         }
     }
 
-    /// Closes the queue, waits for the writer to write and flush everything queued.
+    /// Closes the log: the writer writes and flushes everything waiting, and ends.
     pub fn close(mut self) {
         self.finish();
     }
 
     fn finish(&mut self) {
-        // Dropping the only sender ends the writer loop after it drains the queue.
-        let (dead_tx, _) = sync_channel(1);
-        drop(std::mem::replace(&mut self.tx, dead_tx));
+        self.shared.lock().closed = true;
         if let Some(t) = self.thread.take() {
+            t.thread().unpark();
             let _ = t.join();
         }
     }
@@ -246,54 +330,56 @@ impl Drop for TlogHandle {
     }
 }
 
-fn writer_loop(mut writer: TlogWriter, rx: &Receiver<Record>, stats: &TlogStats) {
-    let mut flush_by: Option<Instant> = None;
+/// The writer thread: sleeps until the oldest waiting record is [`WRITE_DELAY`] old (or the
+/// log closes), then writes everything waiting at once and flushes.
+fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
+    let mut out = writer.into_file();
+    let mut batch: Vec<u8> = Vec::new();
     let mut reported_error = false;
     loop {
-        let received = match flush_by {
-            Some(deadline) => rx.recv_timeout(deadline.saturating_duration_since(Instant::now())),
-            None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
+        let (records, closed) = {
+            let mut p = shared.lock();
+            let Some(oldest) = p.oldest else {
+                if p.closed {
+                    return;
+                }
+                p.writer_idle = true;
+                drop(p);
+                // Woken by the next record (or spuriously: the loop looks again).
+                std::thread::park();
+                continue;
+            };
+            let due = oldest + WRITE_DELAY;
+            let now = Instant::now();
+            if now < due && !p.closed {
+                drop(p);
+                std::thread::park_timeout(due - now);
+                continue;
+            }
+            std::mem::swap(&mut batch, &mut p.bytes);
+            let records = std::mem::take(&mut p.records);
+            p.oldest = None;
+            (records, p.closed)
         };
-        match received {
-            Ok(record) => {
-                let len = record.frame.len() as u64 + 8;
-                match writer.write(&record) {
-                    Ok(true) => {
-                        stats.records.fetch_add(1, Ordering::Relaxed);
-                        stats.bytes.fetch_add(len, Ordering::Relaxed);
-                        flush_by.get_or_insert_with(|| Instant::now() + FLUSH_INTERVAL);
-                    }
-                    Ok(false) => {
-                        stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
-                    }
-                    Err(e) => {
-                        stats.write_errors.fetch_add(1, Ordering::Relaxed);
-                        if !reported_error {
-                            tracing::error!("tlog write failed (routing continues): {e}");
-                            reported_error = true;
-                        }
-                    }
-                }
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => {
-                if let Err(e) = writer.flush() {
-                    tracing::error!("tlog final flush failed: {e}");
-                }
-                return;
-            }
-        }
-        if flush_by.is_some_and(|d| Instant::now() >= d) {
-            flush_by = None;
-            if let Err(e) = writer.flush() {
-                stats.write_errors.fetch_add(1, Ordering::Relaxed);
-                if !reported_error {
-                    tracing::error!("tlog flush failed (routing continues): {e}");
-                    reported_error = true;
-                }
-            } else {
+        let written = out.write_all(&batch).and_then(|()| out.flush());
+        match written {
+            Ok(()) => {
+                stats.records.fetch_add(records, Ordering::Relaxed);
+                stats.bytes.fetch_add(batch.len() as u64, Ordering::Relaxed);
                 reported_error = false;
             }
+            Err(e) => {
+                stats.write_errors.fetch_add(records, Ordering::Relaxed);
+                if !reported_error {
+                    tracing::error!("tlog write failed (routing continues): {e}");
+                    reported_error = true;
+                }
+            }
+        }
+        batch.clear();
+        if closed {
+            // Records may not arrive after the close; the loop ends once nothing waits.
+            continue;
         }
     }
 }
@@ -366,8 +452,6 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
 
 /// Bytes read from the file at a time by [`TlogReader`].
 const READ_CHUNK: usize = 256 * 1024;
-/// Largest record: the timestamp and the largest frame.
-const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
 /// While resynchronising, a candidate record's timestamp must lie this close to the last good
 /// one (µs): a CRC-valid frame inside garbage is rare, one with a plausible time rarer still.
 const RESYNC_MAX_JUMP_US: u64 = 24 * 3600 * 1_000_000;

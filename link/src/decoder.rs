@@ -146,10 +146,18 @@ impl FrameDecoder {
     /// Candidates that can no longer complete are skipped, so a real frame hidden behind a
     /// false, long candidate is not lost. The decoder is empty and reusable afterwards.
     pub fn finish(&mut self) -> Vec<Frame> {
-        self.eof = true;
-        let frames = self.frames().collect();
-        self.eof = false;
+        let mut frames = Vec::new();
+        self.finish_with(|f| frames.push(f));
         frames
+    }
+
+    /// [`FrameDecoder::finish`] handing each frame to `each` instead of collecting them.
+    pub fn finish_with(&mut self, mut each: impl FnMut(Frame)) {
+        self.eof = true;
+        while let Some(frame) = self.next_frame() {
+            each(frame);
+        }
+        self.eof = false;
     }
 
     /// The next complete frame, or `None` if more bytes are needed.

@@ -26,8 +26,9 @@ pub use frame::{
     gcs_heartbeat,
 };
 pub use transport::{
-    EndpointHandle, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats,
-    LinkStatsSnapshot, SendError, run_stream_link, spawn_endpoint, spawn_stream_link,
+    EgressFilter, EndpointHandle, Events, LinkError, LinkEvent, LinkEventHandler, LinkId,
+    LinkOptions, LinkSender, LinkStats, LinkStatsSnapshot, SendError, SendSummary, run_stream_link,
+    spawn_endpoint, spawn_stream_link,
 };
 pub use url::{LinkUrl, UrlError};
 

@@ -223,6 +223,16 @@ impl ClientHandle {
         *self.target.borrow()
     }
 
+    /// Which frames the client reads: the message types it uses and, until the vehicle is
+    /// known, the autopilot telemetry that finds it. For the link that carries a router's
+    /// traffic to an in-process client ([`vtol_link::LinkOptions::accept`]): the rest never
+    /// needs copying.
+    #[must_use]
+    pub fn read_filter(&self) -> vtol_link::EgressFilter {
+        let target = self.target.clone();
+        vtol_link::EgressFilter::new(move |frame| session::reads(frame, target.borrow().is_some()))
+    }
+
     /// Waits up to `timeout` for the vehicle to be known.
     ///
     /// # Errors

@@ -32,6 +32,15 @@ const AUTOPILOT1: u8 = 1;
 /// Messages only an autopilot streams (SYS_STATUS, ATTITUDE).
 const TELEMETRY: [u32; 2] = [1, 30];
 
+/// Whether the session reads `frame`: the message types its machines use and, while the
+/// vehicle is not known yet, the autopilot telemetry that finds it. The rest is never looked
+/// at, so an in-process link to the client need not carry it.
+pub(crate) fn reads(frame: &Frame, target_known: bool) -> bool {
+    let id = frame.message_id();
+    WANTED.contains(&id)
+        || (!target_known && frame.component_id() == AUTOPILOT1 && TELEMETRY.contains(&id))
+}
+
 /// Shared between the session task and every handle.
 #[derive(Debug)]
 pub(crate) struct Shared {

@@ -1,29 +1,40 @@
-//! The router task: takes every frame from every link, learns where each sender sits, and
-//! forwards the raw bytes per [`table`]'s rules. It also feeds the taps: the tlog writer (both
+//! The router: takes every frame from every link, learns where each sender sits, and forwards
+//! the raw bytes per [`table`]'s rules. It also feeds the taps: the tlog writer (both
 //! directions) and the vehicle tracker.
 //!
-//! Links arrive on two channels: the vehicle side and the client side (scripts, other ground
+//! Links are on one of two sides: the vehicle side and the client side (scripts, other ground
 //! stations, and the daemon's own traffic). The side fixes the tlog direction and which link
-//! health the tracker reports. Every egress is a bounded queue filled with `try_send`, so a slow
-//! client never blocks the vehicle link; each drop is counted per link and per reason.
+//! health the tracker reports. Every egress is a bounded queue filled without waiting, so a
+//! slow client never blocks the vehicle link; each drop is counted per link and per reason.
+//!
+//! Two ways to drive it, with the same rules:
+//! - [`Router::inline`]: the daemon's hot path. The router state sits behind a lock and each
+//!   link task routes the frames it received itself, before it reads its socket again: no queue
+//!   and no task hop between a link and the router. A run of frames (one wake-up of a link
+//!   task) is routed under one lock, each egress link gets the run's frames for it in one go
+//!   (one `sendmmsg` for a UDP peer whose queue is empty), the tlog gets the run's records in
+//!   one hand-off, and the tracker's tap is filled without waking the tracker.
+//! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
+//!   queues.
 
 pub mod table;
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
-use vtol_link::{Frame, LinkEvent, LinkId, LinkSender, LinkStats};
+use vtol_link::{
+    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, LinkStats, SendSummary,
+};
 
-use crate::tlog::{Direction, Record, TlogHandle};
+use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
 use table::{Addressing, Route, RoutingTable};
 
 const MSG_ID_COMMAND_ACK: u32 = 77;
-/// Events taken from a channel per wake-up. Under load the router routes a run of frames per
-/// wake-up and hands their tlog records over together (one wake-up of the writer thread per run
-/// instead of one per frame); at low rates a run is one frame and nothing waits.
+/// Events taken from a queue per wake-up ([`Router::run`]): under load a run of frames is
+/// routed together; at low rates a run is one frame and nothing waits.
 const BATCH: usize = 64;
 const MSG_ID_SETUP_SIGNING: u32 = 256;
 
@@ -90,9 +101,11 @@ struct Egress {
     side: Side,
     peer: String,
     tx: LinkSender,
+    /// Frames of the run being routed that go out on this link, in order.
+    run: Vec<Frame>,
 }
 
-/// The router's state, driven by [`Router::run`].
+/// The router's state, driven by [`Router::run`] or, shared, by [`Router::inline`].
 pub struct Router {
     table: RoutingTable,
     egress: BTreeMap<LinkId, Egress>,
@@ -103,8 +116,6 @@ pub struct Router {
     tlog: Option<TlogHandle>,
     /// Records of the current run, handed to the tlog writer after the run is forwarded.
     pending_log: Vec<Record>,
-    /// Whether the run being routed is a lone frame (see [`Router::route`]).
-    send_inline: bool,
     tap: Option<mpsc::Sender<Tapped>>,
 }
 
@@ -117,7 +128,9 @@ impl std::fmt::Debug for Router {
 }
 
 impl Router {
-    /// A router that logs to `tlog` (if any) and copies every frame to `tap` (if any).
+    /// A router that logs to `tlog` (if any) and copies every frame to `tap` (if any). The tap
+    /// is filled without waiting and without caring whether its reader is awake: a full tap
+    /// drops the copy and counts it.
     #[must_use]
     pub fn new(
         tlog: Option<TlogHandle>,
@@ -134,13 +147,12 @@ impl Router {
             links_tx,
             tlog,
             pending_log: Vec::with_capacity(BATCH),
-            send_inline: true,
             tap,
         };
         (router, RouterHandle { stats, links })
     }
 
-    /// Routes until `cancel` fires or both channels close; then closes the tlog (flushing it).
+    /// Routes until `cancel` fires or both queues close; then closes the tlog (flushing it).
     pub async fn run(
         mut self,
         mut vehicle: mpsc::Receiver<LinkEvent>,
@@ -156,56 +168,111 @@ impl Router {
                 () = cancel.cancelled() => break,
                 n = vehicle.recv_many(&mut from_vehicle, BATCH), if vehicle_open => {
                     vehicle_open = n > 0;
-                    self.send_inline = n == 1;
-                    for ev in from_vehicle.drain(..) {
-                        self.apply(Side::Vehicle, ev);
-                    }
+                    self.apply_run(Side::Vehicle, &mut from_vehicle);
                 }
                 n = clients.recv_many(&mut from_clients, BATCH), if clients_open => {
                     clients_open = n > 0;
-                    self.send_inline = n == 1;
-                    for ev in from_clients.drain(..) {
-                        self.apply(Side::Client, ev);
-                    }
+                    self.apply_run(Side::Client, &mut from_clients);
                 }
             }
-            self.flush_log();
         }
+        self.close();
+    }
+
+    /// Shares the router between the link tasks: each routes what it receives itself. Hand
+    /// [`InlineRouter::events`] to the links of each side; call [`InlineRouter::close`] at
+    /// shutdown (it closes the tlog, flushing it).
+    #[must_use]
+    pub fn inline(self) -> InlineRouter {
+        InlineRouter(Arc::new(Mutex::new(Some(self))))
+    }
+
+    /// Applies one link event at once (its frame forwarded, its record handed to the tlog).
+    pub fn handle(&mut self, side: Side, event: LinkEvent) {
+        self.apply(side, event, unix_time_us());
+        self.end_run();
+    }
+
+    /// Applies a run of events taken from a queue, in order, and empties `events`.
+    fn apply_run(&mut self, side: Side, events: &mut Vec<LinkEvent>) {
+        let t_us = unix_time_us();
+        for ev in events.drain(..) {
+            self.apply(side, ev, t_us);
+        }
+        self.end_run();
+    }
+
+    /// Routes a run of frames (one wake-up of a link task) and empties `frames`.
+    fn route_run(&mut self, side: Side, frames: &mut Vec<(LinkId, Frame)>) {
+        // One clock read per run: its frames arrived together.
+        let t_us = unix_time_us();
+        for (id, frame) in frames.drain(..) {
+            self.route(id, side, frame, t_us);
+        }
+        self.end_run();
+    }
+
+    /// Sends what the run routed to each egress link and hands its records to the tlog.
+    fn end_run(&mut self) {
+        self.send_runs();
+        if let Some(tlog) = &self.tlog
+            && !self.pending_log.is_empty()
+        {
+            tlog.log_many(self.pending_log.drain(..));
+        }
+    }
+
+    /// Hands each egress link the frames routed to it in this run.
+    fn send_runs(&mut self) {
+        let mut total = SendSummary::default();
+        for e in self.egress.values_mut() {
+            if !e.run.is_empty() {
+                total += e.tx.try_send_many(&mut e.run);
+            }
+        }
+        // Queue-full drops are counted by the links themselves (tx_dropped_queue_full).
+        let add = |a: &AtomicU64, n: usize| {
+            if n > 0 {
+                a.fetch_add(n as u64, Ordering::Relaxed);
+            }
+        };
+        add(&self.stats.frames_out, total.taken);
+        add(&self.stats.dropped_link_closed, total.closed);
+    }
+
+    fn close(&mut self) {
+        self.send_runs();
         if let Some(tlog) = self.tlog.take() {
+            tlog.log_many(self.pending_log.drain(..));
             tlog.close();
         }
     }
 
-    /// Hands the records of the run just routed to the tlog writer.
-    fn flush_log(&mut self) {
-        if let Some(tlog) = &self.tlog {
-            for record in self.pending_log.drain(..) {
-                tlog.log(record);
-            }
-        }
-    }
-
-    /// Applies one link event (and hands its tlog record over at once).
-    pub fn handle(&mut self, side: Side, event: LinkEvent) {
-        self.apply(side, event);
-        self.flush_log();
-    }
-
-    /// Applies one link event; its tlog record waits for [`Router::flush_log`].
-    fn apply(&mut self, side: Side, event: LinkEvent) {
+    /// Applies one link event; its copies and record wait for [`Router::end_run`].
+    fn apply(&mut self, side: Side, event: LinkEvent, t_us: u64) {
         match event {
             LinkEvent::Up { id, peer, tx } => {
                 tracing::info!(%id, %peer, ?side, "link up");
-                self.egress.insert(id, Egress { side, peer, tx });
+                self.send_runs();
+                self.egress.insert(
+                    id,
+                    Egress {
+                        side,
+                        peer,
+                        tx,
+                        run: Vec::new(),
+                    },
+                );
                 self.publish_links();
             }
             LinkEvent::Down { id, reason } => {
                 tracing::info!(%id, %reason, "link down");
+                self.send_runs();
                 self.egress.remove(&id);
                 self.table.forget_link(id);
                 self.publish_links();
             }
-            LinkEvent::Frame { id, frame } => self.route(id, side, frame),
+            LinkEvent::Frame { id, frame } => self.route(id, side, frame, t_us),
         }
     }
 
@@ -224,7 +291,9 @@ impl Router {
         self.links_tx.send_replace(infos);
     }
 
-    fn route(&mut self, ingress: LinkId, side: Side, frame: Frame) {
+    /// Routes one frame: learns its sender, feeds the taps, and adds it to the run of each
+    /// egress link it goes to.
+    fn route(&mut self, ingress: LinkId, side: Side, frame: Frame, t_us: u64) {
         self.stats.frames_in.fetch_add(1, Ordering::Relaxed);
         self.table
             .learn(ingress, frame.system_id(), frame.component_id());
@@ -253,8 +322,11 @@ impl Router {
                 Side::Vehicle => Direction::FromVehicle,
                 Side::Client => Direction::ToVehicle,
             };
-            // Stamped now, handed over after the run is forwarded (see `flush_log`).
-            self.pending_log.push(Record::now(direction, frame.clone()));
+            self.pending_log.push(Record {
+                t_us,
+                direction,
+                frame: frame.clone(),
+            });
         }
         let route = self
             .table
@@ -262,32 +334,72 @@ impl Router {
         if route == Route::Unroutable {
             self.stats.unroutable.fetch_add(1, Ordering::Relaxed);
         }
-        let single = self.out.len() == 1;
         for link in &self.out {
-            let Some(e) = self.egress.get(link) else {
-                continue;
-            };
-            // A lone frame (an idle router), or a frame for one link only, goes out from here
-            // when the link allows it, which saves a task hop; a run of frames fanned out to
-            // several links goes through the queues, so each link's writer sends in parallel.
-            let sent = if self.send_inline || single {
-                e.tx.try_send(frame.clone())
-            } else {
-                e.tx.try_send_queued(frame.clone())
-            };
-            match sent {
-                Ok(()) => {
-                    self.stats.frames_out.fetch_add(1, Ordering::Relaxed);
-                }
-                // Counted by the link itself (tx_dropped_queue_full).
-                Err(vtol_link::SendError::Full) => {}
-                Err(vtol_link::SendError::Closed) => {
-                    self.stats
-                        .dropped_link_closed
-                        .fetch_add(1, Ordering::Relaxed);
-                }
+            if let Some(e) = self.egress.get_mut(link) {
+                e.run.push(frame.clone());
             }
         }
+    }
+}
+
+/// The router shared by the link tasks ([`Router::inline`]).
+#[derive(Debug, Clone)]
+pub struct InlineRouter(Arc<Mutex<Option<Router>>>);
+
+impl InlineRouter {
+    /// Where the links of `side` report: each calls the router from its own task.
+    #[must_use]
+    pub fn events(&self, side: Side) -> Events {
+        let handler: Arc<dyn LinkEventHandler> = Arc::new(SideHandler {
+            router: self.clone(),
+            side,
+        });
+        Events::Inline(handler)
+    }
+
+    /// Stops routing: later events are refused (their links stop), what the last run routed is
+    /// sent, and the tlog is closed (everything logged reaches the file).
+    pub fn close(&self) {
+        let router = self.lock().take();
+        if let Some(mut router) = router {
+            router.close();
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Option<Router>> {
+        // A panic while routing leaves the table and queues usable: keep routing.
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// The links of one side, calling into the shared router.
+struct SideHandler {
+    router: InlineRouter,
+    side: Side,
+}
+
+impl LinkEventHandler for SideHandler {
+    fn event(&self, event: LinkEvent) -> bool {
+        let mut guard = self.router.lock();
+        let Some(router) = guard.as_mut() else {
+            return false;
+        };
+        router.handle(self.side, event);
+        true
+    }
+
+    fn frames(&self, frames: &mut Vec<(LinkId, Frame)>) -> bool {
+        let mut guard = self.router.lock();
+        let Some(router) = guard.as_mut() else {
+            frames.clear();
+            return false;
+        };
+        router.route_run(self.side, frames);
+        true
+    }
+
+    fn is_closed(&self) -> bool {
+        self.router.lock().is_none()
     }
 }
 

@@ -15,8 +15,13 @@ use crate::router::{LinkInfo, Tapped};
 pub use history::{History, SharedHistory};
 pub use state::{VehicleState, VehicleView};
 
-/// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second.
+/// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second;
+/// also how often the tap is read.
 const PUBLISH_EVERY: Duration = Duration::from_millis(20);
+/// Most frames taken from the tap per tick (the tap holds more only after a stall).
+const TAP_DRAIN: usize = 16_384;
+/// Frames applied per lock of the history.
+const TAP_RUN: usize = 256;
 
 /// Runs the tracker until the tap closes or `cancel` fires. `links` is the router's list of
 /// live links: a link that leaves it is forgotten, so its health does not go stale on screen.
@@ -32,24 +37,13 @@ pub async fn run(
     let mut last_publish = Instant::now();
     let mut dirty = false;
     let mut links_open = true;
-    let mut batch = Vec::with_capacity(64);
     let mut tick = tokio::time::interval(PUBLISH_EVERY);
-    loop {
+    let mut tap_open = true;
+    while tap_open {
+        // The tick is the publishing rate: publish what a tick took at once.
+        let mut ticked = false;
         tokio::select! {
             () = cancel.cancelled() => break,
-            n = tap.recv_many(&mut batch, 64) => {
-                if n == 0 { break }
-                let now = Instant::now();
-                // One lock per run of frames, not per frame.
-                if let Ok(mut h) = history.lock() {
-                    for t in batch.drain(..) {
-                        let msg = state.apply(t.link, t.side, &t.frame, now);
-                        h.record(&t.frame, msg.as_ref(), now);
-                    }
-                }
-                batch.clear();
-                dirty = true;
-            }
             r = links.changed(), if links_open => {
                 if r.is_err() {
                     links_open = false;
@@ -60,6 +54,37 @@ pub async fn run(
                 dirty = true;
             }
             _ = tick.tick() => {
+                // The router fills the tap without waking this task (a wake-up per frame
+                // would cost more than the frame's routing): take what came since the last
+                // tick, under one lock.
+                ticked = true;
+                let now = Instant::now();
+                let mut taken = 0;
+                while tap_open && taken < TAP_DRAIN {
+                    // One lock per run of frames, not per frame.
+                    let Ok(mut h) = history.lock() else { break };
+                    let mut run = 0;
+                    while run < TAP_RUN {
+                        match tap.try_recv() {
+                            Ok(t) => {
+                                let msg = state.apply(t.link, t.side, &t.frame, now);
+                                h.record(&t.frame, msg.as_ref(), now);
+                                run += 1;
+                            }
+                            Err(mpsc::error::TryRecvError::Empty) => break,
+                            Err(mpsc::error::TryRecvError::Disconnected) => tap_open = false,
+                        }
+                        if !tap_open {
+                            break;
+                        }
+                    }
+                    drop(h);
+                    dirty |= run > 0;
+                    taken += run;
+                    if run < TAP_RUN {
+                        break;
+                    }
+                }
                 // Time alone changes rates and the lost state: publish once in a while even
                 // when nothing arrives.
                 if last_publish.elapsed() >= Duration::from_millis(500) {
@@ -67,7 +92,7 @@ pub async fn run(
                 }
             }
         }
-        if dirty && last_publish.elapsed() >= PUBLISH_EVERY {
+        if dirty && (ticked || last_publish.elapsed() >= PUBLISH_EVERY) {
             publish.send_replace(state.clone());
             last_publish = Instant::now();
             dirty = false;

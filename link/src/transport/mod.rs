@@ -16,10 +16,9 @@ use std::fmt;
 use std::io;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
-use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
@@ -29,6 +28,7 @@ use crate::frame::Frame;
 use crate::url::{LinkUrl, UrlError};
 
 pub use stream::{run_stream_link, spawn_stream_link};
+use udp::DirectUdp;
 
 /// Identifies one link for the life of the process (unique across all endpoints).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -172,99 +172,146 @@ pub enum SendError {
     Closed,
 }
 
+/// What became of the frames handed to [`LinkSender::try_send_many`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SendSummary {
+    /// Sent, or queued for the link's writer.
+    pub taken: usize,
+    /// Dropped because the queue was full (also counted in the link's `tx_dropped_queue_full`).
+    pub full: usize,
+    /// Lost because the link is down.
+    pub closed: usize,
+    /// Not wanted by the link ([`LinkOptions::accept`]).
+    pub filtered: usize,
+}
+
+impl std::ops::AddAssign for SendSummary {
+    fn add_assign(&mut self, o: Self) {
+        self.taken += o.taken;
+        self.full += o.full;
+        self.closed += o.closed;
+        self.filtered += o.filtered;
+    }
+}
+
+/// Which frames a link takes, for an in-process consumer that reads only a few message types
+/// (the daemon's own client): the others are never copied to it.
+#[derive(Clone)]
+pub struct EgressFilter(Arc<dyn Fn(&Frame) -> bool + Send + Sync>);
+
+impl EgressFilter {
+    /// A filter that takes the frames for which `accepts` is true.
+    pub fn new(accepts: impl Fn(&Frame) -> bool + Send + Sync + 'static) -> Self {
+        EgressFilter(Arc::new(accepts))
+    }
+
+    /// Whether the link takes `frame`.
+    pub fn accepts(&self, frame: &Frame) -> bool {
+        (self.0)(frame)
+    }
+}
+
+impl fmt::Debug for EgressFilter {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("EgressFilter")
+    }
+}
+
 /// The egress side of one link: a bounded queue plus the link's counters.
 ///
 /// `try_send` never waits, so one slow peer cannot stall the router; a full queue drops the
-/// frame and counts it in `tx_dropped_queue_full`.
+/// frame and counts it in `tx_dropped_queue_full`. A UDP peer whose writer has nothing queued
+/// gets its datagrams from the caller's task at once, without a task hop.
 #[derive(Debug, Clone)]
 pub struct LinkSender {
     tx: mpsc::Sender<Frame>,
     stats: Arc<LinkStats>,
     direct: Option<Arc<DirectUdp>>,
-}
-
-/// A UDP peer a producer may send to itself while nothing is queued for the peer's writer:
-/// a datagram then leaves without waking the writer task, which costs a task hop per frame.
-/// Frames queued while the writer is busy keep their order, because the producer only goes
-/// direct once the writer has sent everything it was given.
-#[derive(Debug)]
-pub(crate) struct DirectUdp {
-    pub(crate) sock: Arc<UdpSocket>,
-    pub(crate) dest: SocketAddr,
-    /// Frames handed to the writer's queue and not yet sent by it.
-    pub(crate) queued: AtomicUsize,
-}
-
-impl DirectUdp {
-    /// Sends one datagram now if the socket has room: `None` when it would block.
-    pub(crate) fn try_send_now(&self, frame: &Frame, stats: &LinkStats) -> Option<()> {
-        match self.sock.try_send_to(frame.as_bytes(), self.dest) {
-            Ok(n) => stats.add_tx(1, n),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => return None,
-            Err(e) => {
-                // Lost like any UDP datagram (e.g. ENOBUFS): counted, the link goes on.
-                tracing::debug!(dest = %self.dest, "udp send error: {e}");
-                stats.add_tx_error();
-            }
-        }
-        Some(())
-    }
+    accept: Option<EgressFilter>,
 }
 
 impl LinkSender {
-    pub(crate) fn new(tx: mpsc::Sender<Frame>, stats: Arc<LinkStats>) -> Self {
+    pub(crate) fn new(
+        tx: mpsc::Sender<Frame>,
+        stats: Arc<LinkStats>,
+        accept: Option<EgressFilter>,
+    ) -> Self {
         LinkSender {
             tx,
             stats,
             direct: None,
+            accept,
         }
     }
 
     pub(crate) fn with_direct_udp(
         tx: mpsc::Sender<Frame>,
         stats: Arc<LinkStats>,
+        accept: Option<EgressFilter>,
         direct: Arc<DirectUdp>,
     ) -> Self {
         LinkSender {
             tx,
             stats,
             direct: Some(direct),
+            accept,
         }
     }
 
-    /// Sends straight to a UDP peer when its writer has nothing queued; `Err(frame)` when the
-    /// frame must go through the queue.
-    fn try_direct(&self, frame: Frame) -> Result<(), Frame> {
-        match &self.direct {
-            Some(d) if d.queued.load(Ordering::Acquire) == 0 && !self.tx.is_closed() => {
-                d.try_send_now(&frame, &self.stats).ok_or(frame)
-            }
-            _ => Err(frame),
-        }
+    fn accepts(&self, frame: &Frame) -> bool {
+        self.accept.as_ref().is_none_or(|a| a.accepts(frame))
     }
 
-    fn note_queued(&self, delta: isize) {
-        if let Some(d) = &self.direct {
-            if delta > 0 {
-                d.queued.fetch_add(1, Ordering::AcqRel);
-            } else {
-                d.queued.fetch_sub(1, Ordering::AcqRel);
-            }
-        }
+    /// The UDP peer to send to directly, when its writer has nothing queued (so order holds).
+    fn direct_now(&self) -> Option<&DirectUdp> {
+        self.direct
+            .as_deref()
+            .filter(|d| d.queued.load(Ordering::Acquire) == 0 && !self.tx.is_closed())
     }
 
     /// Queues a frame without waiting; a full queue drops it (counted). A UDP peer whose
-    /// writer is idle gets the datagram at once, from the caller's task.
+    /// writer is idle gets the datagram at once, from the caller's task. A frame the link does
+    /// not take ([`LinkOptions::accept`]) is dropped and reported as sent.
     pub fn try_send(&self, frame: Frame) -> Result<(), SendError> {
-        match self.try_direct(frame) {
-            Ok(()) => Ok(()),
-            Err(frame) => self.try_send_queued(frame),
+        if !self.accepts(&frame) {
+            return Ok(());
         }
+        if let Some(d) = self.direct_now()
+            && d.try_send_now(&frame, &self.stats).is_some()
+        {
+            return Ok(());
+        }
+        self.try_send_queued(frame)
+    }
+
+    /// Sends a run of frames, in order, without waiting, and empties `frames`: to a UDP peer
+    /// whose writer is idle in as few system calls as the kernel allows (`sendmmsg`), the rest
+    /// (the socket buffer full, or another kind of link) through the queue.
+    pub fn try_send_many(&self, frames: &mut Vec<Frame>) -> SendSummary {
+        let mut summary = SendSummary::default();
+        if self.accept.is_some() {
+            let before = frames.len();
+            frames.retain(|f| self.accepts(f));
+            summary.filtered = before - frames.len();
+        }
+        let mut start = 0;
+        if let Some(d) = self.direct_now() {
+            start = d.try_send_now_many(frames, &self.stats);
+            summary.taken += start;
+        }
+        for frame in frames.drain(start..) {
+            match self.try_send_queued(frame) {
+                Ok(()) => summary.taken += 1,
+                Err(SendError::Full) => summary.full += 1,
+                Err(SendError::Closed) => summary.closed += 1,
+            }
+        }
+        frames.clear();
+        summary
     }
 
     /// Like [`LinkSender::try_send`] but always through the queue, so the link's own writer
-    /// task does the I/O: for a producer under load, which should spread the sends over the
-    /// writers rather than make them itself.
+    /// task does the I/O.
     pub fn try_send_queued(&self, frame: Frame) -> Result<(), SendError> {
         self.note_queued(1);
         match self.tx.try_send(frame) {
@@ -283,12 +330,27 @@ impl LinkSender {
         }
     }
 
+    fn note_queued(&self, delta: isize) {
+        if let Some(d) = &self.direct {
+            if delta > 0 {
+                d.queued.fetch_add(1, Ordering::AcqRel);
+            } else {
+                d.queued.fetch_sub(1, Ordering::AcqRel);
+            }
+        }
+    }
+
     /// Queues a frame, waiting for room (for traffic that must not be dropped, e.g. a
     /// vehicle's replies on an in-memory link). Errors only if the link is down.
     pub async fn send(&self, frame: Frame) -> Result<(), SendError> {
-        let Err(frame) = self.try_direct(frame) else {
+        if !self.accepts(&frame) {
             return Ok(());
-        };
+        }
+        if let Some(d) = self.direct_now()
+            && d.try_send_now(&frame, &self.stats).is_some()
+        {
+            return Ok(());
+        }
         self.note_queued(1);
         let r = self.tx.send(frame).await.map_err(|_| SendError::Closed);
         if r.is_err() {
@@ -327,6 +389,9 @@ pub struct LinkOptions {
     /// Open a serial endpoint whose device does not exist yet and wait for it to appear
     /// (default false: a missing device at start is an error, most likely a typo).
     pub wait_for_device: bool,
+    /// Which frames the links take (default: all). For an in-process consumer that reads only
+    /// a few message types: the others are never copied to it.
+    pub accept: Option<EgressFilter>,
 }
 
 impl Default for LinkOptions {
@@ -337,6 +402,7 @@ impl Default for LinkOptions {
             reconnect_min: Duration::from_millis(100),
             reconnect_max: Duration::from_secs(2),
             wait_for_device: false,
+            accept: None,
         }
     }
 }
@@ -440,10 +506,11 @@ impl EndpointHandle {
 /// USB radio may be replugged).
 pub async fn spawn_endpoint(
     url: &LinkUrl,
-    events: mpsc::Sender<LinkEvent>,
+    events: impl Into<Events>,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> Result<EndpointHandle, LinkError> {
+    let events = events.into();
     let (local_addr, link_id, task) = match url {
         LinkUrl::UdpIn { host, port } => {
             let (addr, task) = udp::spawn_udpin(url, host, *port, events, opts, cancel).await?;
@@ -499,14 +566,83 @@ pub(crate) async fn resolve(host: &str, port: u16) -> Result<Vec<SocketAddr>, Li
     Ok(addrs)
 }
 
+/// Takes a link's events in the task that received them: no queue and no task hop between a
+/// link and its owner. The owner (the daemon's router) routes each frame before the link task
+/// reads its socket again.
+///
+/// Implementations must not block: they run inside the links' tasks.
+pub trait LinkEventHandler: Send + Sync {
+    /// Handles one event. False when the owner is gone: the link stops.
+    fn event(&self, event: LinkEvent) -> bool;
+
+    /// Handles the frames one wake-up of a link task received, in order, and empties `frames`.
+    /// False when the owner is gone. The default hands them to [`LinkEventHandler::event`] one
+    /// by one; an owner that can do better with a run (one lock, one batched send per egress
+    /// link) overrides it.
+    fn frames(&self, frames: &mut Vec<(LinkId, Frame)>) -> bool {
+        for (id, frame) in frames.drain(..) {
+            if !self.event(LinkEvent::Frame { id, frame }) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// True once the owner is gone for good (a reconnecting link then stops trying).
+    fn is_closed(&self) -> bool {
+        false
+    }
+}
+
+/// Where links report their events: a bounded queue read by an owner task, or a handler called
+/// inline by the link tasks. `From<mpsc::Sender<LinkEvent>>` makes a queue.
+#[derive(Clone)]
+pub enum Events {
+    /// A bounded queue; a full queue makes the link wait (it is the owner's job to keep up).
+    Queue(mpsc::Sender<LinkEvent>),
+    /// A handler called from the link tasks.
+    Inline(Arc<dyn LinkEventHandler>),
+}
+
+impl fmt::Debug for Events {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Events::Queue(tx) => f.debug_tuple("Queue").field(tx).finish(),
+            Events::Inline(_) => f.write_str("Inline"),
+        }
+    }
+}
+
+impl From<mpsc::Sender<LinkEvent>> for Events {
+    fn from(tx: mpsc::Sender<LinkEvent>) -> Self {
+        Events::Queue(tx)
+    }
+}
+
+impl From<Arc<dyn LinkEventHandler>> for Events {
+    fn from(handler: Arc<dyn LinkEventHandler>) -> Self {
+        Events::Inline(handler)
+    }
+}
+
+impl Events {
+    /// True once the owner is gone.
+    pub fn is_closed(&self) -> bool {
+        match self {
+            Events::Queue(tx) => tx.is_closed(),
+            Events::Inline(h) => h.is_closed(),
+        }
+    }
+}
+
 /// Sends an event unless shutting down; false if the link should stop.
-pub(crate) async fn emit(
-    events: &mpsc::Sender<LinkEvent>,
-    event: LinkEvent,
-    cancel: &CancellationToken,
-) -> bool {
+pub(crate) async fn emit(events: &Events, event: LinkEvent, cancel: &CancellationToken) -> bool {
+    let tx = match events {
+        Events::Inline(h) => return h.event(event),
+        Events::Queue(tx) => tx,
+    };
     // The common case, room in the queue, needs no future and no select.
-    let event = match events.try_send(event) {
+    let event = match tx.try_send(event) {
         Ok(()) => return true,
         Err(mpsc::error::TrySendError::Closed(_)) => return false,
         Err(mpsc::error::TrySendError::Full(event)) => event,
@@ -514,24 +650,51 @@ pub(crate) async fn emit(
     tokio::select! {
         biased;
         _ = cancel.cancelled() => false,
-        r = events.send(event) => r.is_ok(),
+        r = tx.send(event) => r.is_ok(),
     }
+}
+
+/// Sends the frames of one wake-up, in order, and empties `frames`; false if the link should
+/// stop.
+pub(crate) async fn emit_frames(
+    events: &Events,
+    frames: &mut Vec<(LinkId, Frame)>,
+    cancel: &CancellationToken,
+) -> bool {
+    if frames.is_empty() {
+        return true;
+    }
+    if let Events::Inline(h) = events {
+        return h.frames(frames);
+    }
+    for (id, frame) in frames.drain(..) {
+        if !emit(events, LinkEvent::Frame { id, frame }, cancel).await {
+            return false;
+        }
+    }
+    true
 }
 
 /// Reports a link as down. During shutdown the owner may be gone or not reading, so do not
 /// wait then.
 pub(crate) async fn emit_down(
-    events: &mpsc::Sender<LinkEvent>,
+    events: &Events,
     id: LinkId,
     reason: String,
     cancel: &CancellationToken,
 ) {
     tracing::debug!(%id, %reason, "link down");
     let ev = LinkEvent::Down { id, reason };
-    if cancel.is_cancelled() {
-        let _ = events.try_send(ev);
-    } else {
-        let _ = events.send(ev).await;
+    match events {
+        Events::Inline(h) => {
+            h.event(ev);
+        }
+        Events::Queue(tx) if cancel.is_cancelled() => {
+            let _ = tx.try_send(ev);
+        }
+        Events::Queue(tx) => {
+            let _ = tx.send(ev).await;
+        }
     }
 }
 

@@ -2,19 +2,18 @@
 //! when the device errors or vanishes (USB radio unplugged, pty closed). The [`LinkId`] stays
 //! the same across reopenings.
 
-use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, SerialStream, StopBits};
 use tokio_util::sync::CancellationToken;
 
 use super::stream::run_reconnecting;
-use super::{LinkEvent, LinkId, LinkOptions};
+use super::{Events, LinkId, LinkOptions};
 
 /// Spawns a serial link that keeps reopening the device.
 pub(super) fn spawn_serial(
     device: String,
     baud: u32,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> (LinkId, JoinHandle<()>) {
@@ -39,7 +38,7 @@ async fn serial_task(
     id: LinkId,
     device: String,
     baud: u32,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {

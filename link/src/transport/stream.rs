@@ -14,8 +14,8 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
 use super::{
-    Backoff, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
-    sleep_or_cancel,
+    Backoff, Events, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
+    emit_frames, sleep_or_cancel,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
@@ -37,7 +37,7 @@ pub async fn run_stream_link<S>(
     peer: String,
     stream: S,
     stats: Arc<LinkStats>,
-    events: &mpsc::Sender<LinkEvent>,
+    events: &Events,
     opts: &LinkOptions,
     cancel: &CancellationToken,
 ) -> String
@@ -48,7 +48,7 @@ where
     let up = LinkEvent::Up {
         id,
         peer: peer.clone(),
-        tx: LinkSender::new(tx, stats.clone()),
+        tx: LinkSender::new(tx, stats.clone(), opts.accept.clone()),
     };
     tracing::debug!(%id, %peer, "link up");
     if !emit(events, up, cancel).await {
@@ -69,7 +69,7 @@ where
 pub fn spawn_stream_link<S>(
     stream: S,
     peer: impl Into<String>,
-    events: mpsc::Sender<LinkEvent>,
+    events: impl Into<Events>,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> (LinkId, JoinHandle<()>)
@@ -78,6 +78,7 @@ where
 {
     let id = LinkId::next();
     let peer = peer.into();
+    let events = events.into();
     let task = tokio::spawn(async move {
         let stats = Arc::new(LinkStats::default());
         run_stream_link(id, peer, stream, stats, &events, &opts, &cancel).await;
@@ -89,33 +90,30 @@ async fn read_loop<R: AsyncRead>(
     id: LinkId,
     rd: R,
     stats: &LinkStats,
-    events: &mpsc::Sender<LinkEvent>,
+    events: &Events,
     cancel: &CancellationToken,
 ) -> String {
     tokio::pin!(rd);
     let mut decoder = FrameDecoder::new();
+    let mut frames: Vec<(LinkId, Frame)> = Vec::new();
     loop {
         decoder.buffer_mut().reserve(READ_CHUNK_BYTES);
         match rd.read_buf(decoder.buffer_mut()).await {
             Ok(0) => {
-                for frame in decoder.finish() {
-                    if !emit(events, LinkEvent::Frame { id, frame }, cancel).await {
-                        break;
-                    }
-                }
+                decoder.finish_with(|frame| frames.push((id, frame)));
                 stats.add_decode(&decoder.take_stats());
+                emit_frames(events, &mut frames, cancel).await;
                 return "end of stream".to_string();
             }
             Ok(n) => stats.add_rx_bytes(n),
             Err(e) => return format!("read error: {e}"),
         }
-        while let Some(frame) = decoder.next_frame() {
-            stats.add_decode(&decoder.take_stats());
-            if !emit(events, LinkEvent::Frame { id, frame }, cancel).await {
-                return "event receiver closed".to_string();
-            }
-        }
+        // The frames of one read go to the owner together.
+        frames.extend(decoder.frames().map(|frame| (id, frame)));
         stats.add_decode(&decoder.take_stats());
+        if !emit_frames(events, &mut frames, cancel).await {
+            return "event receiver closed".to_string();
+        }
     }
 }
 
@@ -163,7 +161,7 @@ pub(crate) async fn run_reconnecting<S, E, F, Fut>(
     id: LinkId,
     what: &str,
     mut open: F,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) where

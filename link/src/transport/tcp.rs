@@ -10,14 +10,13 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
 use super::stream::run_reconnecting;
 use super::{
-    LinkError, LinkEvent, LinkId, LinkOptions, LinkStats, resolve, run_stream_link, sleep_or_cancel,
+    Events, LinkError, LinkId, LinkOptions, LinkStats, resolve, run_stream_link, sleep_or_cancel,
 };
 use crate::url::LinkUrl;
 
@@ -29,7 +28,7 @@ pub(super) async fn spawn_tcpin(
     url: &LinkUrl,
     host: &str,
     port: u16,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
@@ -71,7 +70,7 @@ pub(super) async fn spawn_tcpin(
 
 async fn tcpin_task(
     listener: TcpListener,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {
@@ -120,7 +119,7 @@ async fn tcpin_task(
 pub(super) fn spawn_tcp_client(
     host: String,
     port: u16,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> (LinkId, JoinHandle<()>) {
@@ -145,7 +144,7 @@ async fn tcp_client_task(
     id: LinkId,
     host: String,
     port: u16,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {

@@ -10,48 +10,262 @@
 //! (e.g. a stray 0xFE with a large length) can never hold back the real frames behind it until
 //! the next datagram. The cost: a frame split across two datagrams (a raw serial-to-UDP
 //! bridge) is dropped, where pymavlink would reassemble it.
+//!
+//! Two ways to run a socket, by who takes the events:
+//! - **Inline owner** ([`Events::Inline`], the daemon's router): a forwarder's cost is its
+//!   system calls and wake-ups per datagram, so the socket is read by a thread of its own in
+//!   blocking mode, like a bare `recvfrom` loop: one `recvmmsg` both sleeps and takes every
+//!   datagram waiting, and the owner routes their frames before the next one. The socket is
+//!   never registered with the async reactor, so sending on it (which the kernel follows with
+//!   a "writable" event for every datagram) wakes nobody. The thread looks at its timers and
+//!   at cancellation at least every [`BLOCKING_TICK`].
+//! - **Queue owner** ([`Events::Queue`]): a task on the runtime, for owners that read a queue
+//!   (the twin, tools).
+//!
+//! Either way a producer sends straight to a peer whose writer has nothing queued (one
+//! `sendto`, or one `sendmmsg` for a run of frames, never waiting), so the writer task only
+//! wakes when the socket buffer was full.
 
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
+use std::io::{self, IoSlice, IoSliceMut};
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use tokio::net::UdpSocket;
+use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
+use tokio::io::Interest;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
-use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
 use super::{
-    DirectUdp, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
-    resolve, sleep_or_cancel,
+    Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkSender, LinkStats,
+    emit, emit_down, emit_frames, resolve, sleep_or_cancel,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
 use crate::url::LinkUrl;
 
-/// Largest UDP payload.
+/// Largest UDP payload: one receive slot, so no datagram is ever truncated.
 const MAX_DATAGRAM_BYTES: usize = 65_536;
 /// Pause after a receive error so a persistent error cannot become a busy loop.
 const RECV_ERROR_PAUSE: Duration = Duration::from_millis(50);
+/// Most datagrams a socket's reader takes per wake-up before it looks at its timers again.
+const RECV_BATCH: usize = 32;
+/// The same for a udpout socket, which only hears its peer's replies.
+const REPLY_BATCH: usize = 8;
+/// Most datagrams per `sendmmsg`.
+const SEND_BATCH: usize = 64;
+/// Most frames a UDP writer takes from its queue per wake-up.
+const WRITE_BATCH: usize = 64;
+/// Longest a blocking reader waits for a datagram before it looks at its timers and at
+/// cancellation.
+pub(crate) const BLOCKING_TICK: Duration = Duration::from_millis(100);
+/// How long a writer whose blocking socket's buffer is full waits before it tries again (a
+/// blocking socket has no readiness events to wait on; a full UDP send buffer is rare).
+const FULL_RETRY: Duration = Duration::from_millis(1);
 
-/// State of one UDP peer (one link) of a udpin socket.
-struct Peer {
-    id: LinkId,
-    last_heard: Instant,
-    decoder: FrameDecoder,
-    stats: Arc<LinkStats>,
-    writer_cancel: CancellationToken,
+/// The socket of a UDP endpoint, as its reader needs it.
+#[derive(Debug)]
+enum UdpSock {
+    /// Registered with the reactor, read by a task.
+    Async(tokio::net::UdpSocket),
+    /// Blocking, read by a thread of its own, unknown to the reactor.
+    Blocking(std::net::UdpSocket),
 }
 
-async fn bind(url: &LinkUrl, addrs: &[SocketAddr]) -> Result<UdpSocket, LinkError> {
+impl UdpSock {
+    fn local_addr(&self) -> io::Result<SocketAddr> {
+        match self {
+            UdpSock::Async(s) => s.local_addr(),
+            UdpSock::Blocking(s) => s.local_addr(),
+        }
+    }
+
+    /// Runs a non-blocking send; on a registered socket a `WouldBlock` also clears the write
+    /// readiness, so that [`UdpSock::room`] waits for the next one.
+    fn send_io<R>(&self, f: impl FnOnce(BorrowedFd<'_>) -> io::Result<R>) -> io::Result<R> {
+        match self {
+            UdpSock::Async(s) => s.try_io(Interest::WRITABLE, || f(s.as_fd())),
+            UdpSock::Blocking(s) => f(s.as_fd()),
+        }
+    }
+
+    /// Waits until the socket may have room to send again.
+    async fn room(&self) -> io::Result<()> {
+        match self {
+            UdpSock::Async(s) => s.writable().await,
+            UdpSock::Blocking(_) => {
+                tokio::time::sleep(FULL_RETRY).await;
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A UDP peer that producers may send to themselves while nothing is queued for the peer's
+/// writer: a datagram then leaves without waking the writer task, which costs a task hop per
+/// frame. Frames queued while the writer is busy keep their order, because a producer only
+/// goes direct once the writer has sent everything it was given.
+#[derive(Debug)]
+pub(crate) struct DirectUdp {
+    sock: Arc<UdpSock>,
+    dest: SocketAddr,
+    /// Frames handed to the writer's queue and not yet sent by it.
+    pub(crate) queued: AtomicUsize,
+}
+
+impl DirectUdp {
+    /// Sends one datagram now if the socket has room: `None` when it would block.
+    pub(crate) fn try_send_now(&self, frame: &Frame, stats: &LinkStats) -> Option<()> {
+        let sent = self.sock.send_io(|fd| {
+            rustix::net::sendto(
+                fd,
+                frame.as_bytes(),
+                rustix::net::SendFlags::DONTWAIT,
+                &self.dest,
+            )
+            .map_err(io::Error::from)
+        });
+        match sent {
+            Ok(n) => stats.add_tx(1, n),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => return None,
+            Err(e) => {
+                // Lost like any UDP datagram (e.g. ENOBUFS): counted, the link goes on.
+                tracing::debug!(dest = %self.dest, "udp send error: {e}");
+                stats.add_tx_error();
+            }
+        }
+        Some(())
+    }
+
+    /// Sends the frames in order, one datagram each, batched into `sendmmsg` calls, until the
+    /// socket buffer is full. Returns how many were dealt with (sent, or lost to an error and
+    /// counted); the rest must wait for room.
+    pub(crate) fn try_send_now_many(&self, frames: &[Frame], stats: &LinkStats) -> usize {
+        if let [frame] = frames {
+            return usize::from(self.try_send_now(frame, stats).is_some());
+        }
+        let addr = rustix::net::addr::SocketAddrArg::as_any(&self.dest);
+        let mut done = 0;
+        while done < frames.len() {
+            let chunk = &frames[done..frames.len().min(done + SEND_BATCH)];
+            let iovs: Vec<[IoSlice<'_>; 1]> =
+                chunk.iter().map(|f| [IoSlice::new(f.as_bytes())]).collect();
+            let mut no_control: Vec<rustix::net::SendAncillaryBuffer<'_, '_, '_>> =
+                chunk.iter().map(|_| Default::default()).collect();
+            let mut msgs: Vec<rustix::net::MMsgHdr<'_>> = iovs
+                .iter()
+                .zip(no_control.iter_mut())
+                .map(|(iov, control)| rustix::net::MMsgHdr::new_with_addr(&addr, iov, control))
+                .collect();
+            let sent = self.sock.send_io(|fd| {
+                rustix::net::sendmmsg(fd, &mut msgs, rustix::net::SendFlags::DONTWAIT)
+                    .map_err(io::Error::from)
+            });
+            match sent {
+                Ok(0) => break,
+                Ok(n) => {
+                    let bytes = msgs[..n].iter().map(rustix::net::MMsgHdr::bytes_sent).sum();
+                    stats.add_tx(n, bytes);
+                    done += n;
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) => {
+                    // The first datagram of the call failed (ENOBUFS …): lost like any UDP
+                    // datagram, counted, and the rest go on.
+                    tracing::debug!(dest = %self.dest, "udp send error: {e}");
+                    stats.add_tx_error();
+                    done += 1;
+                }
+            }
+        }
+        done
+    }
+}
+
+/// Receive buffers for one blocking reader and what the last `recvmmsg` put in them.
+struct Datagrams {
+    buf: Vec<u8>,
+    slots: usize,
+    headers: MultiHeaders<SockaddrStorage>,
+    got: Vec<(usize, Option<SocketAddr>)>,
+}
+
+impl Datagrams {
+    fn new(slots: usize) -> Self {
+        let slots = slots.clamp(1, RECV_BATCH);
+        Datagrams {
+            // Pages are only touched where datagrams land: a few per slot at most.
+            buf: vec![0u8; slots * MAX_DATAGRAM_BYTES],
+            slots,
+            headers: MultiHeaders::preallocate(slots, None),
+            got: Vec::with_capacity(slots),
+        }
+    }
+
+    /// Sleeps until a datagram arrives (or the socket's read timeout passes, `WouldBlock`),
+    /// then takes it and every other one waiting, up to the number of slots.
+    fn recv(&mut self, sock: &std::net::UdpSocket) -> io::Result<usize> {
+        self.got.clear();
+        let mut chunks = self.buf.chunks_mut(MAX_DATAGRAM_BYTES);
+        let mut iovs: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
+            std::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or_default())]);
+        let msgs = recvmmsg(
+            sock.as_raw_fd(),
+            &mut self.headers,
+            iovs[..self.slots].iter_mut(),
+            MsgFlags::MSG_WAITFORONE,
+            None,
+        )
+        .map_err(io::Error::from)?;
+        for m in msgs {
+            self.got.push((m.bytes, m.address.and_then(to_std)));
+        }
+        Ok(self.got.len())
+    }
+
+    /// The datagrams of the last receive: (bytes, sender).
+    fn iter(&self) -> impl Iterator<Item = (&[u8], Option<SocketAddr>)> {
+        self.got.iter().enumerate().map(|(i, (n, addr))| {
+            let start = i * MAX_DATAGRAM_BYTES;
+            (&self.buf[start..start + n], *addr)
+        })
+    }
+}
+
+fn to_std(a: SockaddrStorage) -> Option<SocketAddr> {
+    a.as_sockaddr_in()
+        .map(|v4| SocketAddr::from(*v4))
+        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
+}
+
+/// Binds `addrs` in turn; a socket for a blocking reader when the owner takes events inline.
+fn bind(url: &LinkUrl, addrs: &[SocketAddr], events: &Events) -> Result<Arc<UdpSock>, LinkError> {
+    let io_err = |source| LinkError::Io {
+        url: url.to_string(),
+        source,
+    };
     let mut last = None;
     for &addr in addrs {
-        match UdpSocket::bind(addr).await {
-            Ok(s) => return Ok(s),
+        match std::net::UdpSocket::bind(addr) {
+            Ok(s) => {
+                let sock = match events {
+                    Events::Inline(_) => {
+                        s.set_read_timeout(Some(BLOCKING_TICK)).map_err(io_err)?;
+                        UdpSock::Blocking(s)
+                    }
+                    Events::Queue(_) => {
+                        s.set_nonblocking(true).map_err(io_err)?;
+                        UdpSock::Async(tokio::net::UdpSocket::from_std(s).map_err(io_err)?)
+                    }
+                };
+                return Ok(Arc::new(sock));
+            }
             Err(source) => last = Some((addr, source)),
         }
     }
@@ -63,25 +277,21 @@ async fn bind(url: &LinkUrl, addrs: &[SocketAddr]) -> Result<UdpSocket, LinkErro
     })
 }
 
-fn local_addr(url: &LinkUrl, sock: &UdpSocket) -> Result<SocketAddr, LinkError> {
+fn local_addr(url: &LinkUrl, sock: &UdpSock) -> Result<SocketAddr, LinkError> {
     sock.local_addr().map_err(|source| LinkError::Io {
         url: url.to_string(),
         source,
     })
 }
 
-/// Most frames a UDP writer takes from its queue per wake-up.
-const WRITE_BATCH: usize = 64;
-
-/// Writes one link's queue to `dest`, one datagram per frame, until cancelled.
+/// Writes what producers could not send directly (the socket buffer was full), in order, one
+/// datagram per frame, until cancelled.
 async fn udp_writer(
     direct: Arc<DirectUdp>,
     mut rx: mpsc::Receiver<Frame>,
     stats: Arc<LinkStats>,
     cancel: CancellationToken,
 ) {
-    // Frames are taken from the queue a run at a time: under load one wake-up sends many
-    // datagrams (still one datagram per frame, as pymavlink expects).
     let mut batch: Vec<Frame> = Vec::with_capacity(WRITE_BATCH);
     loop {
         let n = tokio::select! {
@@ -93,123 +303,281 @@ async fn udp_writer(
             cancel.cancelled().await;
             return;
         }
-        for frame in batch.drain(..) {
-            // Try without waiting first; only a full socket buffer needs the readiness await.
-            if direct.try_send_now(&frame, &stats).is_none() {
-                match direct.sock.send_to(frame.as_bytes(), direct.dest).await {
-                    Ok(n) => stats.add_tx(1, n),
-                    Err(e) => {
-                        tracing::debug!(dest = %direct.dest, "udp send error: {e}");
-                        stats.add_tx_error();
+        let mut sent = 0;
+        while sent < batch.len() {
+            sent += direct.try_send_now_many(&batch[sent..], &stats);
+            if sent < batch.len() {
+                let room = tokio::select! {
+                    _ = cancel.cancelled() => return,
+                    r = direct.sock.room() => r,
+                };
+                if let Err(e) = room {
+                    tracing::debug!(dest = %direct.dest, "udp writer cannot wait for room: {e}");
+                    stats.add_tx_error();
+                    sent += 1;
+                    if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
+                        return;
                     }
                 }
             }
-            // Only now may producers send directly again: this frame is out, in order.
-            direct.queued.fetch_sub(1, Ordering::AcqRel);
         }
+        // Only now may producers send directly again: these frames are out, in order.
+        direct.queued.fetch_sub(batch.len(), Ordering::AcqRel);
+        batch.clear();
     }
 }
 
-/// The writer of one UDP peer and the sender the router uses for it.
+/// The writer of one UDP peer and the sender the owner uses for it.
 fn udp_link(
-    sock: &Arc<UdpSocket>,
+    sock: &Arc<UdpSock>,
     dest: SocketAddr,
     stats: &Arc<LinkStats>,
-    queue_len: usize,
+    opts: &LinkOptions,
     cancel: CancellationToken,
 ) -> (
     LinkSender,
     impl std::future::Future<Output = ()> + Send + 'static,
 ) {
-    let (tx, rx) = mpsc::channel(queue_len.max(1));
+    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
     let direct = Arc::new(DirectUdp {
         sock: sock.clone(),
         dest,
         queued: AtomicUsize::new(0),
     });
-    let sender = LinkSender::with_direct_udp(tx, stats.clone(), direct.clone());
+    let sender =
+        LinkSender::with_direct_udp(tx, stats.clone(), opts.accept.clone(), direct.clone());
     (sender, udp_writer(direct, rx, stats.clone(), cancel))
 }
 
-/// Creates the state of a newly heard peer, spawns its writer and returns its `Up` event.
-fn new_peer(
-    sock: &Arc<UdpSocket>,
-    addr: SocketAddr,
-    writers: &TaskTracker,
-    opts: &LinkOptions,
-    cancel: &CancellationToken,
-) -> (Peer, LinkEvent) {
-    let id = LinkId::next();
-    let stats = Arc::new(LinkStats::default());
-    let writer_cancel = cancel.child_token();
-    let (tx, writer) = udp_link(sock, addr, &stats, opts.queue_len, writer_cancel.clone());
-    writers.spawn(writer);
-    tracing::debug!(%id, %addr, "udp peer up");
-    let up = LinkEvent::Up {
-        id,
-        peer: format!("udp {addr}"),
-        tx,
-    };
-    let peer = Peer {
-        id,
-        last_heard: Instant::now(),
-        decoder: FrameDecoder::new(),
-        stats,
-        writer_cancel,
-    };
-    (peer, up)
+/// State of one UDP peer (one link) of a udpin socket.
+struct Peer {
+    id: LinkId,
+    last_heard: Instant,
+    decoder: FrameDecoder,
+    stats: Arc<LinkStats>,
+    writer_cancel: CancellationToken,
 }
 
-/// Binds a udpin socket and spawns its task.
+/// The peers of a udpin socket.
+struct Peers {
+    sock: Arc<UdpSock>,
+    by_addr: HashMap<SocketAddr, Peer>,
+    writers: TaskTracker,
+    runtime: tokio::runtime::Handle,
+    opts: LinkOptions,
+    cancel: CancellationToken,
+}
+
+impl Peers {
+    fn new(sock: Arc<UdpSock>, opts: LinkOptions, cancel: CancellationToken) -> Self {
+        Peers {
+            sock,
+            by_addr: HashMap::new(),
+            writers: TaskTracker::new(),
+            runtime: tokio::runtime::Handle::current(),
+            opts,
+            cancel,
+        }
+    }
+
+    /// Takes a datagram from `addr`: its frames are added to `frames`. A new peer becomes a
+    /// link (its writer starts) and its `Up` event is returned, for the caller to report
+    /// before the frames.
+    fn on_datagram(
+        &mut self,
+        addr: SocketAddr,
+        data: &[u8],
+        now: Instant,
+        frames: &mut Vec<(LinkId, Frame)>,
+    ) -> Option<LinkEvent> {
+        let (peer, up) = match self.by_addr.entry(addr) {
+            Entry::Occupied(o) => (o.into_mut(), None),
+            Entry::Vacant(v) => {
+                let id = LinkId::next();
+                let stats = Arc::new(LinkStats::default());
+                let writer_cancel = self.cancel.child_token();
+                let (tx, writer) =
+                    udp_link(&self.sock, addr, &stats, &self.opts, writer_cancel.clone());
+                self.writers.spawn_on(writer, &self.runtime);
+                tracing::debug!(%id, %addr, "udp peer up");
+                let up = LinkEvent::Up {
+                    id,
+                    peer: format!("udp {addr}"),
+                    tx,
+                };
+                let peer = v.insert(Peer {
+                    id,
+                    last_heard: now,
+                    decoder: FrameDecoder::new(),
+                    stats,
+                    writer_cancel,
+                });
+                (peer, Some(up))
+            }
+        };
+        peer.last_heard = now;
+        peer.stats.add_rx_bytes(data.len());
+        peer.decoder.push(data);
+        let id = peer.id;
+        peer.decoder.finish_with(|frame| frames.push((id, frame)));
+        peer.stats.add_decode(&peer.decoder.take_stats());
+        up
+    }
+
+    /// Drops a peer that was not reported up (its owner is gone).
+    fn forget(&mut self, addr: SocketAddr) {
+        if let Some(p) = self.by_addr.remove(&addr) {
+            p.writer_cancel.cancel();
+        }
+    }
+
+    /// Removes the peers silent for the timeout: (id, reason) of each.
+    fn expire(&mut self, now: Instant) -> Vec<(LinkId, String)> {
+        let timeout = self.opts.udp_peer_timeout;
+        let expired: Vec<SocketAddr> = self
+            .by_addr
+            .iter()
+            .filter(|(_, p)| now.duration_since(p.last_heard) >= timeout)
+            .map(|(a, _)| *a)
+            .collect();
+        expired
+            .into_iter()
+            .filter_map(|addr| {
+                let p = self.by_addr.remove(&addr)?;
+                p.writer_cancel.cancel();
+                Some((p.id, format!("udp peer {addr} silent for {timeout:?}")))
+            })
+            .collect()
+    }
+
+    /// Removes every peer: the id of each.
+    fn drain(&mut self) -> Vec<LinkId> {
+        self.by_addr
+            .drain()
+            .map(|(_, p)| {
+                p.writer_cancel.cancel();
+                p.id
+            })
+            .collect()
+    }
+}
+
+/// How often a udpin reader looks for silent peers: often enough that a peer expires within
+/// ~25 % of the timeout.
+fn expiry_period(opts: &LinkOptions) -> Duration {
+    (opts.udp_peer_timeout / 4).clamp(Duration::from_millis(5), Duration::from_secs(1))
+}
+
+/// Binds a udpin socket and starts its reader.
 pub(super) async fn spawn_udpin(
     url: &LinkUrl,
     host: &str,
     port: u16,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
     let addrs = resolve(host, port).await?;
-    let sock = Arc::new(bind(url, &addrs).await?);
+    let sock = bind(url, &addrs, &events)?;
     let local = local_addr(url, &sock)?;
     tracing::info!(%url, %local, "udpin listening");
-    let task = tokio::spawn(udpin_task(sock, events, opts, cancel));
+    let task = match events {
+        Events::Inline(handler) => {
+            let peers = Peers::new(sock, opts, cancel);
+            tokio::task::spawn_blocking(move || udpin_blocking(peers, &*handler))
+        }
+        events @ Events::Queue(_) => tokio::spawn(udpin_task(sock, events, opts, cancel)),
+    };
     Ok((local, task))
 }
 
+/// The udpin reader on a thread of its own, routing inline.
+fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
+    let UdpSock::Blocking(sock) = &*Arc::clone(&peers.sock) else {
+        return;
+    };
+    let period = expiry_period(&peers.opts);
+    if let Err(e) = sock.set_read_timeout(Some(BLOCKING_TICK.min(period))) {
+        tracing::debug!("udpin read timeout: {e}");
+    }
+    let mut next_expiry = Instant::now() + period;
+    let mut dgrams = Datagrams::new(RECV_BATCH);
+    let mut frames: Vec<(LinkId, Frame)> = Vec::with_capacity(RECV_BATCH);
+    'run: while !peers.cancel.is_cancelled() {
+        let mut now = None;
+        match dgrams.recv(sock) {
+            Ok(_) => {
+                let t = Instant::now();
+                now = Some(t);
+                for (data, addr) in dgrams.iter() {
+                    let Some(addr) = addr else { continue };
+                    if let Some(up) = peers.on_datagram(addr, data, t, &mut frames)
+                        && !handler.event(up)
+                    {
+                        peers.forget(addr);
+                        break 'run;
+                    }
+                }
+                // The frames of the whole wake-up go to the owner together.
+                if !handler.frames(&mut frames) {
+                    break;
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => {
+                // E.g. ECONNREFUSED from an ICMP error on some platforms: not fatal.
+                tracing::debug!("udpin receive error: {e}");
+                std::thread::sleep(RECV_ERROR_PAUSE);
+            }
+        }
+        let now = now.unwrap_or_else(Instant::now);
+        if now >= next_expiry {
+            next_expiry = now + period;
+            for (id, reason) in peers.expire(now) {
+                tracing::debug!(%id, %reason, "link down");
+                handler.event(LinkEvent::Down { id, reason });
+            }
+        }
+    }
+    for id in peers.drain() {
+        handler.event(LinkEvent::Down {
+            id,
+            reason: "shutdown".to_string(),
+        });
+    }
+    peers.writers.close();
+    let (runtime, writers) = (peers.runtime.clone(), peers.writers.clone());
+    runtime.block_on(writers.wait());
+}
+
 async fn udpin_task(
-    sock: Arc<UdpSocket>,
-    events: mpsc::Sender<LinkEvent>,
+    sock: Arc<UdpSock>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) {
-    let writers = TaskTracker::new();
-    let mut peers: HashMap<SocketAddr, Peer> = HashMap::new();
+    let UdpSock::Async(s) = &*Arc::clone(&sock) else {
+        return;
+    };
+    let period = expiry_period(&opts);
+    let mut peers = Peers::new(sock, opts, cancel.clone());
     let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
-    let timeout = opts.udp_peer_timeout;
-    // Check often enough that a peer expires within ~25 % of the timeout.
-    let period = (timeout / 4).clamp(Duration::from_millis(5), Duration::from_secs(1));
+    let mut frames: Vec<(LinkId, Frame)> = Vec::with_capacity(RECV_BATCH);
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     'run: loop {
         tokio::select! {
             _ = cancel.cancelled() => break,
             _ = tick.tick() => {
-                let now = Instant::now();
-                let expired: Vec<SocketAddr> = peers
-                    .iter()
-                    .filter(|(_, p)| now.duration_since(p.last_heard) >= timeout)
-                    .map(|(a, _)| *a)
-                    .collect();
-                for addr in expired {
-                    if let Some(p) = peers.remove(&addr) {
-                        p.writer_cancel.cancel();
-                        let reason = format!("udp peer {addr} silent for {timeout:?}");
-                        emit_down(&events, p.id, reason, &cancel).await;
-                    }
+                for (id, reason) in peers.expire(Instant::now()) {
+                    emit_down(&events, id, reason, &cancel).await;
                 }
             }
-            r = sock.recv_from(&mut buf) => {
+            r = s.recv_from(&mut buf) => {
                 let (n, addr) = match r {
                     Ok(x) => x,
                     Err(e) => {
@@ -221,87 +589,38 @@ async fn udpin_task(
                         continue;
                     }
                 };
-                let ctx = PeerContext { sock: &sock, writers: &writers, opts: &opts, events: &events, cancel: &cancel };
-                if !on_datagram(&mut peers, &buf[..n], addr, &ctx).await {
-                    break 'run;
-                }
-                // Under load more datagrams are already waiting: take a run of them before going
-                // back to the select, which costs more than the receive itself.
-                for _ in 1..RECV_BATCH {
-                    let Ok((n, addr)) = sock.try_recv_from(&mut buf) else {
-                        break;
-                    };
-                    if !on_datagram(&mut peers, &buf[..n], addr, &ctx).await {
+                let mut next = Some((n, addr));
+                // Under load more datagrams are already waiting: take a run of them before
+                // going back to the select, which costs more than the receive itself.
+                for _ in 0..RECV_BATCH {
+                    let Some((n, addr)) = next.take() else { break };
+                    if let Some(up) = peers.on_datagram(addr, &buf[..n], Instant::now(), &mut frames)
+                        && !emit(&events, up, &cancel).await
+                    {
+                        peers.forget(addr);
                         break 'run;
                     }
+                    next = s.try_recv_from(&mut buf).ok();
+                }
+                if !emit_frames(&events, &mut frames, &cancel).await {
+                    break;
                 }
             }
         }
     }
-    for (_, p) in peers.drain() {
-        p.writer_cancel.cancel();
-        emit_down(&events, p.id, "shutdown".to_string(), &cancel).await;
+    for id in peers.drain() {
+        emit_down(&events, id, "shutdown".to_string(), &cancel).await;
     }
-    writers.close();
-    writers.wait().await;
+    peers.writers.close();
+    peers.writers.wait().await;
 }
 
-/// Most datagrams a udpin task takes per wake-up before it looks at its timers again.
-const RECV_BATCH: usize = 32;
-
-/// What handling a datagram needs besides the peer table.
-struct PeerContext<'a> {
-    sock: &'a Arc<UdpSocket>,
-    writers: &'a TaskTracker,
-    opts: &'a LinkOptions,
-    events: &'a mpsc::Sender<LinkEvent>,
-    cancel: &'a CancellationToken,
-}
-
-/// Handles one datagram from `addr`: a new peer becomes a link (Up), then the frames it holds
-/// go to the owner. False when the owner is gone or the task is cancelled.
-async fn on_datagram(
-    peers: &mut HashMap<SocketAddr, Peer>,
-    data: &[u8],
-    addr: SocketAddr,
-    ctx: &PeerContext<'_>,
-) -> bool {
-    let peer = match peers.entry(addr) {
-        Entry::Occupied(o) => o.into_mut(),
-        Entry::Vacant(v) => {
-            let (peer, up) = new_peer(ctx.sock, addr, ctx.writers, ctx.opts, ctx.cancel);
-            if !emit(ctx.events, up, ctx.cancel).await {
-                peer.writer_cancel.cancel();
-                return false;
-            }
-            v.insert(peer)
-        }
-    };
-    peer.last_heard = Instant::now();
-    peer.stats.add_rx_bytes(data.len());
-    peer.decoder.push(data);
-    let frames = peer.decoder.finish();
-    peer.stats.add_decode(&peer.decoder.take_stats());
-    for frame in frames {
-        if !emit(
-            ctx.events,
-            LinkEvent::Frame { id: peer.id, frame },
-            ctx.cancel,
-        )
-        .await
-        {
-            return false;
-        }
-    }
-    true
-}
-
-/// Binds an ephemeral socket for udpout and spawns its single link.
+/// Binds an ephemeral socket for udpout and starts its single link.
 pub(super) async fn spawn_udpout(
     url: &LinkUrl,
     host: &str,
     port: u16,
-    events: mpsc::Sender<LinkEvent>,
+    events: Events,
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> Result<(SocketAddr, LinkId, JoinHandle<()>), LinkError> {
@@ -311,67 +630,133 @@ pub(super) async fn spawn_udpout(
     } else {
         (Ipv6Addr::UNSPECIFIED, 0).into()
     };
-    let sock = Arc::new(bind(url, &[any]).await?);
+    let sock = bind(url, &[any], &events)?;
     let local = local_addr(url, &sock)?;
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, "udpout sending to {dest}");
-    let task = tokio::spawn(udpout_task(id, sock, dest, events, opts, cancel));
-    Ok((local, id, task))
-}
-
-async fn udpout_task(
-    id: LinkId,
-    sock: Arc<UdpSocket>,
-    dest: SocketAddr,
-    events: mpsc::Sender<LinkEvent>,
-    opts: LinkOptions,
-    cancel: CancellationToken,
-) {
     let stats = Arc::new(LinkStats::default());
     let writer_cancel = cancel.child_token();
-    let (tx, writer) = udp_link(&sock, dest, &stats, opts.queue_len, writer_cancel.clone());
+    let (tx, writer) = udp_link(&sock, dest, &stats, &opts, writer_cancel.clone());
     let writer = tokio::spawn(writer);
     let up = LinkEvent::Up {
         id,
         peer: format!("udp {dest}"),
         tx,
     };
-    let mut reason = "shutdown".to_string();
-    if emit(&events, up, &cancel).await {
-        // Replies may come from any address (the peer may answer from another port); one
-        // decoder suffices since there is one logical peer.
-        let mut decoder = FrameDecoder::new();
-        let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
-        'run: loop {
-            let r = tokio::select! {
-                _ = cancel.cancelled() => break,
-                r = sock.recv_from(&mut buf) => r,
+    let link = UdpOut {
+        id,
+        sock,
+        stats,
+        writer,
+        writer_cancel,
+        cancel,
+    };
+    let task = match events {
+        Events::Inline(handler) => {
+            let runtime = tokio::runtime::Handle::current();
+            tokio::task::spawn_blocking(move || {
+                let reason = if handler.event(up) {
+                    udpout_blocking(&link, &*handler)
+                } else {
+                    "shutdown".to_string()
+                };
+                link.writer_cancel.cancel();
+                let _ = runtime.block_on(link.writer);
+                handler.event(LinkEvent::Down { id, reason });
+            })
+        }
+        events @ Events::Queue(_) => tokio::spawn(async move {
+            let reason = if emit(&events, up, &link.cancel).await {
+                udpout_task(&link, &events).await
+            } else {
+                "shutdown".to_string()
             };
-            let n = match r {
-                Ok((n, _from)) => n,
-                Err(e) => {
-                    // Linux reports ECONNREFUSED only on connected sockets, others may report
-                    // it here when nobody listens yet: keep going, slowly.
-                    tracing::debug!(%id, "udpout receive error: {e}");
-                    if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
-                        break;
-                    }
-                    continue;
+            link.writer_cancel.cancel();
+            let _ = link.writer.await;
+            emit_down(&events, id, reason, &link.cancel).await;
+        }),
+    };
+    Ok((local, id, task))
+}
+
+/// A udpout link: its socket, counters and writer.
+struct UdpOut {
+    id: LinkId,
+    sock: Arc<UdpSock>,
+    stats: Arc<LinkStats>,
+    writer: JoinHandle<()>,
+    writer_cancel: CancellationToken,
+    cancel: CancellationToken,
+}
+
+/// Hears a udpout peer's replies on a thread of its own; returns why it stopped.
+fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
+    let UdpSock::Blocking(sock) = &*link.sock else {
+        return "not a blocking socket".to_string();
+    };
+    // Replies may come from any address (the peer may answer from another port); one decoder
+    // suffices since there is one logical peer.
+    let mut decoder = FrameDecoder::new();
+    let mut dgrams = Datagrams::new(REPLY_BATCH);
+    let mut frames: Vec<(LinkId, Frame)> = Vec::new();
+    while !link.cancel.is_cancelled() {
+        match dgrams.recv(sock) {
+            Ok(_) => {
+                for (data, _from) in dgrams.iter() {
+                    link.stats.add_rx_bytes(data.len());
+                    decoder.push(data);
+                    decoder.finish_with(|frame| frames.push((link.id, frame)));
+                    link.stats.add_decode(&decoder.take_stats());
                 }
-            };
-            stats.add_rx_bytes(n);
-            decoder.push(&buf[..n]);
-            let frames = decoder.finish();
-            stats.add_decode(&decoder.take_stats());
-            for frame in frames {
-                if !emit(&events, LinkEvent::Frame { id, frame }, &cancel).await {
-                    reason = "event receiver closed".to_string();
-                    break 'run;
+                if !handler.frames(&mut frames) {
+                    return "event receiver closed".to_string();
                 }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => {
+                // Linux reports ECONNREFUSED only on connected sockets, others may report it
+                // here when nobody listens yet: keep going, slowly.
+                tracing::debug!(id = %link.id, "udpout receive error: {e}");
+                std::thread::sleep(RECV_ERROR_PAUSE);
             }
         }
     }
-    writer_cancel.cancel();
-    let _ = writer.await;
-    emit_down(&events, id, reason, &cancel).await;
+    "shutdown".to_string()
+}
+
+/// Hears a udpout peer's replies in a task; returns why it stopped.
+async fn udpout_task(link: &UdpOut, events: &Events) -> String {
+    let UdpSock::Async(sock) = &*link.sock else {
+        return "not a registered socket".to_string();
+    };
+    let mut decoder = FrameDecoder::new();
+    let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
+    let mut frames: Vec<(LinkId, Frame)> = Vec::new();
+    loop {
+        let r = tokio::select! {
+            _ = link.cancel.cancelled() => return "shutdown".to_string(),
+            r = sock.recv_from(&mut buf) => r,
+        };
+        let n = match r {
+            Ok((n, _from)) => n,
+            Err(e) => {
+                tracing::debug!(id = %link.id, "udpout receive error: {e}");
+                if !sleep_or_cancel(RECV_ERROR_PAUSE, &link.cancel).await {
+                    return "shutdown".to_string();
+                }
+                continue;
+            }
+        };
+        link.stats.add_rx_bytes(n);
+        decoder.push(&buf[..n]);
+        decoder.finish_with(|frame| frames.push((link.id, frame)));
+        link.stats.add_decode(&decoder.take_stats());
+        if !emit_frames(events, &mut frames, &link.cancel).await {
+            return "event receiver closed".to_string();
+        }
+    }
 }
