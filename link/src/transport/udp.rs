@@ -468,6 +468,19 @@ fn expiry_period(opts: &LinkOptions) -> Duration {
     (opts.udp_peer_timeout / 4).clamp(Duration::from_millis(5), Duration::from_secs(1))
 }
 
+/// The stop signal of a blocking reader: `cancel`, and also the end of the runtime (a task
+/// that holds a guard is dropped then), so a runtime shut down without cancelling never waits
+/// on the thread for more than its tick.
+fn blocking_stop(cancel: &CancellationToken) -> CancellationToken {
+    let stop = cancel.child_token();
+    let (guard, watch) = (stop.clone().drop_guard(), stop.clone());
+    tokio::spawn(async move {
+        let _guard = guard;
+        watch.cancelled().await;
+    });
+    stop
+}
+
 /// Binds a udpin socket and starts its reader.
 pub(super) async fn spawn_udpin(
     url: &LinkUrl,
@@ -483,7 +496,7 @@ pub(super) async fn spawn_udpin(
     tracing::info!(%url, %local, "udpin listening");
     let task = match events {
         Events::Inline(handler) => {
-            let peers = Peers::new(sock, opts, cancel);
+            let peers = Peers::new(sock, opts, blocking_stop(&cancel));
             tokio::task::spawn_blocking(move || udpin_blocking(peers, &*handler))
         }
         events @ Events::Queue(_) => tokio::spawn(udpin_task(sock, events, opts, cancel)),
@@ -635,6 +648,10 @@ pub(super) async fn spawn_udpout(
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, "udpout sending to {dest}");
     let stats = Arc::new(LinkStats::default());
+    let cancel = match events {
+        Events::Inline(_) => blocking_stop(&cancel),
+        Events::Queue(_) => cancel,
+    };
     let writer_cancel = cancel.child_token();
     let (tx, writer) = udp_link(&sock, dest, &stats, &opts, writer_cancel.clone());
     let writer = tokio::spawn(writer);
