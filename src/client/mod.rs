@@ -230,7 +230,17 @@ impl ClientHandle {
     #[must_use]
     pub fn read_filter(&self) -> vtol_link::EgressFilter {
         let target = self.target.clone();
-        vtol_link::EgressFilter::new(move |frame| session::reads(frame, target.borrow().is_some()))
+        // Once found, the vehicle stays found: remember that instead of asking the channel for
+        // every frame of its telemetry.
+        let known = std::sync::atomic::AtomicBool::new(false);
+        vtol_link::EgressFilter::new(move |frame| {
+            let is_known = known.load(Ordering::Relaxed) || {
+                let k = target.borrow().is_some();
+                known.store(k, Ordering::Relaxed);
+                k
+            };
+            session::reads(frame, is_known)
+        })
     }
 
     /// Waits up to `timeout` for the vehicle to be known.

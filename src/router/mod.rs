@@ -212,14 +212,16 @@ impl Router {
         self.end_run();
     }
 
-    /// Sends what the run routed to each egress link and hands its records to the tlog.
+    /// Hands the run's records to the tlog, then sends what the run routed to each egress
+    /// link: the sends come last, so a link task goes back to its socket right after them (a
+    /// datagram sent wakes its receiver, which may take this CPU at once).
     fn end_run(&mut self) {
-        self.send_runs();
         if let Some(tlog) = &self.tlog
             && !self.pending_log.is_empty()
         {
             tlog.log_many(self.pending_log.drain(..));
         }
+        self.send_runs();
     }
 
     /// Hands each egress link the frames routed to it in this run.
