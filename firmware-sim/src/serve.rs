@@ -389,7 +389,36 @@ struct LinkEntry {
     bad_seen: u64,
     /// Telemetry frames left out because the link was short of room (kept for replies).
     shed: u64,
+    /// Replies that found the queue full, oldest first: they go before anything else.
+    backlog: std::collections::VecDeque<Frame>,
+    /// Replies lost because even the backlog was full (a peer that reads nothing).
+    replies_lost: u64,
 }
+
+impl LinkEntry {
+    fn new(tx: LinkSender) -> Self {
+        Self {
+            tx,
+            bad_seen: 0,
+            shed: 0,
+            backlog: std::collections::VecDeque::new(),
+            replies_lost: 0,
+        }
+    }
+
+    /// Moves backlogged replies into the queue while it has room.
+    fn flush_backlog(&mut self) {
+        while self.tx.room() > 0 {
+            let Some(f) = self.backlog.pop_front() else {
+                return;
+            };
+            let _ = self.tx.try_send(f);
+        }
+    }
+}
+
+/// Replies a link keeps waiting for room, frames; beyond it a reply is lost (and counted).
+const REPLY_BACKLOG: usize = 4096;
 
 /// Sim time one chunk of an `advance` runs before its frames go out, µs: the real-time
 /// loop's batch, so a lockstep twin ticks its streams and events as finely as a real-time one.
@@ -439,6 +468,9 @@ impl Shell {
                     None => calls_open = false,
                 },
                 () = next_batch(&mut batch) => {
+                    for entry in self.links.values_mut() {
+                        entry.flush_backlog();
+                    }
                     self.note_bad_frames();
                     self.tick().await;
                     if let Some(t) = &mut self.tlog {
@@ -466,14 +498,7 @@ impl Shell {
         match ev {
             LinkEvent::Up { id, peer, tx } => {
                 tracing::info!(%id, %peer, "link up");
-                self.links.insert(
-                    id,
-                    LinkEntry {
-                        tx,
-                        bad_seen: 0,
-                        shed: 0,
-                    },
-                );
+                self.links.insert(id, LinkEntry::new(tx));
                 self.endpoint.add_link(key(id));
                 // The first frames (HEARTBEAT and every stream) go out now, not a batch later.
                 self.tick().await;
@@ -484,8 +509,11 @@ impl Shell {
                 }
             }
             LinkEvent::Down { id, reason } => {
-                let shed = self.links.remove(&id).map_or(0, |e| e.shed);
-                tracing::info!(%id, %reason, shed, "link down");
+                let (shed, replies_lost) = self
+                    .links
+                    .remove(&id)
+                    .map_or((0, 0), |e| (e.shed, e.replies_lost));
+                tracing::info!(%id, %reason, shed, replies_lost, "link down");
                 self.endpoint.remove_link(key(id));
             }
         }
@@ -609,18 +637,33 @@ impl Shell {
     }
 
     /// Queues a frame on its link. Under lockstep it waits for room (nothing is lost, the run
-    /// stays the same); otherwise a link short of room sheds telemetry and keeps its last
-    /// places for replies, and a full queue drops the frame (counted by the link).
+    /// stays the same). Otherwise the vehicle never waits for one slow peer: a link short of
+    /// room sheds telemetry, keeping its last places for replies, and a reply that finds the
+    /// queue full waits in the link's backlog, in order, for the next batch.
     async fn deliver(&mut self, id: LinkId, frame: Frame, telemetry: bool) {
         let Some(entry) = self.links.get_mut(&id) else {
             return;
         };
         if self.lockstep {
             let _ = entry.tx.send(frame).await;
-        } else if telemetry && entry.tx.room() <= self.reserve {
-            entry.shed += 1;
-        } else {
+            return;
+        }
+        // This loop is the queue's only producer, so room seen here is room at the send.
+        if telemetry {
+            if entry.backlog.is_empty() && entry.tx.room() > self.reserve {
+                let _ = entry.tx.try_send(frame);
+            } else {
+                entry.shed += 1;
+            }
+            return;
+        }
+        entry.flush_backlog();
+        if entry.backlog.is_empty() && entry.tx.room() > 0 {
             let _ = entry.tx.try_send(frame);
+        } else if entry.backlog.len() < REPLY_BACKLOG {
+            entry.backlog.push_back(frame);
+        } else {
+            entry.replies_lost += 1;
         }
     }
 }
