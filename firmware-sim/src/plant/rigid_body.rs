@@ -47,7 +47,7 @@ impl EulerTrig {
     pub fn shifted(&self, from: &Euler, to: &Euler) -> Self {
         let d = [to.psi - from.psi, to.theta - from.theta, to.phi - from.phi];
         let largest = d[0].abs().max(d[1].abs()).max(d[2].abs());
-        if !(largest <= SHIFT_MAX_RAD) {
+        if largest > SHIFT_MAX_RAD {
             return Self::exact(to);
         }
         // One branch for all three angles, so the common path is straight-line arithmetic.
