@@ -64,10 +64,9 @@ use std::path::PathBuf;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkUrl};
-
-use tokio::time::Instant;
 
 use crate::clock::{BATCH, ClockMode, SimClock};
 use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
@@ -306,8 +305,9 @@ impl Twin {
             radio: Radio::new(config.impairment),
             tlog,
             reserve: config.link_options.queue_len / 4,
+            cancel: cancel.clone(),
         };
-        let task = tokio::spawn(shell.run(rx, calls, cancel.clone()));
+        let task = tokio::spawn(shell.run(rx, calls));
         Ok(Self {
             bound,
             control,
@@ -434,6 +434,8 @@ struct Shell {
     tlog: Option<TlogSink>,
     /// Free queue places kept for replies: below this, telemetry is shed.
     reserve: usize,
+    /// Stops the loop, also while it waits for a lockstep reader.
+    cancel: CancellationToken,
 }
 
 impl Shell {
@@ -443,8 +445,8 @@ impl Shell {
         mut self,
         mut events: mpsc::Receiver<LinkEvent>,
         mut calls: mpsc::Receiver<Call>,
-        cancel: CancellationToken,
     ) -> Endpoint {
+        let cancel = self.cancel.clone();
         let mut batch = self.clock.pause().map(|p| {
             let mut i = tokio::time::interval(p);
             i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -601,7 +603,7 @@ impl Shell {
         let step_us = crate::vehicle::PHYSICS_DT_US;
         let target =
             self.endpoint.now_us() + (seconds * 1e6 / step_us as f64).round() as u64 * step_us;
-        while self.endpoint.now_us() < target {
+        while self.endpoint.now_us() < target && !self.cancel.is_cancelled() {
             let next = (self.endpoint.now_us() + ADVANCE_CHUNK_US).min(target);
             self.clock.advance_to(next);
             let out = self.endpoint.tick_at(next, next);
@@ -645,7 +647,11 @@ impl Shell {
             return;
         };
         if self.lockstep {
-            let _ = entry.tx.send(frame).await;
+            // Waits for the reader, but not past a shutdown.
+            tokio::select! {
+                _ = entry.tx.send(frame) => {}
+                () = self.cancel.cancelled() => {}
+            }
             return;
         }
         // This loop is the queue's only producer, so room seen here is room at the send.
