@@ -120,7 +120,7 @@ pub async fn start(
         });
     }
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
-        crate::vehicle::History::new(std::time::Instant::now()),
+        crate::vehicle::History::new(crate::vehicle::now()),
     ));
     tasks.spawn(vehicle::run(
         tap_rx,

@@ -9,6 +9,7 @@ pub mod control;
 pub mod endpoint;
 pub mod estimator;
 pub mod frames;
+pub mod harness;
 pub mod integrator;
 pub mod mode;
 pub mod params;
@@ -16,6 +17,7 @@ pub mod plant;
 pub mod sensors;
 pub mod serve;
 pub mod simulate;
+pub mod tlog;
 pub mod vehicle;
 
 pub use airframe::{Airframe, ModelMode};

@@ -33,7 +33,7 @@ use crate::frames::Euler;
 use crate::integrator::rk4_step;
 use crate::mode::FlightMode;
 use crate::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
-use crate::plant::rigid_body::EulerTrig;
+use crate::plant::rigid_body::{EulerTrig, RigidBody};
 use crate::plant::{self, PlantInput, PlantState, ground};
 use crate::sensors::{self, Sensors};
 
@@ -94,6 +94,11 @@ pub struct VehicleConfig {
     pub mode: FlightMode,
     /// Start armed (the offline `simulate` command flies from t = 0).
     pub armed: bool,
+    /// The gyros were calibrated at rest before sim time 0, so the vehicle is ready to arm at
+    /// once (`firmware-sim serve` starts so). False: the firmware calibrates for
+    /// [`crate::estimator::CALIBRATION_TIME_S`] at rest after power-up, as the hardware does
+    /// (and as a reboot does); arming is refused until then.
+    pub calibrated: bool,
     /// QLOITER's position setpoint at start (paper frame, z up), m; `None` = (0, 0,
     /// `HOVER_ALT`). Given here rather than set after construction because the controller's
     /// output at t = 0 is computed at construction.
@@ -117,6 +122,7 @@ impl Default for VehicleConfig {
             gains: Gains::default(),
             mode: FlightMode::QStabilize,
             armed: false,
+            calibrated: false,
             position_setpoint_m: None,
             rc_us: [0; 8],
         }
@@ -236,6 +242,8 @@ pub struct Vehicle {
     plant: PlantState,
     /// Sines and cosines of `plant.euler`, kept with the state (computed once per step).
     plant_trig: EulerTrig,
+    /// The airframe's mass properties as the equations of motion use them.
+    body: RigidBody,
     actuators: ActuatorModel,
     /// What the plant is driven with during the current step.
     input: PlantInput,
@@ -290,8 +298,9 @@ impl Vehicle {
         if config.model == ModelMode::Paper || config.ideal_sensors || config.perfect_state {
             estimator.skip_calibration();
             state = SystemState::Standby;
-        } else if config.armed {
-            // Launched armed: the gyros were calibrated at rest before, with the same sensors.
+        } else if config.armed || config.calibrated {
+            // Launched armed or ready: the gyros were calibrated at rest before, with the same
+            // sensors.
             let rest = Vector3::new(0.0, 0.0, af.gravity_m_s2);
             while !estimator.calibrate(&sensors.sample_imu(&Vector3::zeros(), &rest)) {}
             state = SystemState::Standby;
@@ -306,6 +315,7 @@ impl Vehicle {
         let mut v = Self {
             plant,
             plant_trig: EulerTrig::new(&plant.euler),
+            body: RigidBody::new(af),
             actuators,
             input: PlantInput::default(),
             sensors,
@@ -417,9 +427,19 @@ impl Vehicle {
                     plant::derivative_with_trig(af, model, s, &u, &trig)
                 });
             } else {
+                // The input is held over the step: its loads are computed once.
+                let held = plant::HeldLoads::new(af, model, &input);
+                let body = &self.body;
+                let mut first_stage = true;
                 self.plant = rk4_step(&self.plant, dt, |s| {
-                    let trig = start_trig.shifted(&start, &s.euler);
-                    plant::derivative_with_trig(af, model, s, &input, &trig)
+                    // The first stage is the step's start, whose trig is known.
+                    let trig = if first_stage {
+                        first_stage = false;
+                        start_trig
+                    } else {
+                        start_trig.shifted(&start, &s.euler)
+                    };
+                    plant::derivative_held(af, body, s, &held, &trig)
                 });
             }
             let touchdown = ground::touchdown(&mut self.plant);
@@ -474,7 +494,8 @@ impl Vehicle {
                 .rotation_body_to_inertial()
                 .tr_mul(&Vector3::new(0.0, 0.0, af.gravity_m_s2))
         } else {
-            plant::specific_force_body_m_s2(af, model, &self.plant, &self.input)
+            // `plant_trig` is exact here: it is recomputed at every control tick.
+            plant::specific_force_body_m_s2(af, model, &self.plant_trig, &self.plant, &self.input)
         };
         let imu = self
             .sensors
