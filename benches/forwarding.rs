@@ -6,9 +6,10 @@
 //! cargo bench --bench forwarding -- --quick      # smoke run, a few seconds
 //! cargo test  --bench forwarding                 # the same smoke run, in the test profile
 //! ```
-//! (`FORWARDING_RUNS=N` sets the number of runs too; `FORWARDING_QUICK=1` also selects the
-//! smoke run; so does running without cargo bench's `--bench` argument, which is how
-//! `cargo test` runs a `harness = false` target.)
+//! (`FORWARDING_RUNS=N` sets the number of runs too; `FORWARDING_BARE_TOKIO=1` runs the bare
+//! forwarder on a tokio runtime instead of blocking `std` calls; `FORWARDING_QUICK=1` also
+//! selects the smoke run; so does running without cargo bench's `--bench` argument, which is
+//! how `cargo test` runs a `harness = false` target.)
 //!
 //! Set-up, all on loopback UDP:
 //! - a load generator (this process, one thread) sends MAVLink 2 ATTITUDE frames from sysid 1
@@ -479,7 +480,9 @@ fn bare_forwarder(targets: &str) -> ! {
         while std::io::Read::read(&mut std::io::stdin(), &mut sink).is_ok_and(|n| n > 0) {}
         std::process::exit(0);
     });
-    if std::env::var_os("BARE_TOKIO").is_some() {
+    // FORWARDING_BARE_TOKIO=1: the same loop on a current-thread tokio runtime (readiness from
+    // the reactor, then `recv_from`), to see what the reactor's path costs by itself.
+    if std::env::var_os("FORWARDING_BARE_TOKIO").is_some() {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
