@@ -57,6 +57,7 @@ use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, Li
 
 use crate::clock::{ClockMode, SimClock};
 use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
+use crate::mission;
 use crate::params::{ParamFileError, Params};
 
 /// Capacity of the transport → twin event queue.
@@ -119,7 +120,8 @@ impl Default for ServeConfig {
 
 impl ServeConfig {
     /// Loads the parameter file if one is given (a missing file starts from defaults and is
-    /// created on the first change; a corrupt one is an error, never silently replaced).
+    /// created on the first change; a corrupt one is an error, never silently replaced), and
+    /// the mission saved beside it.
     ///
     /// # Errors
     /// [`ServeError::Params`].
@@ -128,6 +130,16 @@ impl ServeConfig {
             && path.exists()
         {
             self.endpoint.params = Params::load(path)?;
+        }
+        // The mission lives beside the parameter file, with the same rules.
+        if let Some(path) = self
+            .endpoint
+            .param_file
+            .as_deref()
+            .map(mission::file_beside)
+            && path.exists()
+        {
+            self.endpoint.mission = mission::Mission::load(&path)?;
         }
         Ok(())
     }
@@ -142,6 +154,9 @@ pub enum ServeError {
     /// The parameter file is unusable.
     #[error(transparent)]
     Params(#[from] ParamFileError),
+    /// The mission file beside it is unusable.
+    #[error(transparent)]
+    Mission(#[from] mission::MissionFileError),
     /// The tokio runtime could not start.
     #[error("cannot start the runtime: {0}")]
     Runtime(std::io::Error),
