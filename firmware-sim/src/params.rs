@@ -190,6 +190,7 @@ pub static TABLE: &[ParamDef] = &[
     def("NAV_ALT_MAX", F32, "m", (1.0, 1000.0), 50.0, RW, "Targets higher above home are refused"),
     def("BATT_CAPACITY", I32, "mAh", (100.0, 100_000.0), 1300.0, RW, "Battery capacity (after restart)"),
     def("SIM_BATT_VOLTAGE", F32, "V", (1.0, 60.0), 12.6, RW, "Voltage of the full battery at rest (after restart)"),
+    def("ARMING_CHECK", I32, "", (0.0, 1.0), 1.0, RO, "Pre-arm checks (calibration, crash, mode, landed, level): 1 = all, always on"),
 ];
 
 /// Why a write was refused or a name not found.

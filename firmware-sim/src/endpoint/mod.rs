@@ -543,4 +543,6 @@ impl Endpoint {
 }
 
 #[cfg(test)]
+mod mission_tests;
+#[cfg(test)]
 mod tests;
