@@ -234,7 +234,8 @@ impl Limits {
     /// ([`MavMissionResult::MAV_MISSION_INVALID_PARAM7`]).
     pub fn check(&self, what: &str, ned_m: &Vector3<f64>) -> Result<(), Refusal> {
         let dist = crate::globe::horizontal_distance_m(ned_m, &self.home_ned_m);
-        if !(dist <= self.radius_max_m) {
+        // NaN (a target that is not a number) fails too.
+        if dist.is_nan() || dist > self.radius_max_m {
             return Err(Refusal::new(
                 MavMissionResult::MAV_MISSION_INVALID_PARAM5_X,
                 format!(
@@ -344,7 +345,7 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
             format!("Mission item {seq}: hold time {hold} s outside 0..3600"),
         ));
     }
-    if c == cmd::NAV_WAYPOINT && !(item.params[1] >= 0.0) && !item.params[1].is_nan() {
+    if c == cmd::NAV_WAYPOINT && item.params[1] < 0.0 {
         return Err(Refusal::new(
             R::MAV_MISSION_INVALID_PARAM2,
             format!("Mission item {seq}: negative acceptance radius"),

@@ -255,6 +255,22 @@ impl Navigator {
         }
     }
 
+    /// Takes note of a mode the navigator does not fly (the pilot and hover modes), as
+    /// [`Navigator::sync`] would, without the vehicle's state: the endpoint's cheap path for the
+    /// modes where there is nothing to navigate.
+    pub fn note_pilot_mode(&mut self, mode: FlightMode, armed: bool) {
+        if self.mode != Some(mode)
+            && self.mode == Some(FlightMode::Auto)
+            && self.state == MissionState::Active
+        {
+            self.state = MissionState::Paused;
+        }
+        self.mode = Some(mode);
+        self.armed = armed;
+        self.leg = Leg::Idle;
+        self.last_step_us = None;
+    }
+
     fn start_return(&mut self, inp: &NavInput<'_>) {
         let here = inp.pos_ned_m;
         self.leg = if inp.landed {

@@ -90,6 +90,12 @@ impl Endpoint {
     /// One navigation step: the guidance of GUIDED, AUTO and QRTL for the next period.
     pub(super) fn navigate(&mut self) {
         self.next_nav_us = self.now_us + NAV_PERIOD_US;
+        let t = self.vehicle.telemetry();
+        if !t.mode.is_autonomous() {
+            // Nothing to navigate in the pilot and hover modes.
+            self.navigator.note_pilot_mode(t.mode, t.armed);
+            return;
+        }
         // A step may end the mission and change the mode: then once more, in the new mode.
         for _ in 0..2 {
             let mode = self.vehicle.telemetry().mode;
