@@ -127,9 +127,15 @@ pub fn rotation_from_sin_cos(
     )
 }
 
-/// Wraps an angle into (−π, π].
+/// Wraps an angle into (−π, π]. An angle already there is returned unchanged (exactly: a
+/// small negative angle is not moved through 2π and back, which would round it).
+#[inline]
 #[must_use]
 pub fn wrap_pi(a: f64) -> f64 {
+    use std::f64::consts::PI;
+    if a > -PI && a <= PI {
+        return a;
+    }
     let w = a.rem_euclid(2.0 * std::f64::consts::PI);
     if w > std::f64::consts::PI {
         w - 2.0 * std::f64::consts::PI

@@ -34,7 +34,7 @@ use crate::integrator::rk4_step;
 use crate::mode::{FlightMode, Guidance};
 use crate::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
 use crate::plant::battery::{Battery, BatteryConfig, BatteryState};
-use crate::plant::rigid_body::EulerTrig;
+use crate::plant::rigid_body::{EulerTrig, RigidBody};
 use crate::plant::{self, PlantInput, PlantState, ground};
 use crate::sensors::{self, Sensors};
 
@@ -248,6 +248,8 @@ pub struct Vehicle {
     plant: PlantState,
     /// Sines and cosines of `plant.euler`, kept with the state (computed once per step).
     plant_trig: EulerTrig,
+    /// The airframe's mass properties as the equations of motion use them.
+    body: RigidBody,
     actuators: ActuatorModel,
     /// What the plant is driven with during the current step.
     input: PlantInput,
@@ -323,6 +325,7 @@ impl Vehicle {
         let mut v = Self {
             plant,
             plant_trig: EulerTrig::new(&plant.euler),
+            body: RigidBody::new(af),
             actuators,
             input: PlantInput::default(),
             sensors,
@@ -438,9 +441,19 @@ impl Vehicle {
                     plant::derivative_with_trig(af, model, s, &u, &trig)
                 });
             } else {
+                // The input is held over the step: its loads are computed once.
+                let held = plant::HeldLoads::new(af, model, &input);
+                let body = &self.body;
+                let mut first_stage = true;
                 self.plant = rk4_step(&self.plant, dt, |s| {
-                    let trig = start_trig.shifted(&start, &s.euler);
-                    plant::derivative_with_trig(af, model, s, &input, &trig)
+                    // The first stage is the step's start, whose trig is known.
+                    let trig = if first_stage {
+                        first_stage = false;
+                        start_trig
+                    } else {
+                        start_trig.shifted(&start, &s.euler)
+                    };
+                    plant::derivative_held(af, body, s, &held, &trig)
                 });
             }
             let touchdown = ground::touchdown(&mut self.plant);
@@ -495,7 +508,8 @@ impl Vehicle {
                 .rotation_body_to_inertial()
                 .tr_mul(&Vector3::new(0.0, 0.0, af.gravity_m_s2))
         } else {
-            plant::specific_force_body_m_s2(af, model, &self.plant, &self.input)
+            // `plant_trig` is exact here: it is recomputed at every control tick.
+            plant::specific_force_body_m_s2(af, model, &self.plant_trig, &self.plant, &self.input)
         };
         let imu = self
             .sensors

@@ -66,6 +66,10 @@ pub struct ActuatorModel {
     servo_step_max_rad: f64,
     /// Surface limit.
     surface_limit_rad: f64,
+    /// The PWM outputs the targets below were computed for.
+    targets_for: Option<PwmOutputs>,
+    /// Rotor speeds and deflections those outputs command.
+    targets: [f64; 5],
 }
 
 impl ActuatorModel {
@@ -79,22 +83,34 @@ impl ActuatorModel {
             servo_keep: keep(af.servo_time_constant_s),
             servo_step_max_rad: af.servo_rate_limit_rad_s * dt_s,
             surface_limit_rad: af.surface_limit_rad,
+            targets_for: None,
+            targets: [0.0; 5],
         }
     }
 
     /// Advances every actuator one step toward the position its PWM pulse asks for.
     pub fn step(&mut self, af: &Airframe, pwm_us: &PwmOutputs) {
-        for (i, w) in self.state.rotor_speed_rad_s.iter_mut().enumerate() {
-            let target = esc_pwm_to_rotor_speed_rad_s(af, pwm_us[i]);
+        // The outputs change at the control rate, the models run at the physics rate.
+        if self.targets_for != Some(*pwm_us) {
+            self.targets_for = Some(*pwm_us);
+            self.targets = [
+                esc_pwm_to_rotor_speed_rad_s(af, pwm_us[0]),
+                esc_pwm_to_rotor_speed_rad_s(af, pwm_us[1]),
+                servo_pwm_to_deflection_rad(af, pwm_us[2]),
+                servo_pwm_to_deflection_rad(af, pwm_us[3]),
+                servo_pwm_to_deflection_rad(af, pwm_us[4]),
+            ];
+        }
+        let t = self.targets;
+        for (w, target) in self.state.rotor_speed_rad_s.iter_mut().zip([t[0], t[1]]) {
             *w = target + (*w - target) * self.motor_keep;
         }
         let s = &mut self.state;
-        for (pos, pwm) in [
-            (&mut s.aileron_left_rad, pwm_us[2]),
-            (&mut s.aileron_right_rad, pwm_us[3]),
-            (&mut s.elevator_rad, pwm_us[4]),
+        for (pos, target) in [
+            (&mut s.aileron_left_rad, t[2]),
+            (&mut s.aileron_right_rad, t[3]),
+            (&mut s.elevator_rad, t[4]),
         ] {
-            let target = servo_pwm_to_deflection_rad(af, pwm);
             let lagged = target + (*pos - target) * self.servo_keep;
             let step = (lagged - *pos).clamp(-self.servo_step_max_rad, self.servo_step_max_rad);
             *pos = (*pos + step).clamp(-self.surface_limit_rad, self.surface_limit_rad);

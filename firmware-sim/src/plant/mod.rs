@@ -24,7 +24,7 @@ use crate::control::ActuatorCommand;
 use crate::frames::Euler;
 use crate::integrator::OdeState;
 
-use rigid_body::EulerTrig;
+use rigid_body::{EulerTrig, RigidBody};
 
 /// Rigid-body state s = [ξ, vᴮ, η, Ω] (paper frames).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -73,6 +73,7 @@ pub struct PlantStateDot {
 impl OdeState for PlantState {
     type Derivative = PlantStateDot;
 
+    #[inline]
     fn advanced(&self, d: &PlantStateDot, h: f64) -> Self {
         let e = self.euler;
         Self {
@@ -116,6 +117,66 @@ pub struct Loads {
     pub torque_body_nm: Vector3<f64>,
 }
 
+/// The part of [`Loads`] fixed by the input alone: every force and torque except those that
+/// depend on the state (the rotors' gyroscopic torque and the wind drag). The input is held over
+/// a physics step, so the vehicle computes this once per step rather than at every RK4 stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldLoads {
+    /// Thrust, surface (or `paper` f_x) force in B, N.
+    force_body_n: Vector3<f64>,
+    /// Thrust, surface, rotor-drag and disturbance torque in B, N·m.
+    torque_body_nm: Vector3<f64>,
+    /// Rotor speeds, for the gyroscopic torque.
+    rotor_speed_rad_s: [f64; 2],
+    /// Wind in I when the wind perturbation is active.
+    wind_m_s: Option<Vector3<f64>>,
+}
+
+impl HeldLoads {
+    /// The input's own forces and torques (8), (10)–(12).
+    #[must_use]
+    pub fn new(af: &Airframe, model: ModelMode, u: &PlantInput) -> Self {
+        let w = &u.actuators.rotor_speed_rad_s;
+        let thrusts = rotors::thrusts_n(af, w);
+        let drags = rotors::drags_n(af, w);
+        let lifts = surfaces::lifts(af, &u.actuators);
+        let surface_force = match model {
+            // [I16]: the paper's design applies f_x of (43) in place of the surfaces' force.
+            ModelMode::Paper => Vector3::new(u.fx_paper_n, 0.0, 0.0),
+            ModelMode::Physical => surfaces::force_body_n(&lifts),
+        };
+        Self {
+            force_body_n: rotors::thrust_force_body_n(&thrusts) + surface_force,
+            torque_body_nm: rotors::thrust_torque_body_nm(af, &thrusts)
+                + surfaces::torque_body_nm(af, &lifts)
+                + rotors::drag_torque_body_nm(af, model, &drags)
+                + u.disturbance_torque_body_nm,
+            rotor_speed_rad_s: *w,
+            wind_m_s: u.wind_m_s,
+        }
+    }
+
+    /// All the loads at state `s` (attitude `trig`).
+    #[inline]
+    #[must_use]
+    pub fn at(&self, af: &Airframe, trig: &EulerTrig, s: &PlantState) -> Loads {
+        let mut force = self.force_body_n;
+        if let Some(wind) = &self.wind_m_s {
+            let r = trig.rotation_body_to_inertial();
+            force += disturbances::wind_drag_body_n(af, &r, &s.vel_body_m_s, wind);
+        }
+        Loads {
+            force_body_n: force,
+            torque_body_nm: self.torque_body_nm
+                + rotors::gyroscopic_torque_body_nm(
+                    af,
+                    &s.omega_body_rad_s,
+                    &self.rotor_speed_rad_s,
+                ),
+        }
+    }
+}
+
 /// Forces and torques of every model, summed (8), (10)–(12).
 #[must_use]
 pub fn loads(
@@ -125,31 +186,7 @@ pub fn loads(
     s: &PlantState,
     u: &PlantInput,
 ) -> Loads {
-    let w = &u.actuators.rotor_speed_rad_s;
-    let thrusts = rotors::thrusts_n(af, w);
-    let drags = rotors::drags_n(af, w);
-    let lifts = surfaces::lifts(af, &u.actuators);
-
-    let surface_force = match model {
-        // [I16]: the paper's design applies f_x of (43) in place of the surfaces' force.
-        ModelMode::Paper => Vector3::new(u.fx_paper_n, 0.0, 0.0),
-        ModelMode::Physical => surfaces::force_body_n(&lifts),
-    };
-    let mut force = rotors::thrust_force_body_n(&thrusts) + surface_force;
-    if let Some(wind) = &u.wind_m_s {
-        let r = trig.rotation_body_to_inertial();
-        force += disturbances::wind_drag_body_n(af, &r, &s.vel_body_m_s, wind);
-    }
-
-    let torque = rotors::thrust_torque_body_nm(af, &thrusts)
-        + surfaces::torque_body_nm(af, &lifts)
-        + rotors::gyroscopic_torque_body_nm(af, &s.omega_body_rad_s, w)
-        + rotors::drag_torque_body_nm(af, model, &drags)
-        + u.disturbance_torque_body_nm;
-    Loads {
-        force_body_n: force,
-        torque_body_nm: torque,
-    }
+    HeldLoads::new(af, model, u).at(af, trig, s)
 }
 
 /// ṡ = f(s, u): the plant's equations of motion. Pure: no state, no allocation.
@@ -173,37 +210,52 @@ pub fn derivative_with_trig(
     u: &PlantInput,
     trig: &EulerTrig,
 ) -> PlantStateDot {
-    let trig = *trig;
-    let l = loads(af, model, &trig, s, u);
+    derivative_held(
+        af,
+        &RigidBody::new(af),
+        s,
+        &HeldLoads::new(af, model, u),
+        trig,
+    )
+}
+
+/// [`derivative`] from loads and constants prepared once per step ([`HeldLoads`],
+/// [`RigidBody`]): the form the vehicle's RK4 stages call.
+#[inline]
+#[must_use]
+pub fn derivative_held(
+    af: &Airframe,
+    body: &RigidBody,
+    s: &PlantState,
+    held: &HeldLoads,
+    trig: &EulerTrig,
+) -> PlantStateDot {
+    let l = held.at(af, trig, s);
     PlantStateDot {
         pos_dot_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
-        vel_body_dot_m_s2: rigid_body::body_acceleration_m_s2(
-            af,
-            &trig,
+        vel_body_dot_m_s2: body.body_acceleration_m_s2(
+            trig,
             &s.vel_body_m_s,
             &s.omega_body_rad_s,
             &l.force_body_n,
         ),
         euler_dot_rad_s: trig.euler_rates(&s.omega_body_rad_s),
-        omega_dot_rad_s2: rigid_body::angular_acceleration_rad_s2(
-            af,
-            &s.omega_body_rad_s,
-            &l.torque_body_nm,
-        ),
+        omega_dot_rad_s2: body.angular_acceleration_rad_s2(&s.omega_body_rad_s, &l.torque_body_nm),
     }
 }
 
 /// Specific force in B (what an accelerometer at the CG measures in flight): the
-/// non-gravitational force divided by the mass, m/s².
+/// non-gravitational force divided by the mass, m/s². `trig` holds the sines and cosines of
+/// `s.euler`.
 #[must_use]
 pub fn specific_force_body_m_s2(
     af: &Airframe,
     model: ModelMode,
+    trig: &EulerTrig,
     s: &PlantState,
     u: &PlantInput,
 ) -> Vector3<f64> {
-    let trig = EulerTrig::new(&s.euler);
-    loads(af, model, &trig, s, u).force_body_n * (1.0 / af.mass_kg)
+    loads(af, model, trig, s, u).force_body_n * (1.0 / af.mass_kg)
 }
 
 #[cfg(test)]

@@ -42,11 +42,19 @@ impl EulerTrig {
     /// formulas with a Taylor series for the small increment: the RK4 stages sit within a few
     /// mrad of the step's start, so this replaces three `sin_cos` per stage by a few products.
     /// Exact to rounding for increments up to [`SHIFT_MAX_RAD`]; larger ones are recomputed.
+    #[inline]
     #[must_use]
     pub fn shifted(&self, from: &Euler, to: &Euler) -> Self {
-        let (sps, cps) = shift(self.sps, self.cps, to.psi - from.psi, to.psi);
-        let (sth, cth) = shift(self.sth, self.cth, to.theta - from.theta, to.theta);
-        let (sph, cph) = shift(self.sph, self.cph, to.phi - from.phi, to.phi);
+        let d = [to.psi - from.psi, to.theta - from.theta, to.phi - from.phi];
+        let largest = d[0].abs().max(d[1].abs()).max(d[2].abs());
+        if largest > SHIFT_MAX_RAD {
+            return Self::exact(to);
+        }
+        // One branch for all three angles, so the common path is straight-line arithmetic.
+        let short = largest <= SHIFT_SHORT_MAX_RAD;
+        let (sps, cps) = shift(self.sps, self.cps, d[0], short);
+        let (sth, cth) = shift(self.sth, self.cth, d[1], short);
+        let (sph, cph) = shift(self.sph, self.cph, d[2], short);
         Self {
             sps,
             cps,
@@ -57,7 +65,15 @@ impl EulerTrig {
         }
     }
 
+    /// [`EulerTrig::new`] out of line: the rare fallback of [`EulerTrig::shifted`].
+    #[cold]
+    #[inline(never)]
+    fn exact(e: &Euler) -> Self {
+        Self::new(e)
+    }
+
     /// R_B→I = Rz(ψ)·Ry(θ)·Rx(φ), identical to [`Euler::rotation_body_to_inertial`].
+    #[inline]
     #[must_use]
     pub fn rotation_body_to_inertial(&self) -> Matrix3<f64> {
         crate::frames::rotation_from_sin_cos(
@@ -68,17 +84,18 @@ impl EulerTrig {
     }
 
     /// η̇ = W_n⁻¹ Ω, identical to [`Euler::rates_from_body`].
+    #[inline]
     #[must_use]
     pub fn euler_rates(&self, omega_body_rad_s: &Vector3<f64>) -> Vector3<f64> {
         let Self {
             sth, cth, sph, cph, ..
         } = *self;
         let (q, r) = (omega_body_rad_s[1], omega_body_rad_s[2]);
-        let qr = sph * q + cph * r;
+        let qr_over_cth = (sph * q + cph * r) / cth;
         Vector3::new(
-            qr / cth,
+            qr_over_cth,
             cph * q - sph * r,
-            omega_body_rad_s[0] + qr * sth / cth,
+            omega_body_rad_s[0] + qr_over_cth * sth,
         )
     }
 
@@ -89,6 +106,7 @@ impl EulerTrig {
     }
 
     /// Gravity in B per unit mass: Rᵀ (0, 0, −g) = −g (−sθ, sφcθ, cφcθ) ([I3]).
+    #[inline]
     #[must_use]
     pub fn gravity_body_m_s2(&self, g_m_s2: f64) -> Vector3<f64> {
         Vector3::new(
@@ -103,14 +121,14 @@ impl EulerTrig {
 /// terms kept out, δ⁷/7! and δ⁸/8!, are below 2e-18 there).
 pub const SHIFT_MAX_RAD: f64 = 0.01;
 
-/// (sin, cos) of a + δ from (sin a, cos a); `exact` is a + δ itself, for the fallback.
-fn shift(s: f64, c: f64, d: f64, exact: f64) -> (f64, f64) {
-    if d == 0.0 {
-        return (s, c);
-    }
-    if d.abs() > SHIFT_MAX_RAD {
-        return exact.sin_cos();
-    }
+/// Below this shift the series of [`EulerTrig::shifted`] stops at δ⁴: the omitted terms are
+/// under 1e-17.
+const SHIFT_SHORT_MAX_RAD: f64 = 1e-3;
+
+/// (sin, cos) of a + δ from (sin a, cos a), for |δ| ≤ [`SHIFT_MAX_RAD`]; `short` when
+/// |δ| ≤ [`SHIFT_SHORT_MAX_RAD`]. δ = 0 returns (sin a, cos a) exactly.
+#[inline]
+fn shift(s: f64, c: f64, d: f64, short: bool) -> (f64, f64) {
     // Taylor series in Horner form with the reciprocal factorials as constants: a division by
     // a constant that is not a power of two stays a division, and these sit in the RK4 stages.
     // The first omitted terms, δ⁷/7! and δ⁸/8!, are below 2e-18 for |δ| ≤ SHIFT_MAX_RAD.
@@ -119,9 +137,81 @@ fn shift(s: f64, c: f64, d: f64, exact: f64) -> (f64, f64) {
     const C4: f64 = 1.0 / 24.0;
     const C6: f64 = 1.0 / 720.0;
     let d2 = d * d;
-    let sd = d * (1.0 - d2 * (S3 - d2 * S5));
-    let cd = 1.0 - d2 * (0.5 - d2 * (C4 - d2 * C6));
+    let (sd, cd) = if short {
+        // A stage moves an angle by ω·h/2, a fraction of a mrad: there δ⁵/5! and δ⁶/6! are
+        // below 1e-17 and the series ends two terms earlier.
+        (d * (1.0 - d2 * S3), 1.0 - d2 * (0.5 - d2 * C4))
+    } else {
+        (
+            d * (1.0 - d2 * (S3 - d2 * S5)),
+            1.0 - d2 * (0.5 - d2 * (C4 - d2 * C6)),
+        )
+    };
     (s * cd + c * sd, c * cd - s * sd)
+}
+
+/// The airframe's mass properties in the form the equations of motion use them: reciprocals
+/// and inertia differences, computed once (a division per term is the dearest operation of a
+/// derivative evaluation, and the vehicle runs four of those per physics step).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigidBody {
+    inv_mass_per_kg: f64,
+    gravity_m_s2: f64,
+    inv_inertia_per_kg_m2: [f64; 3],
+    /// (Iz − Iy, Ix − Iz, Iy − Ix), kg·m².
+    inertia_diff_kg_m2: [f64; 3],
+}
+
+impl RigidBody {
+    /// From Table I.
+    #[must_use]
+    pub fn new(af: &Airframe) -> Self {
+        let [ix, iy, iz] = af.inertia_kg_m2;
+        Self {
+            inv_mass_per_kg: 1.0 / af.mass_kg,
+            gravity_m_s2: af.gravity_m_s2,
+            inv_inertia_per_kg_m2: [1.0 / ix, 1.0 / iy, 1.0 / iz],
+            inertia_diff_kg_m2: [iz - iy, ix - iz, iy - ix],
+        }
+    }
+
+    /// Translational acceleration in B: v̇ = −Ω × v + F/m + Rᵀ(0, 0, −g) (1), (7).
+    #[inline]
+    #[must_use]
+    pub fn body_acceleration_m_s2(
+        &self,
+        trig: &EulerTrig,
+        vel_body_m_s: &Vector3<f64>,
+        omega_body_rad_s: &Vector3<f64>,
+        force_body_n: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        -omega_body_rad_s.cross(vel_body_m_s)
+            + force_body_n * self.inv_mass_per_kg
+            + trig.gravity_body_m_s2(self.gravity_m_s2)
+    }
+
+    /// Angular acceleration: Ω̇ = I⁻¹ (Γ − Ω × IΩ) (2), (13) with [I13].
+    #[inline]
+    #[must_use]
+    pub fn angular_acceleration_rad_s2(
+        &self,
+        omega_body_rad_s: &Vector3<f64>,
+        torque_body_nm: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        let [jx, jy, jz] = self.inv_inertia_per_kg_m2;
+        let [dx, dy, dz] = self.inertia_diff_kg_m2;
+        let (p, q, r) = (
+            omega_body_rad_s[0],
+            omega_body_rad_s[1],
+            omega_body_rad_s[2],
+        );
+        // Ω × IΩ written out: (qr(Iz − Iy), pr(Ix − Iz), pq(Iy − Ix)).
+        Vector3::new(
+            (torque_body_nm[0] - q * r * dx) * jx,
+            (torque_body_nm[1] - p * r * dy) * jy,
+            (torque_body_nm[2] - p * q * dz) * jz,
+        )
+    }
 }
 
 /// Translational acceleration in B: v̇ = −Ω × v + F/m + Rᵀ(0, 0, −g) (1), (7).
@@ -133,9 +223,7 @@ pub fn body_acceleration_m_s2(
     omega_body_rad_s: &Vector3<f64>,
     force_body_n: &Vector3<f64>,
 ) -> Vector3<f64> {
-    -omega_body_rad_s.cross(vel_body_m_s)
-        + force_body_n * (1.0 / af.mass_kg)
-        + trig.gravity_body_m_s2(af.gravity_m_s2)
+    RigidBody::new(af).body_acceleration_m_s2(trig, vel_body_m_s, omega_body_rad_s, force_body_n)
 }
 
 /// Angular acceleration: Ω̇ = I⁻¹ (Γ − Ω × IΩ) (2), (13) with [I13].
@@ -145,18 +233,7 @@ pub fn angular_acceleration_rad_s2(
     omega_body_rad_s: &Vector3<f64>,
     torque_body_nm: &Vector3<f64>,
 ) -> Vector3<f64> {
-    let [ix, iy, iz] = af.inertia_kg_m2;
-    let (p, q, r) = (
-        omega_body_rad_s[0],
-        omega_body_rad_s[1],
-        omega_body_rad_s[2],
-    );
-    // Ω × IΩ written out: (qr(Iz − Iy), pr(Ix − Iz), pq(Iy − Ix)).
-    Vector3::new(
-        (torque_body_nm[0] - q * r * (iz - iy)) / ix,
-        (torque_body_nm[1] - p * r * (ix - iz)) / iy,
-        (torque_body_nm[2] - p * q * (iy - ix)) / iz,
-    )
+    RigidBody::new(af).angular_acceleration_rad_s2(omega_body_rad_s, torque_body_nm)
 }
 
 #[cfg(test)]
