@@ -191,12 +191,6 @@ impl Navigator {
         }
     }
 
-    /// Whether the vehicle is on its way down to land.
-    #[must_use]
-    pub fn is_landing(&self) -> bool {
-        matches!(self.leg, Leg::Landing { .. } | Leg::LandAt { .. })
-    }
-
     /// Takes note of mode changes, arming and disarming since the last call, starting what
     /// the new mode does. Every command that acts on the navigator calls this first, so it sees
     /// a mode change made by the previous frame even before the next navigation step.

@@ -19,6 +19,8 @@
 //! - `--loss FRACTION` drops that fraction of frames in each direction, drawn from a generator
 //!   seeded by `--seed`; `--latency MS` delays every frame by that much in each direction. A
 //!   lossy radio is then tested with real frames, retries and all.
+//! - `--param-file FILE`: the parameters, and the mission beside them (`FILE` with the
+//!   `.waypoints` extension, QGC WPL 110), loaded at start and saved on every change.
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
