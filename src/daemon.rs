@@ -111,7 +111,7 @@ pub async fn start(
     let (router, router_handle) = Router::new(tlog, Some(tap_tx));
     tasks.spawn(router.run(vehicle_rx, client_rx, cancel.clone()));
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
-        crate::vehicle::History::new(std::time::Instant::now()),
+        crate::vehicle::History::new(crate::vehicle::now()),
     ));
     tasks.spawn(vehicle::run(
         tap_rx,

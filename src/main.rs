@@ -261,7 +261,7 @@ async fn print_status_lines(
                     .load(std::sync::atomic::Ordering::Relaxed);
                 println!(
                     "{}",
-                    vtol_gcs::status::line(&state, &links, records, unroutable, std::time::Instant::now())
+                    vtol_gcs::status::line(&state, &links, records, unroutable, vtol_gcs::vehicle::now())
                 );
             }
         }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, lints, the Rust tests, then the pymavlink suite.
 # On a fresh machine it installs what it needs itself (socat, tmux, a venv with the pinned Python
-# packages in .venv).
+# packages in .venv, the vtol_twin pytest plugin into that venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -43,3 +43,15 @@ BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
 export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
 "$VENV/bin/python" -m pytest tests/pymavlink
+
+# --- the vtol_twin pytest plugin: installed as a user installs it, then its own tests ---------
+# Reinstalled only when its sources change (flit_core from requirements.txt builds it offline).
+PLUGIN=python/vtol_twin
+PLUGIN_SUM="$(find "$PLUGIN" -type f -not -path '*/__pycache__/*' | LC_ALL=C sort | xargs cat | cksum)"
+if [ "$PLUGIN_SUM" != "$(cat "$VENV/.vtol_twin.installed" 2>/dev/null)" ]; then
+    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+        --no-build-isolation --force-reinstall "./$PLUGIN"
+    echo "$PLUGIN_SUM" > "$VENV/.vtol_twin.installed"
+fi
+# Sixteen workers: the parallel test runs sixteen twins at once.
+"$VENV/bin/python" -m pytest -n 16 "$PLUGIN/tests"

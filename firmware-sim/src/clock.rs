@@ -5,8 +5,20 @@
 //! from the start instant (`elapsed × speed`), never accumulated, so rounding cannot make sim time
 //! drift from wall time. After a stall longer than [`MAX_CATCH_UP`] the clock gives up the lost
 //! time instead of running seconds of physics in one burst (a frozen laptop should not replay).
+//!
+//! Wall time is tokio's clock ([`tokio::time::Instant`]), so a test that pauses tokio's time and
+//! advances it runs the twin without waiting. Under [`ClockMode::Lockstep`] wall time does not
+//! move the simulation at all: sim time advances only when the harness asks
+//! ([`crate::harness`]).
+//!
+//! The clock also gives the *stream time* ([`SimClock::stream_us`]): the time telemetry rates are
+//! counted in. It is wall time in the real-time and fast modes, so a twin at 1 000× still sends
+//! ATTITUDE 20 times a wall second, and sim time under lockstep, so that the telemetry of a
+//! lockstep run is the same on every run.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use tokio::time::Instant;
 
 /// Wall-time period of the serve loop.
 pub const BATCH: Duration = Duration::from_millis(5);
@@ -27,6 +39,8 @@ pub enum ClockMode {
     },
     /// As fast as the CPU allows; sim time advances [`FAST_BATCH_US`] per batch.
     AsFastAsPossible,
+    /// Sim time stands still until the harness advances it (`firmware-sim serve --lockstep`).
+    Lockstep,
 }
 
 impl ClockMode {
@@ -38,6 +52,8 @@ impl ClockMode {
 #[derive(Debug, Clone)]
 pub struct SimClock {
     mode: ClockMode,
+    /// When the clock started (stream time counts from here).
+    start: Instant,
     origin: Instant,
     /// Sim time at `origin`, µs (moves forward when a backlog is dropped).
     origin_sim_us: u64,
@@ -50,6 +66,7 @@ impl SimClock {
     pub fn new(mode: ClockMode, now: Instant) -> Self {
         Self {
             mode,
+            start: now,
             origin: now,
             origin_sim_us: 0,
             last_sim_us: 0,
@@ -62,9 +79,11 @@ impl SimClock {
         self.mode
     }
 
-    /// The sim time (µs) that is due at wall instant `now`. Monotonic.
+    /// The sim time (µs) that is due at wall instant `now`. Monotonic. Under lockstep this is
+    /// the time the harness last advanced to ([`SimClock::advance_to`]).
     pub fn due_sim_us(&mut self, now: Instant) -> u64 {
         let due = match self.mode {
+            ClockMode::Lockstep => self.last_sim_us,
             ClockMode::AsFastAsPossible => self.last_sim_us + FAST_BATCH_US,
             ClockMode::Scaled { speed } => {
                 let elapsed_us = now.saturating_duration_since(self.origin).as_secs_f64() * 1e6;
@@ -84,12 +103,28 @@ impl SimClock {
         self.last_sim_us
     }
 
+    /// Lockstep: the harness moves sim time forward to `sim_us` (never back).
+    pub fn advance_to(&mut self, sim_us: u64) {
+        self.last_sim_us = self.last_sim_us.max(sim_us);
+    }
+
+    /// The time stream rates count in at wall instant `now`, µs: wall time since the clock
+    /// started, or sim time under lockstep.
+    #[must_use]
+    pub fn stream_us(&self, now: Instant) -> u64 {
+        match self.mode {
+            ClockMode::Lockstep => self.last_sim_us,
+            _ => now.saturating_duration_since(self.start).as_micros() as u64,
+        }
+    }
+
     /// Wall time to wait before the next batch.
     #[must_use]
     pub fn pause(&self) -> Option<Duration> {
         match self.mode {
             ClockMode::AsFastAsPossible => None,
-            ClockMode::Scaled { .. } => Some(BATCH),
+            // Lockstep still wakes: parameter lists drain at the sim time standing.
+            ClockMode::Scaled { .. } | ClockMode::Lockstep => Some(BATCH),
         }
     }
 }
@@ -121,6 +156,21 @@ mod tests {
         let after_stall = c.due_sim_us(t0 + Duration::from_secs(10));
         assert_eq!(after_stall, 10_000 + 500_000);
         assert_eq!(c.due_sim_us(t0 + Duration::from_millis(10_005)), 515_000);
+    }
+
+    #[test]
+    fn lockstep_stands_still_until_advanced() {
+        let t0 = Instant::now();
+        let mut c = SimClock::new(ClockMode::Lockstep, t0);
+        assert_eq!(c.due_sim_us(t0 + Duration::from_secs(10)), 0);
+        c.advance_to(60_000_000);
+        assert_eq!(c.due_sim_us(t0 + Duration::from_secs(11)), 60_000_000);
+        c.advance_to(1_000);
+        assert_eq!(c.due_sim_us(t0), 60_000_000, "never back");
+        // Streams count sim time under lockstep, wall time otherwise.
+        assert_eq!(c.stream_us(t0 + Duration::from_secs(99)), 60_000_000);
+        let w = SimClock::new(ClockMode::AsFastAsPossible, t0);
+        assert_eq!(w.stream_us(t0 + Duration::from_millis(250)), 250_000);
     }
 
     #[test]

@@ -10,6 +10,7 @@ pub mod endpoint;
 pub mod estimator;
 pub mod frames;
 pub mod globe;
+pub mod harness;
 pub mod integrator;
 pub mod mission;
 pub mod mode;
@@ -19,6 +20,7 @@ pub mod plant;
 pub mod sensors;
 pub mod serve;
 pub mod simulate;
+pub mod tlog;
 pub mod vehicle;
 
 pub use airframe::{Airframe, ModelMode};

@@ -102,13 +102,15 @@ fn main() -> ExitCode {
             return ExitCode::SUCCESS;
         }
         Err(e) => {
-            // One clear line: clap's first line names the flag and the problem.
+            // One clear line: clap's first line names the flag and the problem, or ends in a
+            // colon before the line that names it ("required arguments were not provided:").
             let text = e.to_string();
-            let line = text
-                .lines()
-                .find(|l| !l.trim().is_empty())
-                .unwrap_or("invalid arguments");
-            eprintln!("{line}");
+            let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+            let first = lines.next().unwrap_or("invalid arguments");
+            match lines.next() {
+                Some(next) if first.ends_with(':') => eprintln!("{first} {next}"),
+                _ => eprintln!("{first}"),
+            }
             return ExitCode::from(2);
         }
     };
@@ -178,11 +180,28 @@ struct ServeArgs {
     #[arg(long = "listen", value_name = "URL", default_value = DEFAULT_LISTEN)]
     listen: Vec<LinkUrl>,
     /// Sim time per wall time (2 = twice real time).
-    #[arg(long, default_value_t = 1.0, value_parser = parse_speed, conflicts_with = "fast")]
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed, conflicts_with_all = ["fast", "lockstep"])]
     speed: f64,
     /// Run as fast as the CPU allows (tests).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "lockstep")]
     fast: bool,
+    /// Sim time moves only when the control channel says `advance SECONDS`: a test gets the
+    /// same telemetry on every run. Needs --control.
+    #[arg(long, requires = "control", conflicts_with = "latency")]
+    lockstep: bool,
+    /// The harness channel (tcpin:HOST:PORT; port 0 = pick one): advance, state, param.
+    #[arg(long, value_name = "URL")]
+    control: Option<LinkUrl>,
+    /// Log every frame in both directions to FILE (a new file; never overwritten).
+    #[arg(long, value_name = "FILE")]
+    tlog: Option<std::path::PathBuf>,
+    /// Where the vehicle stands at start: x=..,y=..,psi=.. (m, rad; paper frame, on the ground).
+    #[arg(long, default_value = "", value_parser = parse_ground_start)]
+    initial: InitialArg,
+    /// Calibrate the gyros for 1 s of sim time after start, as the hardware does (arming is
+    /// refused until then). Without it the twin starts calibrated, ready to arm.
+    #[arg(long)]
+    boot_calibration: bool,
     /// Parameter file (.parm): loaded at start, rewritten atomically on every change. The
     /// mission is kept beside it (NAME.waypoints, QGC WPL 110).
     #[arg(long, value_name = "FILE")]
@@ -207,6 +226,17 @@ struct ServeArgs {
     latency: u64,
 }
 
+/// `--initial` of `serve`: a start on the ground, so x, y and psi only.
+fn parse_ground_start(s: &str) -> Result<InitialArg, String> {
+    let a = simulate::parse_initial(s)?;
+    if a.pos_m.z != 0.0 || a.euler.phi != 0.0 || a.euler.theta != 0.0 {
+        return Err(
+            "serve --initial takes x, y and psi: the twin starts on the ground, level".into(),
+        );
+    }
+    Ok(a)
+}
+
 fn parse_loss(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
@@ -229,7 +259,9 @@ impl ServeArgs {
     fn to_config(&self) -> Result<ServeConfig, ServeError> {
         let mut config = ServeConfig {
             listen: self.listen.clone(),
-            clock: if self.fast {
+            clock: if self.lockstep {
+                ClockMode::Lockstep
+            } else if self.fast {
                 ClockMode::AsFastAsPossible
             } else {
                 ClockMode::Scaled { speed: self.speed }
@@ -241,6 +273,12 @@ impl ServeArgs {
                     ideal_sensors: self.ideal_sensors,
                     perfect_state: self.ideal_sensors,
                     seed: self.seed,
+                    initial: firmware_sim::vehicle::InitialState {
+                        pos_m: self.initial.pos_m,
+                        euler: self.initial.euler,
+                    },
+                    // Ready to arm at once unless the hardware's power-up calibration is asked for.
+                    calibrated: !self.boot_calibration,
                     ..Default::default()
                 },
                 params: Params::new(),
@@ -254,6 +292,8 @@ impl ServeArgs {
                 latency: std::time::Duration::from_millis(self.latency),
                 seed: self.seed,
             },
+            control: self.control.clone(),
+            tlog: self.tlog.clone(),
         };
         config.load_param_file()?;
         Ok(config)
@@ -289,6 +329,9 @@ fn run_serve(args: &ServeArgs) -> anyhow::Result<()> {
             let mut out = std::io::stdout().lock();
             for b in twin.bound() {
                 let _ = writeln!(out, "listening {}", b.resolved_url());
+            }
+            if let Some(url) = twin.control_url() {
+                let _ = writeln!(out, "control {url}");
             }
             let _ = out.flush();
         }

@@ -4,9 +4,10 @@
 //! # Command line (stable; scripts and the pytest suite rely on it)
 //!
 //! ```text
-//! firmware-sim serve [--listen URL]... [--speed N | --fast] [--param-file FILE] [--seed N]
-//!                    [--model paper|physical] [--ideal-sensors] [--sysid N]
-//!                    [--loss FRACTION] [--latency MS]
+//! firmware-sim serve [--listen URL]... [--speed N | --fast | --lockstep] [--control URL]
+//!                    [--tlog FILE] [--param-file FILE] [--seed N] [--model paper|physical]
+//!                    [--ideal-sensors] [--sysid N] [--initial x=..,y=..,psi=..]
+//!                    [--boot-calibration] [--loss FRACTION] [--latency MS]
 //! ```
 //!
 //! - `--listen URL`, repeatable, default `tcpin:127.0.0.1:5760` (SITL's SERIAL0): `tcpin:` accepts
@@ -14,8 +15,16 @@
 //!   `tcp:` and `serial:` connect out.
 //! - After every endpoint is bound, one line per `--listen` is printed on stdout, in order:
 //!   `listening <url>` where `<url>` carries the real bound port (so `tcpin:127.0.0.1:0` prints
-//!   e.g. `listening tcpin:127.0.0.1:40121`). Connect-out URLs print as given. Then stdout is
-//!   flushed; logs go to stderr.
+//!   e.g. `listening tcpin:127.0.0.1:40121`). Connect-out URLs print as given. With `--control`,
+//!   one more line follows: `control tcpin:<host>:<port>`. Then stdout is flushed; logs go to
+//!   stderr.
+//! - `--control tcpin:HOST:PORT` opens the harness channel ([`crate::harness`]: `advance`,
+//!   `state`, `param`); `--lockstep` freezes sim time except when the channel advances it, and
+//!   needs `--control`.
+//! - Telemetry rates count in wall time whatever the speed (sim time under `--lockstep`), and a
+//!   link short of room sheds telemetry before a reply: PARAM_VALUE and COMMAND_ACK are never
+//!   lost behind a stream. Under `--lockstep` nothing is shed; the twin waits for the reader.
+//! - `--tlog FILE` logs every frame in both directions ([`crate::tlog`]).
 //! - `--loss FRACTION` drops that fraction of frames in each direction, drawn from a generator
 //!   seeded by `--seed`; `--latency MS` delays every frame by that much in each direction. A
 //!   lossy radio is then tested with real frames, retries and all.
@@ -31,7 +40,10 @@
 //! [`Twin::start`] runs the same vehicle inside an existing tokio runtime and returns a
 //! [`Twin`] handle. [`Twin::attach_stream`] connects it to any byte stream, e.g. one end of
 //! `tokio::io::duplex`, carrying real MAVLink frames: this is how the `vtol-gcs` daemon embeds
-//! the twin without a socket.
+//! the twin without a socket. [`Twin::harness`] is the harness channel in process.
+//!
+//! Wall time is tokio's clock throughout (the sim clock, the batch timer, the radio's delays),
+//! so under a paused tokio clock the twin runs as fast as the test advances time.
 //!
 //! ```no_run
 //! # async fn demo() -> Result<(), firmware_sim::serve::ServeError> {
@@ -49,18 +61,29 @@
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::time::Instant;
+use std::path::PathBuf;
 
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkUrl};
 
-use crate::clock::{ClockMode, SimClock};
+use crate::clock::{BATCH, ClockMode, SimClock};
 use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
+use crate::harness::{Call, Harness, Reply, Request};
 use crate::mission;
 use crate::params::{ParamFileError, Params};
+use crate::tlog::{TlogError, TlogSink};
+
+/// Capacity of the harness → twin request queue.
+const HARNESS_QUEUE: usize = 64;
+
+/// Egress queue per link under lockstep, frames: a client may leave a long advance's
+/// telemetry unread for a while (about 15 minutes of sim time at the default rates) before
+/// the twin has to wait for it.
+pub const LOCKSTEP_QUEUE_LEN: usize = 64 * 1024;
 
 /// Capacity of the transport → twin event queue.
 const EVENT_QUEUE: usize = 4096;
@@ -81,6 +104,10 @@ pub struct ServeConfig {
     pub link_options: LinkOptions,
     /// Simulated radio: frame loss and latency in each direction.
     pub impairment: Impairment,
+    /// The harness channel's listener (`tcpin:` only), if any.
+    pub control: Option<LinkUrl>,
+    /// The twin's own tlog, if any (created; never overwritten).
+    pub tlog: Option<PathBuf>,
 }
 
 /// A lossy, slow radio between the twin and its links, in each direction.
@@ -116,6 +143,8 @@ impl Default for ServeConfig {
             endpoint: EndpointConfig::default(),
             link_options: LinkOptions::default(),
             impairment: Impairment::default(),
+            control: None,
+            tlog: None,
         }
     }
 }
@@ -162,6 +191,23 @@ pub enum ServeError {
     /// The tokio runtime could not start.
     #[error("cannot start the runtime: {0}")]
     Runtime(std::io::Error),
+    /// The control URL is not a `tcpin:` listener.
+    #[error("--control takes a tcpin:HOST:PORT URL, got '{0}'")]
+    ControlUrl(String),
+    /// The control listener could not bind.
+    #[error("cannot open the control listener {url}: {source}")]
+    Control {
+        /// The URL asked for.
+        url: String,
+        /// The bind error.
+        source: std::io::Error,
+    },
+    /// The tlog could not be created.
+    #[error(transparent)]
+    Tlog(#[from] TlogError),
+    /// `--lockstep` with a simulated radio delay, which would make runs differ.
+    #[error("--latency cannot be used with --lockstep: the delay runs on the wall clock")]
+    LockstepLatency,
 }
 
 /// One opened endpoint and where it ended up.
@@ -198,20 +244,52 @@ fn bracket(host: &str) -> String {
 #[derive(Debug)]
 pub struct Twin {
     bound: Vec<Bound>,
+    control: Option<SocketAddr>,
+    harness: Harness,
     events: mpsc::Sender<LinkEvent>,
     options: LinkOptions,
     cancel: CancellationToken,
     task: JoinHandle<Endpoint>,
     endpoints: Vec<vtol_link::EndpointHandle>,
+    control_task: Option<JoinHandle<()>>,
 }
 
 impl Twin {
-    /// Opens every `listen` endpoint (failing fast if one cannot bind) and starts the vehicle
-    /// loop. Runs until `cancel` fires.
+    /// Opens every `listen` endpoint (failing fast if one cannot bind), the control listener
+    /// and the tlog, and starts the vehicle loop. Runs until `cancel` fires.
     ///
     /// # Errors
-    /// [`ServeError::Link`] for the first endpoint that cannot open.
-    pub async fn start(config: ServeConfig, cancel: CancellationToken) -> Result<Self, ServeError> {
+    /// [`ServeError::Link`] for the first endpoint that cannot open; the control listener's
+    /// and the tlog's errors; [`ServeError::LockstepLatency`].
+    pub async fn start(
+        mut config: ServeConfig,
+        cancel: CancellationToken,
+    ) -> Result<Self, ServeError> {
+        let lockstep = config.clock == ClockMode::Lockstep;
+        if lockstep {
+            if !config.impairment.latency.is_zero() {
+                return Err(ServeError::LockstepLatency);
+            }
+            config.link_options.queue_len = config.link_options.queue_len.max(LOCKSTEP_QUEUE_LEN);
+        }
+        let control_addr = match &config.control {
+            None => None,
+            Some(LinkUrl::TcpIn { host, port }) => Some(format!("{}:{port}", bracket(host))),
+            Some(other) => return Err(ServeError::ControlUrl(other.to_string())),
+        };
+        let tlog = config.tlog.as_deref().map(TlogSink::create).transpose()?;
+        let (calls_tx, calls) = mpsc::channel(HARNESS_QUEUE);
+        let harness = Harness::new(calls_tx);
+        let (control, control_task) = match control_addr {
+            None => (None, None),
+            Some(addr) => {
+                let (local, task) =
+                    crate::harness::spawn_listener(&addr, harness.clone(), cancel.child_token())
+                        .await
+                        .map_err(|source| ServeError::Control { url: addr, source })?;
+                (Some(local), Some(task))
+            }
+        };
         let (events, rx) = mpsc::channel(EVENT_QUEUE);
         let mut bound = Vec::new();
         let mut endpoints = Vec::new();
@@ -236,17 +314,43 @@ impl Twin {
             });
             endpoints.push(handle);
         }
-        let endpoint = Endpoint::new(config.endpoint);
-        let radio = Radio::new(config.impairment);
-        let task = tokio::spawn(run(endpoint, config.clock, radio, rx, cancel.clone()));
+        let shell = Shell {
+            endpoint: Endpoint::new(config.endpoint),
+            clock: SimClock::new(config.clock, Instant::now()),
+            lockstep,
+            links: HashMap::new(),
+            radio: Radio::new(config.impairment),
+            tlog,
+            reserve: config.link_options.queue_len / 4,
+            cancel: cancel.clone(),
+        };
+        let task = tokio::spawn(shell.run(rx, calls));
         Ok(Self {
             bound,
+            control,
+            harness,
             events,
             options: config.link_options,
             cancel,
             task,
             endpoints,
+            control_task,
         })
+    }
+
+    /// The harness channel in process ([`crate::harness`]): advance a lockstep twin, read its
+    /// true state, write parameters.
+    #[must_use]
+    pub fn harness(&self) -> Harness {
+        self.harness.clone()
+    }
+
+    /// The control listener's URL with its real port, if `control` was asked for: what
+    /// `firmware-sim serve` prints after `control `.
+    #[must_use]
+    pub fn control_url(&self) -> Option<String> {
+        self.control
+            .map(|a| format!("tcpin:{}:{}", bracket(&a.ip().to_string()), a.port()))
     }
 
     /// The opened endpoints, in `listen` order.
@@ -279,6 +383,9 @@ impl Twin {
         for e in self.endpoints {
             e.join().await;
         }
+        if let Some(t) = self.control_task {
+            let _ = t.await;
+        }
         endpoint
     }
 }
@@ -297,74 +404,291 @@ struct LinkEntry {
     tx: LinkSender,
     /// Bad frames already reported to the endpoint.
     bad_seen: u64,
+    /// Telemetry frames left out because the link was short of room (kept for replies).
+    shed: u64,
+    /// Replies that found the queue full, oldest first: they go before anything else.
+    backlog: std::collections::VecDeque<Frame>,
+    /// Replies lost because even the backlog was full (a peer that reads nothing).
+    replies_lost: u64,
 }
 
-/// The vehicle loop: link events are handled as they come; every clock batch advances the
-/// twin to the due sim time and sends what became due.
-async fn run(
-    mut endpoint: Endpoint,
-    mode: ClockMode,
-    mut radio: Radio,
-    mut events: mpsc::Receiver<LinkEvent>,
+impl LinkEntry {
+    fn new(tx: LinkSender) -> Self {
+        Self {
+            tx,
+            bad_seen: 0,
+            shed: 0,
+            backlog: std::collections::VecDeque::new(),
+            replies_lost: 0,
+        }
+    }
+
+    /// Moves backlogged replies into the queue while it has room.
+    fn flush_backlog(&mut self) {
+        while self.tx.room() > 0 {
+            let Some(f) = self.backlog.pop_front() else {
+                return;
+            };
+            let _ = self.tx.try_send(f);
+        }
+    }
+}
+
+/// Replies a link keeps waiting for room, frames; beyond it a reply is lost (and counted).
+const REPLY_BACKLOG: usize = 4096;
+
+/// Sim time one chunk of an `advance` runs before its frames go out, µs: the real-time
+/// loop's batch, so a lockstep twin ticks its streams and events as finely as a real-time one.
+const ADVANCE_CHUNK_US: u64 = BATCH.as_micros() as u64;
+
+/// The vehicle loop's state: the endpoint, its clock, its links, the radio and the log.
+struct Shell {
+    endpoint: Endpoint,
+    clock: SimClock,
+    lockstep: bool,
+    links: HashMap<LinkId, LinkEntry>,
+    radio: Radio,
+    tlog: Option<TlogSink>,
+    /// Free queue places kept for replies: below this, telemetry is shed.
+    reserve: usize,
+    /// Stops the loop, also while it waits for a lockstep reader.
     cancel: CancellationToken,
-) -> Endpoint {
-    let mut clock = SimClock::new(mode, Instant::now());
-    let mut links: HashMap<LinkId, LinkEntry> = HashMap::new();
-    let mut batch = clock.pause().map(|p| {
-        let mut i = tokio::time::interval(p);
-        i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        i
-    });
-    loop {
-        tokio::select! {
-            biased;
-            () = cancel.cancelled() => break,
-            ev = events.recv() => match ev {
-                Some(LinkEvent::Up { id, peer, tx }) => {
-                    tracing::info!(%id, %peer, "link up");
-                    links.insert(id, LinkEntry { tx, bad_seen: 0 });
-                    endpoint.add_link(key(id));
-                }
-                Some(LinkEvent::Frame { id, frame }) => {
-                    if let Some(frame) = radio.pass(Way::In, id, frame) {
-                        let out = endpoint.handle(key(id), frame.as_bytes());
-                        dispatch(&links, &mut radio, out);
+}
+
+impl Shell {
+    /// The vehicle loop: link events and harness calls are handled as they come; every clock
+    /// batch advances the twin to the due sim time and sends what became due.
+    async fn run(
+        mut self,
+        mut events: mpsc::Receiver<LinkEvent>,
+        mut calls: mpsc::Receiver<Call>,
+    ) -> Endpoint {
+        let cancel = self.cancel.clone();
+        let mut batch = self.clock.pause().map(|p| {
+            let mut i = tokio::time::interval(p);
+            i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            i
+        });
+        let mut calls_open = true;
+        loop {
+            tokio::select! {
+                biased;
+                () = cancel.cancelled() => break,
+                ev = events.recv() => match ev {
+                    Some(ev) => self.on_link_event(ev).await,
+                    // Only reachable once every sender is gone; keep flying for attached streams.
+                    None => cancel.cancelled().await,
+                },
+                call = calls.recv(), if calls_open => match call {
+                    Some(Call { request, reply }) => {
+                        let r = self.on_request(request).await;
+                        let _ = reply.send(r);
+                    }
+                    None => calls_open = false,
+                },
+                () = next_batch(&mut batch) => {
+                    for entry in self.links.values_mut() {
+                        entry.flush_backlog();
+                    }
+                    self.note_bad_frames();
+                    self.tick().await;
+                    if let Some(t) = &mut self.tlog {
+                        t.hand_over();
                     }
                 }
-                Some(LinkEvent::Down { id, reason }) => {
-                    tracing::info!(%id, %reason, "link down");
-                    links.remove(&id);
-                    endpoint.remove_link(key(id));
-                }
-                // Only reachable once every sender is gone; keep flying for attached streams.
-                None => cancel.cancelled().await,
-            },
-            () = next_batch(&mut batch) => {
-                for entry in links.values_mut() {
-                    let s = entry.tx.stats().snapshot();
-                    let bad = s.bad_crc + s.bad_incompat;
-                    endpoint.note_bad_frames(bad.saturating_sub(entry.bad_seen));
-                    entry.bad_seen = bad;
-                }
-                let due = clock.due_sim_us(Instant::now());
-                let out = endpoint.tick(due);
-                dispatch(&links, &mut radio, out);
-            }
-            () = radio.next_due() => {
-                let now = tokio::time::Instant::now();
-                while let Some((way, id, frame)) = radio.pop_due(now) {
-                    match way {
-                        Way::In => {
-                            let out = endpoint.handle(key(id), frame.as_bytes());
-                            dispatch(&links, &mut radio, out);
+                () = self.radio.next_due() => {
+                    let now = Instant::now();
+                    while let Some((way, id, frame, telemetry)) = self.radio.pop_due(now) {
+                        match way {
+                            Way::In => self.on_frame(id, &frame).await,
+                            Way::Out => self.deliver(id, frame, telemetry).await,
                         }
-                        Way::Out => send_now(&links, id, frame),
                     }
                 }
             }
         }
+        if let Some(t) = self.tlog.take() {
+            let _ = tokio::task::spawn_blocking(move || t.finish()).await;
+        }
+        self.endpoint
     }
-    endpoint
+
+    async fn on_link_event(&mut self, ev: LinkEvent) {
+        match ev {
+            LinkEvent::Up { id, peer, tx } => {
+                tracing::info!(%id, %peer, "link up");
+                self.links.insert(id, LinkEntry::new(tx));
+                self.endpoint.add_link(key(id));
+                // The first frames (HEARTBEAT and every stream) go out now, not a batch later.
+                self.tick().await;
+            }
+            LinkEvent::Frame { id, frame } => {
+                if let Some(frame) = self.radio.pass(Way::In, id, frame, false) {
+                    self.on_frame(id, &frame).await;
+                }
+            }
+            LinkEvent::Down { id, reason } => {
+                let (shed, replies_lost) = self
+                    .links
+                    .remove(&id)
+                    .map_or((0, 0), |e| (e.shed, e.replies_lost));
+                tracing::info!(%id, %reason, shed, replies_lost, "link down");
+                self.endpoint.remove_link(key(id));
+            }
+        }
+    }
+
+    /// The time a tlog record carries: sim time under lockstep (the same on every run), Unix
+    /// time otherwise.
+    fn stamp_us(&self) -> u64 {
+        if self.lockstep {
+            self.endpoint.now_us()
+        } else {
+            crate::tlog::unix_now_us()
+        }
+    }
+
+    async fn on_frame(&mut self, id: LinkId, frame: &Frame) {
+        if self.tlog.is_some() {
+            let stamp = self.stamp_us();
+            if let Some(t) = &mut self.tlog {
+                t.record(stamp, false, frame.as_bytes());
+            }
+        }
+        let out = self.endpoint.handle(key(id), frame.as_bytes());
+        self.dispatch(out).await;
+        self.settle().await;
+    }
+
+    /// Lockstep: sends at once whatever the last event made due at the sim time standing (a
+    /// message whose interval was just set, an event's text), so it follows its cause the same
+    /// way on every run rather than whenever the next batch wakes.
+    async fn settle(&mut self) {
+        if self.lockstep {
+            let now = self.endpoint.now_us();
+            let out = self.endpoint.tick_at(now, now);
+            self.dispatch(out).await;
+        }
+    }
+
+    fn note_bad_frames(&mut self) {
+        for entry in self.links.values_mut() {
+            let s = entry.tx.stats().snapshot();
+            let bad = s.bad_crc + s.bad_incompat;
+            self.endpoint
+                .note_bad_frames(bad.saturating_sub(entry.bad_seen));
+            entry.bad_seen = bad;
+        }
+    }
+
+    /// Runs the twin to the sim time the clock says is due and sends what became due.
+    async fn tick(&mut self) {
+        let now = Instant::now();
+        let sim_us = self.clock.due_sim_us(now);
+        let stream_us = self.clock.stream_us(now);
+        let out = self.endpoint.tick_at(sim_us, stream_us);
+        self.dispatch(out).await;
+    }
+
+    async fn on_request(&mut self, request: Request) -> Reply {
+        match request {
+            Request::Advance { seconds } => self.advance(seconds).await,
+            Request::State => Reply::State(crate::harness::TrueState::of(
+                self.endpoint.vehicle().telemetry(),
+            )),
+            Request::Param { name, value } => {
+                let r = self.endpoint.set_param_announced(&name, value);
+                let out = self.endpoint.take_outbound();
+                self.dispatch(out).await;
+                self.settle().await;
+                match r {
+                    Ok(value) => Reply::Param { name, value },
+                    Err(e) => Reply::Error(e.to_string()),
+                }
+            }
+        }
+    }
+
+    /// Lockstep: flies `seconds` more of sim time in chunks, sending each chunk's frames
+    /// (waiting for room, never dropping) before the next.
+    async fn advance(&mut self, seconds: f64) -> Reply {
+        if !self.lockstep {
+            return Reply::Error(
+                "advance needs a lockstep twin (firmware-sim serve --lockstep)".into(),
+            );
+        }
+        let step_us = crate::vehicle::PHYSICS_DT_US;
+        let target =
+            self.endpoint.now_us() + (seconds * 1e6 / step_us as f64).round() as u64 * step_us;
+        while self.endpoint.now_us() < target && !self.cancel.is_cancelled() {
+            let next = (self.endpoint.now_us() + ADVANCE_CHUNK_US).min(target);
+            self.clock.advance_to(next);
+            let out = self.endpoint.tick_at(next, next);
+            self.dispatch(out).await;
+            // A long advance still lets the links' writers and other tasks run.
+            tokio::task::consume_budget().await;
+        }
+        if let Some(t) = &mut self.tlog {
+            t.hand_over();
+        }
+        Reply::Time(self.endpoint.now_us())
+    }
+
+    async fn dispatch(&mut self, out: Vec<Outbound>) {
+        if out.is_empty() {
+            return;
+        }
+        let stamp = self.stamp_us();
+        for o in out {
+            let id = LinkId(o.link.0 as u32);
+            if let Some(t) = &mut self.tlog {
+                t.record(stamp, true, &o.frame);
+            }
+            match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
+                Ok(f) => {
+                    if let Some(f) = self.radio.pass(Way::Out, id, f, o.telemetry) {
+                        self.deliver(id, f, o.telemetry).await;
+                    }
+                }
+                Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
+            }
+        }
+    }
+
+    /// Queues a frame on its link. Under lockstep it waits for room (nothing is lost, the run
+    /// stays the same). Otherwise the vehicle never waits for one slow peer: a link short of
+    /// room sheds telemetry, keeping its last places for replies, and a reply that finds the
+    /// queue full waits in the link's backlog, in order, for the next batch.
+    async fn deliver(&mut self, id: LinkId, frame: Frame, telemetry: bool) {
+        let Some(entry) = self.links.get_mut(&id) else {
+            return;
+        };
+        if self.lockstep {
+            // Waits for the reader, but not past a shutdown.
+            tokio::select! {
+                _ = entry.tx.send(frame) => {}
+                () = self.cancel.cancelled() => {}
+            }
+            return;
+        }
+        // This loop is the queue's only producer, so room seen here is room at the send.
+        if telemetry {
+            if entry.backlog.is_empty() && entry.tx.room() > self.reserve {
+                let _ = entry.tx.try_send(frame);
+            } else {
+                entry.shed += 1;
+            }
+            return;
+        }
+        entry.flush_backlog();
+        if entry.backlog.is_empty() && entry.tx.room() > 0 {
+            let _ = entry.tx.try_send(frame);
+        } else if entry.backlog.len() < REPLY_BACKLOG {
+            entry.backlog.push_back(frame);
+        } else {
+            entry.replies_lost += 1;
+        }
+    }
 }
 
 /// Which way a frame goes through the simulated radio.
@@ -379,7 +703,7 @@ enum Way {
 struct Radio {
     imp: Impairment,
     rng: rand_chacha::ChaCha8Rng,
-    delayed: std::collections::VecDeque<(tokio::time::Instant, Way, LinkId, Frame)>,
+    delayed: std::collections::VecDeque<(Instant, Way, LinkId, Frame, bool)>,
 }
 
 impl Radio {
@@ -392,8 +716,9 @@ impl Radio {
         }
     }
 
-    /// The frame if it goes through now; `None` if lost or delayed.
-    fn pass(&mut self, way: Way, id: LinkId, frame: Frame) -> Option<Frame> {
+    /// The frame if it goes through now; `None` if lost or delayed (`telemetry` travels with a
+    /// delayed frame).
+    fn pass(&mut self, way: Way, id: LinkId, frame: Frame, telemetry: bool) -> Option<Frame> {
         use rand::Rng as _;
         if self.imp.loss > 0.0 && self.rng.random_bool(self.imp.loss) {
             return None;
@@ -401,8 +726,8 @@ impl Radio {
         if self.imp.latency.is_zero() {
             return Some(frame);
         }
-        let due = tokio::time::Instant::now() + self.imp.latency;
-        self.delayed.push_back((due, way, id, frame));
+        let due = Instant::now() + self.imp.latency;
+        self.delayed.push_back((due, way, id, frame, telemetry));
         None
     }
 
@@ -413,11 +738,13 @@ impl Radio {
         }
     }
 
-    fn pop_due(&mut self, now: tokio::time::Instant) -> Option<(Way, LinkId, Frame)> {
+    fn pop_due(&mut self, now: Instant) -> Option<(Way, LinkId, Frame, bool)> {
         if self.delayed.front()?.0 > now {
             return None;
         }
-        self.delayed.pop_front().map(|(_, w, id, f)| (w, id, f))
+        self.delayed
+            .pop_front()
+            .map(|(_, w, id, f, t)| (w, id, f, t))
     }
 }
 
@@ -433,25 +760,4 @@ async fn next_batch(batch: &mut Option<tokio::time::Interval>) {
 
 fn key(id: LinkId) -> LinkKey {
     LinkKey(u64::from(id.0))
-}
-
-fn dispatch(links: &HashMap<LinkId, LinkEntry>, radio: &mut Radio, out: Vec<Outbound>) {
-    for o in out {
-        let id = LinkId(o.link.0 as u32);
-        match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
-            Ok(f) => {
-                if let Some(f) = radio.pass(Way::Out, id, f) {
-                    send_now(links, id, f);
-                }
-            }
-            Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
-        }
-    }
-}
-
-fn send_now(links: &HashMap<LinkId, LinkEntry>, id: LinkId, frame: Frame) {
-    if let Some(entry) = links.get(&id) {
-        // A full queue is a slow peer: the frame is dropped and counted by the link.
-        let _ = entry.tx.try_send(frame);
-    }
 }

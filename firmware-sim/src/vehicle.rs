@@ -98,6 +98,11 @@ pub struct VehicleConfig {
     pub mode: FlightMode,
     /// Start armed (the offline `simulate` command flies from t = 0).
     pub armed: bool,
+    /// The gyros were calibrated at rest before sim time 0, so the vehicle is ready to arm at
+    /// once (`firmware-sim serve` starts so). False: the firmware calibrates for
+    /// [`crate::estimator::CALIBRATION_TIME_S`] at rest after power-up, as the hardware does
+    /// (and as a reboot does); arming is refused until then.
+    pub calibrated: bool,
     /// QLOITER's position setpoint at start (paper frame, z up), m; `None` = (0, 0,
     /// `HOVER_ALT`). Given here rather than set after construction because the controller's
     /// output at t = 0 is computed at construction.
@@ -123,6 +128,7 @@ impl Default for VehicleConfig {
             gains: Gains::default(),
             mode: FlightMode::QStabilize,
             armed: false,
+            calibrated: false,
             position_setpoint_m: None,
             rc_us: [0; 8],
             battery: BatteryConfig::default(),
@@ -309,8 +315,9 @@ impl Vehicle {
         if config.model == ModelMode::Paper || config.ideal_sensors || config.perfect_state {
             estimator.skip_calibration();
             state = SystemState::Standby;
-        } else if config.armed {
-            // Launched armed: the gyros were calibrated at rest before, with the same sensors.
+        } else if config.armed || config.calibrated {
+            // Launched armed or ready: the gyros were calibrated at rest before, with the same
+            // sensors.
             let rest = Vector3::new(0.0, 0.0, af.gravity_m_s2);
             while !estimator.calibrate(&sensors.sample_imu(&Vector3::zeros(), &rest)) {}
             state = SystemState::Standby;

@@ -5,6 +5,7 @@
 use std::time::Duration;
 
 use firmware_sim::clock::ClockMode;
+use firmware_sim::harness::HarnessError;
 use firmware_sim::serve::{ServeConfig, Twin};
 use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
@@ -349,4 +350,210 @@ async fn cli_prints_bound_address_and_persists_params() {
         std::fs::read_to_string(&param_file).unwrap(),
         "ALT_KD banana\n"
     );
+}
+
+/// Every ATTITUDE's `time_boot_ms` up to (and including) the first at or after `end_ms`.
+async fn attitude_times<S: AsyncRead + AsyncWrite + Unpin>(
+    gcs: &mut Gcs<S>,
+    end_ms: u32,
+) -> Vec<u32> {
+    let mut times = Vec::new();
+    while times.last().is_none_or(|&t| t < end_ms) {
+        let t = gcs
+            .wait_for("ATTITUDE", |f| match f.decode() {
+                Ok(apm::MavMessage::ATTITUDE(a)) => Some(a.time_boot_ms),
+                _ => None,
+            })
+            .await;
+        times.push(t);
+    }
+    times
+}
+
+/// Under lockstep sim time moves only on `advance`; replies come at once; streams count sim
+/// time, so an advance brings exactly its share of telemetry; the harness reads the true state
+/// and writes parameters.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lockstep_flies_only_when_the_harness_advances() {
+    let cancel = CancellationToken::new();
+    let mut c = config(&[]);
+    c.clock = ClockMode::Lockstep;
+    c.endpoint.vehicle.ideal_sensors = false;
+    c.endpoint.vehicle.calibrated = true;
+    let twin = Twin::start(c, cancel.clone()).await.unwrap();
+    let harness = twin.harness();
+    let (ours, theirs) = tokio::io::duplex(64 * 1024);
+    twin.attach_stream(theirs, "test duplex");
+    let mut gcs = Gcs::new(ours);
+
+    let hb = gcs.heartbeat().await;
+    assert_eq!(
+        hb.system_status,
+        apm::MavState::MAV_STATE_STANDBY,
+        "ready to arm at t = 0"
+    );
+    gcs.send(&command_long(apm::MavCmd::MAV_CMD_DO_SET_MODE, 1.0, 18.0))
+        .await;
+    assert_eq!(gcs.ack().await, (176, 0));
+    gcs.send(&command_long(
+        apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        1.0,
+        0.0,
+    ))
+    .await;
+    assert_eq!(gcs.ack().await, (400, 0));
+    let s = harness.state().await.unwrap();
+    assert_eq!((s.t_us, s.armed, s.mode), (0, true, "QHOVER"));
+
+    assert_eq!(harness.advance(2.0).await, Ok(2_000_000));
+    // 20 Hz of sim time: 50, …, 2000 ms, each once (t = 0 came at connection, read above).
+    let times = attitude_times(&mut gcs, 2000).await;
+    assert_eq!(times, (50..=2000).step_by(50).collect::<Vec<u32>>());
+    let s = harness.state().await.unwrap();
+    assert_eq!(s.t_us, 2_000_000);
+    assert!(s.altitude_m > 0.3 && !s.landed, "climbing in QHOVER: {s:?}");
+
+    assert_eq!(harness.set_param("hover_alt", 2.0).await, Ok(2.0));
+    let v = gcs
+        .wait_for("PARAM_VALUE of the harness's write", |f| match f.decode() {
+            Ok(apm::MavMessage::PARAM_VALUE(v)) if v.param_id.to_str() == Ok("HOVER_ALT") => {
+                Some(v.param_value)
+            }
+            _ => None,
+        })
+        .await;
+    assert_eq!(v, 2.0);
+    assert_eq!(
+        harness.set_param("NOPE", 1.0).await,
+        Err(HarnessError::Refused("unknown parameter NOPE".into()))
+    );
+    assert_eq!(harness.advance(0.0).await, Ok(2_000_000));
+    cancel.cancel();
+    tokio::time::timeout(BOUND, twin.join())
+        .await
+        .expect("clean stop");
+    assert_eq!(harness.state().await, Err(HarnessError::Stopped));
+}
+
+/// The twin runs on tokio's clock: under a paused clock 30 s of flight at 10× pass in no wall
+/// time, and streams count that clock, not sim time (1 Hz heartbeats, 20 Hz ATTITUDE).
+#[tokio::test(start_paused = true)]
+async fn a_paused_clock_runs_the_twin_and_streams_keep_wall_rates() {
+    let cancel = CancellationToken::new();
+    let mut c = config(&[]);
+    c.clock = ClockMode::Scaled { speed: 10.0 };
+    let twin = Twin::start(c, cancel.clone()).await.unwrap();
+    let (ours, theirs) = tokio::io::duplex(64 * 1024);
+    twin.attach_stream(theirs, "test duplex");
+    let mut gcs = Gcs::new(ours);
+    let start = tokio::time::Instant::now();
+    let mut heartbeats = 0;
+    let mut attitudes = Vec::new();
+    while attitudes.last().is_none_or(|&t| t < 30_000) {
+        let f = gcs.next_frame().await;
+        match f.decode() {
+            Ok(apm::MavMessage::HEARTBEAT(_)) => heartbeats += 1,
+            Ok(apm::MavMessage::ATTITUDE(a)) => attitudes.push(a.time_boot_ms),
+            _ => {}
+        }
+    }
+    let clock_s = start.elapsed().as_secs_f64();
+    assert!((2.9..3.2).contains(&clock_s), "{clock_s} s of tokio time");
+    assert!((3..=4).contains(&heartbeats), "{heartbeats} heartbeats");
+    assert!((59..=62).contains(&attitudes.len()), "{attitudes:?}");
+    // Each ATTITUDE carries the latest sample: half a second of sim time apart at 10×.
+    let gaps: Vec<u32> = attitudes.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(gaps.iter().all(|g| (495..=505).contains(g)), "{gaps:?}");
+    assert!(
+        matches!(twin.harness().advance(1.0).await, Err(HarnessError::Refused(e)) if e.contains("lockstep"))
+    );
+    cancel.cancel();
+    twin.join().await;
+}
+
+/// A reader that leaves a flood of telemetry unread: the twin sheds telemetry and keeps the
+/// parameter list waiting in order, so the whole list still arrives once the reader reads.
+#[tokio::test(start_paused = true)]
+async fn replies_are_never_lost_behind_telemetry() {
+    let cancel = CancellationToken::new();
+    let mut c = config(&[]);
+    c.clock = ClockMode::REAL_TIME;
+    c.link_options.queue_len = 16;
+    let twin = Twin::start(c, cancel.clone()).await.unwrap();
+    let (ours, theirs) = tokio::io::duplex(512);
+    twin.attach_stream(theirs, "slow reader");
+    let mut gcs = Gcs::new(ours);
+    gcs.heartbeat().await;
+    // Every stream at every batch.
+    for msgid in [1u32, 2, 26, 27, 30, 31, 32, 36, 65, 245, 251] {
+        let mut set = command_long(apm::MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL, msgid as f32, 1.0);
+        if let apm::MavMessage::COMMAND_LONG(c) = &mut set {
+            c.target_component = 1;
+        }
+        gcs.send(&set).await;
+        assert_eq!(gcs.ack().await, (511, 0), "interval of {msgid}");
+    }
+    gcs.send(&apm::MavMessage::PARAM_REQUEST_LIST(
+        apm::PARAM_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 0,
+        },
+    ))
+    .await;
+    // A second of the (paused) clock passes with nothing read: 200 batches of telemetry and
+    // the whole list meet a full queue.
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let count = firmware_sim::params::TABLE.len();
+    let mut seen = vec![false; count];
+    while seen.iter().any(|s| !s) {
+        let v = gcs
+            .wait_for("PARAM_VALUE", |f| match f.decode() {
+                Ok(apm::MavMessage::PARAM_VALUE(v)) => Some(v),
+                _ => None,
+            })
+            .await;
+        seen[usize::from(v.param_index)] = true;
+    }
+    // And the telemetry goes on once the replies are through.
+    attitude_times(&mut gcs, 0).await;
+    cancel.cancel();
+    twin.join().await;
+}
+
+/// Impossible `serve` flags: one line on stderr each, exit status 2, nothing started.
+#[test]
+fn cli_refuses_impossible_serve_flags() {
+    for (args, says) in [
+        (&["--lockstep"][..], "--control"),
+        (
+            &["--lockstep", "--control", "tcpin:127.0.0.1:0", "--fast"][..],
+            "--fast",
+        ),
+        (
+            &["--control", "udpin:127.0.0.1:0"][..],
+            "--control takes a tcpin",
+        ),
+        (&["--initial", "z=2"][..], "on the ground"),
+        (
+            &[
+                "--lockstep",
+                "--control",
+                "tcpin:127.0.0.1:0",
+                "--latency",
+                "5",
+            ][..],
+            "--latency",
+        ),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_firmware-sim"))
+            .args(["serve", "--listen", "tcpin:127.0.0.1:0"])
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} started");
+        assert!(out.stdout.is_empty(), "{args:?} printed {:?}", out.stdout);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+    }
 }

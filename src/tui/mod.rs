@@ -195,7 +195,7 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
-                        for req in app.on_key(k, &state, Instant::now()) {
+                        for req in app.on_key(k, &state, crate::vehicle::now()) {
                             let c = control.clone();
                             let out = out_tx.clone();
                             tokio::spawn(async move { c.execute(req, out).await });
@@ -229,7 +229,13 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
         }
         // Keys and outcomes draw at once (a person is waiting); vehicle data at most at 30 fps.
         if now_draw || (dirty && last_draw.elapsed() >= FRAME_INTERVAL) {
-            draw_running(terminal, &mut app, running, &mut cache, Instant::now())?;
+            draw_running(
+                terminal,
+                &mut app,
+                running,
+                &mut cache,
+                crate::vehicle::now(),
+            )?;
             last_draw = Instant::now();
             dirty = false;
         }

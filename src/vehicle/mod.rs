@@ -1,6 +1,10 @@
 //! The vehicle tracker task: applies every routed frame to a [`VehicleState`] and publishes it
 //! on a `watch` channel for the terminal UI and the headless status line, records the recent
 //! past in a [`History`] for the charts, and forgets links the router reports down.
+//!
+//! Its clock is tokio's ([`now`]): under a paused tokio clock a test advances the tracker's
+//! time (rates, link loss, "vehicle lost") instead of waiting for it. Readers of the state
+//! compare it with the same [`now`].
 
 pub mod history;
 pub mod state;
@@ -9,6 +13,7 @@ pub mod window;
 use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, watch};
+use tokio::time::Instant as TokioInstant;
 use tokio_util::sync::CancellationToken;
 
 use crate::router::{LinkInfo, Tapped};
@@ -17,6 +22,12 @@ pub use state::{VehicleState, VehicleView};
 
 /// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second.
 const PUBLISH_EVERY: Duration = Duration::from_millis(20);
+
+/// The tracker's clock as a `std` instant: tokio's, so a paused test clock moves it.
+#[must_use]
+pub fn now() -> Instant {
+    TokioInstant::now().into_std()
+}
 
 /// Runs the tracker until the tap closes or `cancel` fires. `links` is the router's list of
 /// live links: a link that leaves it is forgotten, so its health does not go stale on screen.
@@ -27,9 +38,9 @@ pub async fn run(
     history: SharedHistory,
     cancel: CancellationToken,
 ) {
-    let epoch = history.lock().map_or_else(|_| Instant::now(), |h| h.epoch);
+    let epoch = history.lock().map_or_else(|_| now(), |h| h.epoch);
     let mut state = VehicleState::new(epoch);
-    let mut last_publish = Instant::now();
+    let mut last_publish = TokioInstant::now();
     let mut dirty = false;
     let mut links_open = true;
     let mut batch = Vec::with_capacity(64);
@@ -39,12 +50,12 @@ pub async fn run(
             () = cancel.cancelled() => break,
             n = tap.recv_many(&mut batch, 64) => {
                 if n == 0 { break }
-                let now = Instant::now();
+                let at = now();
                 // One lock per run of frames, not per frame.
                 if let Ok(mut h) = history.lock() {
                     for t in batch.drain(..) {
-                        let msg = state.apply(t.link, t.side, &t.frame, now);
-                        h.record(&t.frame, msg.as_ref(), now);
+                        let msg = state.apply(t.link, t.side, &t.frame, at);
+                        h.record(&t.frame, msg.as_ref(), at);
                     }
                 }
                 batch.clear();
@@ -69,7 +80,7 @@ pub async fn run(
         }
         if dirty && last_publish.elapsed() >= PUBLISH_EVERY {
             publish.send_replace(state.clone());
-            last_publish = Instant::now();
+            last_publish = TokioInstant::now();
             dirty = false;
         }
     }
@@ -124,6 +135,69 @@ mod tests {
         wait(&mut state_rx, true).await;
         links_tx.send_replace(Vec::new());
         wait(&mut state_rx, false).await;
+        cancel.cancel();
+        task.await.unwrap();
+    }
+
+    fn vehicle_heartbeat() -> Frame {
+        use vtol_link::dialect as apm;
+        let hb = apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
+            custom_mode: 18,
+            mavtype: apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            autopilot: apm::MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            base_mode: apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: apm::MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        });
+        Frame::encode_v2(1, 1, 0, &hb)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_tracker_runs_on_tokio_time() {
+        let (tap_tx, tap_rx) = mpsc::channel(16);
+        let (_links_tx, links_rx) = watch::channel(vec![info(LinkId(3))]);
+        let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
+        let history = Arc::new(Mutex::new(History::new(now())));
+        let cancel = CancellationToken::new();
+        let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
+        let beat = || Tapped {
+            link: LinkId(3),
+            side: Side::Vehicle,
+            frame: vehicle_heartbeat(),
+        };
+        // The state as published once its heartbeat time is later than `after`.
+        let heard_after = |rx: &mut watch::Receiver<VehicleState>, after: Option<Instant>| {
+            let mut rx = rx.clone();
+            async move {
+                loop {
+                    let t = rx
+                        .borrow_and_update()
+                        .vehicles
+                        .get(&(1, 1))
+                        .map(|v| v.last_heartbeat);
+                    if let Some(t) = t
+                        && after.is_none_or(|a| t > a)
+                    {
+                        return t;
+                    }
+                    rx.changed().await.unwrap();
+                }
+            }
+        };
+        tap_tx.send(beat()).await.unwrap();
+        let first = heard_after(&mut state_rx, None).await;
+        assert!(!state_rx.borrow().vehicle_lost(now()));
+        // A minute passes in no time at all: the vehicle is lost by the tracker's clock.
+        tokio::time::advance(Duration::from_secs(60)).await;
+        assert!(state_rx.borrow().vehicle_lost(now()));
+        tap_tx.send(beat()).await.unwrap();
+        let second = heard_after(&mut state_rx, Some(first)).await;
+        assert!(
+            second.duration_since(first) >= Duration::from_secs(60),
+            "the tracker stamped {:?} between the heartbeats",
+            second.duration_since(first)
+        );
+        assert!(!state_rx.borrow().vehicle_lost(now()));
         cancel.cancel();
         task.await.unwrap();
     }

@@ -149,8 +149,8 @@ def test_get_set_and_usage_errors(lossless):
 
 
 def test_arm_refused_by_a_prearm_check_gives_the_reason(twin_factory):
-    # At 1 % of real time the twin's 1 s gyro calibration lasts 100 s.
-    slow = twin_factory(speed=0.01)
+    # At 1 % of real time the hardware's 1 s gyro calibration after power-up lasts 100 s.
+    slow = twin_factory(speed=0.01, extra=["--boot-calibration"])
     r = gcs("arm", link=slow.tcp)
     assert r.returncode == 1, r.stdout + r.stderr
     assert "PreArm" in r.stderr and "calibration" in r.stderr, r.stderr

@@ -112,8 +112,9 @@ def test_mavlink1_first_client_is_answered(twin, gcs_factory):
         assert out["v2_after"] is True, out
 
 
-def test_heartbeat_is_1hz_of_vehicle_time(twin, gcs_factory):
-    """HEARTBEAT runs at 1 Hz of sim time: count them against ATTITUDE's time_boot_ms."""
+def test_heartbeat_is_1hz_of_wall_time_at_any_speed(twin, gcs_factory):
+    """HEARTBEAT runs at 1 Hz of wall time whatever the sim speed: the module's twin flies at 4x,
+    so 8 s of vehicle time (time_boot_ms) carry about two heartbeats, not eight."""
     g = gcs_factory(twin.tcp)
     g.wait_vehicle_heartbeat()
     start = g.recv("ATTITUDE").time_boot_ms
@@ -122,9 +123,9 @@ def test_heartbeat_is_1hz_of_vehicle_time(twin, gcs_factory):
         m = g.recv(["HEARTBEAT", "ATTITUDE"], timeout=10)
         if m.get_type() == "HEARTBEAT":
             beats += m.type != 6
-        elif m.time_boot_ms - start >= 6000:
+        elif m.time_boot_ms - start >= 8000:
             break
-    assert 5 <= beats <= 7, f"{beats} heartbeats in 6 s of vehicle time"
+    assert 1 <= beats <= 4, f"{beats} heartbeats in 8 s of vehicle time at 4x"
 
 
 def test_sigterm_exits_cleanly(twin_factory, gcs_factory):

@@ -137,7 +137,7 @@ impl Endpoint {
                 self.apply_custom_mode(link, p[1] as u32)
             }
             cmd::SET_MESSAGE_INTERVAL => {
-                let now = self.now_us;
+                let now = self.stream_now_us;
                 let msgid = p[0] as u32;
                 let ok = self
                     .links
@@ -307,7 +307,7 @@ impl Endpoint {
             0 => streams::Group::ALL.to_vec(),
             n => streams::Group::from_stream_id(n).into_iter().collect(),
         };
-        let now = self.now_us;
+        let now = self.stream_now_us;
         if let Some(l) = self.links.get_mut(&link) {
             for g in groups {
                 l.schedule.set_group(g, Some(hz), now);

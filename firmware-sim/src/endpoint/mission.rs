@@ -6,7 +6,8 @@
 //!   its `MAV_MISSION_RESULT` and a STATUSTEXT saying why, and the stored mission stays as it
 //!   was. Only a complete, accepted upload replaces it (and is saved beside the parameter file).
 //!   Requests are repeated after [`RETRY_US`] of silence and the upload is cancelled after
-//!   [`TIMEOUT_US`] (sim time). One upload at a time: another ground station's MISSION_COUNT
+//!   [`TIMEOUT_US`], counted in the endpoint's stream time (wall time when served, sim time
+//!   under lockstep), so a ground station has as long to answer at any speed. One upload at a time: another ground station's MISSION_COUNT
 //!   meanwhile gets `MAV_MISSION_DENIED`. MISSION_ITEM (floats) is accepted as well as
 //!   MISSION_ITEM_INT.
 //! - **Download**: MISSION_REQUEST_LIST → MISSION_COUNT; every MISSION_REQUEST_INT (or legacy
@@ -26,9 +27,9 @@ use mavlink::dialects::ardupilotmega as apm;
 use super::{Endpoint, InFrame, LinkKey};
 use crate::mission::{MAX_ITEMS, Mission, MissionItem, check_item, xy_from_float, xy_to_float};
 
-/// Silence after which the next item is requested again, µs of sim time.
+/// Silence after which the next item is requested again, µs of stream time.
 pub const RETRY_US: u64 = 1_000_000;
-/// Silence after which an upload is cancelled, µs of sim time (ArduPilot: 8 s).
+/// Silence after which an upload is cancelled, µs of stream time (ArduPilot: 8 s).
 pub const TIMEOUT_US: u64 = 8_000_000;
 
 /// MISSION_ITEM id.
@@ -211,7 +212,7 @@ impl Endpoint {
             self.mission_ack(link, from, r.mission_type, R::MAV_MISSION_UNSUPPORTED);
             return;
         }
-        let now = self.now_us;
+        let now = self.stream_now_us;
         let (expected, count) = match self.upload.as_mut().filter(|u| u.partner == from) {
             Some(up) => {
                 up.last_heard_us = now;
@@ -283,7 +284,7 @@ impl Endpoint {
     /// Requests item `seq` of the upload in progress and restarts its retry timer.
     fn request_next(&mut self, link: LinkKey, to: (u8, u8), seq: u16) {
         if let Some(up) = self.upload.as_mut() {
-            up.last_request_us = self.now_us;
+            up.last_request_us = self.stream_now_us;
         }
         self.request_item(link, to, seq);
     }
@@ -328,7 +329,7 @@ impl Endpoint {
         }
         if let Some(up) = &self.upload
             && up.partner != from
-            && self.now_us.saturating_sub(up.last_heard_us) < TIMEOUT_US
+            && self.stream_now_us.saturating_sub(up.last_heard_us) < TIMEOUT_US
         {
             self.mission_ack(link, from, kind, R::MAV_MISSION_DENIED);
             self.say(
@@ -359,8 +360,8 @@ impl Endpoint {
             partner: from,
             count: m.count,
             items: Vec::with_capacity(usize::from(m.count)),
-            last_heard_us: self.now_us,
-            last_request_us: self.now_us,
+            last_heard_us: self.stream_now_us,
+            last_request_us: self.stream_now_us,
         });
         self.request_item(link, from, 0);
     }
@@ -453,7 +454,7 @@ impl Endpoint {
         let Some(up) = &mut self.upload else {
             return;
         };
-        let now = self.now_us;
+        let now = self.stream_now_us;
         if now.saturating_sub(up.last_heard_us) >= TIMEOUT_US {
             let (link, to) = (up.link, up.partner);
             self.upload = None;

@@ -58,6 +58,9 @@ pub struct Outbound {
     pub link: LinkKey,
     /// A complete MAVLink 2 frame.
     pub frame: Vec<u8>,
+    /// A scheduled stream message (true) rather than a reply or an event (false). A link that
+    /// is short of room sheds telemetry first, so replies are never lost behind it.
+    pub telemetry: bool,
 }
 
 /// How to build an endpoint.
@@ -105,6 +108,8 @@ pub struct Endpoint {
     params: Params,
     param_file: Option<PathBuf>,
     now_us: u64,
+    /// The time stream rates count in, µs (see [`Endpoint::tick_at`]).
+    stream_now_us: u64,
     links: BTreeMap<LinkKey, LinkState>,
     out: Vec<Outbound>,
     stats: EndpointStats,
@@ -171,6 +176,7 @@ impl Endpoint {
             params,
             param_file,
             now_us: 0,
+            stream_now_us: 0,
             links: BTreeMap::new(),
             out: Vec::new(),
             stats: EndpointStats::default(),
@@ -220,6 +226,13 @@ impl Endpoint {
         self.now_us
     }
 
+    /// The time stream rates count in, µs: wall time under the serve loop's real-time and fast
+    /// clocks, sim time otherwise.
+    #[must_use]
+    pub fn stream_now_us(&self) -> u64 {
+        self.stream_now_us
+    }
+
     /// The twin.
     #[must_use]
     pub fn vehicle(&self) -> &Vehicle {
@@ -236,6 +249,12 @@ impl Endpoint {
     #[must_use]
     pub fn stats(&self) -> EndpointStats {
         self.stats
+    }
+
+    /// The frames queued outside [`Endpoint::handle`] and [`Endpoint::tick`] (e.g. by
+    /// [`Endpoint::set_param_announced`]), oldest first.
+    pub fn take_outbound(&mut self) -> Vec<Outbound> {
+        std::mem::take(&mut self.out)
     }
 
     /// Adds bad frames counted by a transport's decoder (reported in SYS_STATUS `errors_comm`).
@@ -275,6 +294,8 @@ impl Endpoint {
             euler: crate::frames::Euler::new(self.vehicle.telemetry().euler.psi, 0.0, 0.0),
         };
         config.armed = false;
+        // A reboot calibrates the gyros again, at rest.
+        config.calibrated = false;
         config.position_setpoint_m = None;
         config.rc_us = [0; 8];
         config.gains = self.params.gains();
@@ -320,8 +341,18 @@ impl Endpoint {
     }
 
     /// Advances the twin to sim time `now_us` (1 kHz physics steps) and returns the frames that
-    /// became due: streams, heartbeats, paced parameter lists, status texts.
+    /// became due: streams, heartbeats, paced parameter lists, status texts. Stream rates count
+    /// in sim time.
     pub fn tick(&mut self, now_us: u64) -> Vec<Outbound> {
+        self.tick_at(now_us, now_us)
+    }
+
+    /// [`Endpoint::tick`] with stream rates counted in `stream_us` instead of sim time: the serve
+    /// loop passes wall time, so a twin running 1 000× faster than real time still sends
+    /// ATTITUDE 20 times a wall second, not 20 000 times (each message then carries the latest
+    /// sample). `stream_us` never goes back.
+    pub fn tick_at(&mut self, now_us: u64, stream_us: u64) -> Vec<Outbound> {
+        self.stream_now_us = self.stream_now_us.max(stream_us);
         while self.now_us + STEP_US <= now_us {
             self.vehicle.step();
             self.now_us += STEP_US;
@@ -346,9 +377,10 @@ impl Endpoint {
         self.drain_param_queues();
         let errors_comm = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
         let keys: Vec<LinkKey> = self.links.keys().copied().collect();
+        let replies = self.out.len();
         for link in keys {
             let due = match self.links.get_mut(&link) {
-                Some(l) => l.schedule.due(self.now_us),
+                Some(l) => l.schedule.due(self.stream_now_us),
                 None => continue,
             };
             for msgid in due {
@@ -356,6 +388,9 @@ impl Endpoint {
                     self.send(link, &msg);
                 }
             }
+        }
+        for o in &mut self.out[replies..] {
+            o.telemetry = true;
         }
         std::mem::take(&mut self.out)
     }
@@ -476,7 +511,11 @@ impl Endpoint {
         let seq = self.next_seq(link);
         let frame = wire::encode_v2(seq, self.sysid, COMPID, msg);
         self.stats.frames_out += 1;
-        self.out.push(Outbound { link, frame });
+        self.out.push(Outbound {
+            link,
+            frame,
+            telemetry: false,
+        });
     }
 
     /// Queues a hand-built payload on one link.
@@ -484,7 +523,11 @@ impl Endpoint {
         let seq = self.next_seq(link);
         let frame = wire::encode_v2_raw(seq, self.sysid, COMPID, msgid, payload);
         self.stats.frames_out += 1;
-        self.out.push(Outbound { link, frame });
+        self.out.push(Outbound {
+            link,
+            frame,
+            telemetry: false,
+        });
     }
 
     /// Queues a message on every link.

@@ -151,6 +151,20 @@ impl Endpoint {
         Ok(accepted.index)
     }
 
+    /// Writes a parameter for the test harness rather than for a GCS: the same checks and
+    /// effects as a PARAM_SET, and every GCS gets the PARAM_VALUE of the change (collect it
+    /// with [`Endpoint::take_outbound`]). Returns the value stored, after its type conversion.
+    ///
+    /// # Errors
+    /// The refusal reason; nothing changes then.
+    pub fn set_param_announced(&mut self, name: &str, value: f64) -> Result<f64, ParamError> {
+        let index = self.set_param(name, value)?;
+        if let Some(msg) = self.param_value(index) {
+            self.broadcast(&msg);
+        }
+        Ok(self.params.at(index).map_or(value, |(_, v)| v))
+    }
+
     fn persist(&mut self) {
         let Some(path) = self.param_file.clone() else {
             return;
@@ -178,7 +192,7 @@ impl Endpoint {
             n if n.starts_with("SR0_") => {
                 let hz = (value >= 0.0).then_some(value);
                 if let Some(group) = streams::Group::ALL.into_iter().find(|g| g.param() == n) {
-                    let now = self.now_us;
+                    let now = self.stream_now_us;
                     for l in self.links.values_mut() {
                         l.schedule.set_group(group, hz, now);
                     }

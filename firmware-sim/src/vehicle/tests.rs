@@ -45,6 +45,19 @@ fn calibrates_then_arms_only_when_checks_pass() {
 }
 
 #[test]
+fn a_vehicle_calibrated_before_start_arms_at_once_in_qhover() {
+    let mut v = Vehicle::new(VehicleConfig {
+        calibrated: true,
+        ..on_ground()
+    });
+    assert_eq!(v.telemetry().state, SystemState::Standby);
+    v.arm(false).expect("ready at t = 0");
+    assert_eq!(v.telemetry().mode, FlightMode::QHover);
+    run(&mut v, 3.0);
+    assert!(!v.telemetry().landed, "QHOVER climbs at once");
+}
+
+#[test]
 fn refuses_to_arm_in_the_air() {
     let cfg = VehicleConfig {
         initial: InitialState {

@@ -297,6 +297,12 @@ impl LinkSender {
         r
     }
 
+    /// Free places in the egress queue now: a producer with traffic of two priorities sheds
+    /// the lower one before the queue is full.
+    pub fn room(&self) -> usize {
+        self.tx.capacity()
+    }
+
     /// True once the link is down.
     pub fn is_closed(&self) -> bool {
         self.tx.is_closed()
