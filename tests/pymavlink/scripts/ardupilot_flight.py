@@ -43,9 +43,10 @@ def command_ack(master, command):
 
 
 def set_mode(master, name):
+    """Change mode; the ACK is the answer (waiting for the next heartbeat as well would let
+    the messages that come meanwhile, a MISSION_ITEM_REACHED among them, go unread)."""
     master.set_mode(master.mode_mapping()[name])
     command_ack(master, mavutil.mavlink.MAV_CMD_DO_SET_MODE)
-    wait(master, "HEARTBEAT", lambda h: mavutil.mode_string_v10(h) == name, 10, f"mode {name}")
 
 
 def offset(lat, lon, north, east):
