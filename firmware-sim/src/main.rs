@@ -49,7 +49,7 @@ struct SimulateArgs {
     /// Model: paper or physical.
     #[arg(long, default_value = "physical")]
     model: ModelMode,
-    /// Flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND).
+    /// Flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND; GUIDED, AUTO and QRTL need `serve`).
     #[arg(long, default_value = "QLOITER")]
     mode: FlightMode,
     /// Perfect sensing: no noise, bias or quantisation, and the controller reads the true state.
@@ -202,7 +202,8 @@ struct ServeArgs {
     /// refused until then). Without it the twin starts calibrated, ready to arm.
     #[arg(long)]
     boot_calibration: bool,
-    /// Parameter file (.parm): loaded at start, rewritten atomically on every change.
+    /// Parameter file (.parm): loaded at start, rewritten atomically on every change. The
+    /// mission is kept beside it (NAME.waypoints, QGC WPL 110).
     #[arg(long, value_name = "FILE")]
     param_file: Option<std::path::PathBuf>,
     /// Seed of every random draw (sensor noise, gusts).
@@ -283,6 +284,7 @@ impl ServeArgs {
                 params: Params::new(),
                 param_file: self.param_file.clone(),
                 sysid: self.sysid,
+                mission: firmware_sim::mission::Mission::default(),
             },
             link_options: LinkOptions::default(),
             impairment: Impairment {

@@ -1,4 +1,8 @@
 //! Flight modes. The numbers are ArduPlane's, so pymavlink and MAVProxy name them for free.
+//!
+//! The pilot and hover modes (QSTABILIZE, QHOVER, QLOITER, QLAND) are control laws. The
+//! autonomous modes (GUIDED, AUTO, QRTL) fly those laws towards targets the navigator chooses
+//! (`navigation`): each control tick they fly one [`Guidance`].
 
 /// A flight mode of the twin (ArduPlane custom_mode numbers).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -12,11 +16,37 @@ pub enum FlightMode {
     QLoiter,
     /// Descend, touch down and disarm.
     QLand,
+    /// Fly to the ground station's targets (take-off, reposition, position targets).
+    Guided,
+    /// Fly the stored mission.
+    Auto,
+    /// Fly home and land (ArduPlane's QRTL; RTL requests land here too).
+    QRtl,
+}
+
+/// What an autonomous mode flies during one control tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Guidance {
+    /// Armed on the ground, waiting for a take-off: the motors stay at idle.
+    #[default]
+    Idle,
+    /// QLOITER's law to this point (paper frame, z up), m.
+    Position(nalgebra::Vector3<f64>),
+    /// QLAND's law: descend where the vehicle is, touch down, disarm.
+    Land,
 }
 
 impl FlightMode {
     /// Every mode, in number order.
-    pub const ALL: [Self; 4] = [Self::QStabilize, Self::QHover, Self::QLoiter, Self::QLand];
+    pub const ALL: [Self; 7] = [
+        Self::Auto,
+        Self::Guided,
+        Self::QStabilize,
+        Self::QHover,
+        Self::QLoiter,
+        Self::QLand,
+        Self::QRtl,
+    ];
 
     /// The ArduPlane `custom_mode` number.
     #[must_use]
@@ -26,6 +56,9 @@ impl FlightMode {
             Self::QHover => 18,
             Self::QLoiter => 19,
             Self::QLand => 20,
+            Self::Guided => 15,
+            Self::Auto => 10,
+            Self::QRtl => 21,
         }
     }
 
@@ -43,7 +76,23 @@ impl FlightMode {
             Self::QHover => "QHOVER",
             Self::QLoiter => "QLOITER",
             Self::QLand => "QLAND",
+            Self::Guided => "GUIDED",
+            Self::Auto => "AUTO",
+            Self::QRtl => "QRTL",
         }
+    }
+
+    /// Whether the navigator chooses the targets (GUIDED, AUTO, QRTL).
+    #[must_use]
+    pub const fn is_autonomous(self) -> bool {
+        matches!(self, Self::Guided | Self::Auto | Self::QRtl)
+    }
+
+    /// Whether the vehicle may be armed in this mode: not in the modes that can only come down
+    /// (ArduPilot refuses to arm in a mode that cannot take off).
+    #[must_use]
+    pub const fn allows_arming(self) -> bool {
+        !matches!(self, Self::QLand | Self::QRtl)
     }
 
     /// Whether the mode holds altitude (and so needs the external position sensor).

@@ -129,7 +129,7 @@ const fn def(
 }
 
 use Access::{ReadOnly as RO, ReadWrite as RW, Volatile as VOL};
-use ParamType::{Int8 as I8, Int16 as I16, Real32 as F32};
+use ParamType::{Int8 as I8, Int16 as I16, Int32 as I32, Real32 as F32};
 
 /// Longest accepted parameter id (the MAVLink `param_id` field).
 pub const MAX_NAME_LEN: usize = 16;
@@ -179,6 +179,18 @@ pub static TABLE: &[ParamDef] = &[
     def("SIM_WIND_SPD", F32, "m/s", (0.0, 30.0), 0.0, RW, "Steady wind speed"),
     def("SIM_WIND_DIR", F32, "deg", (0.0, 360.0), 0.0, RW, "Direction the wind blows from (0 = north)"),
     def("SIM_WIND_TURB", F32, "m/s", (0.0, 10.0), 0.0, RW, "Gust intensity (standard deviation)"),
+    def("SR0_EXTRA2", I16, "Hz", (-1.0, 50.0), -1.0, RW, "VFR_HUD rate; -1 = default"),
+    def("SIM_HOME_LAT", F32, "deg", (-90.0, 90.0), -35.363_261, RW, "Latitude of the motion-capture origin (after restart)"),
+    def("SIM_HOME_LON", F32, "deg", (-180.0, 180.0), 149.165_230, RW, "Longitude of the motion-capture origin (after restart)"),
+    def("SIM_HOME_ALT", F32, "m", (-500.0, 9000.0), 584.0, RW, "Ground altitude above mean sea level at the origin (after restart)"),
+    def("WP_RADIUS", F32, "m", (0.05, 100.0), 0.3, RW, "A waypoint is reached within this distance (an item's param2 overrides)"),
+    def("WP_SPEED_UP", F32, "m/s", (0.1, 5.0), 1.0, RW, "Climb rate of take-offs and altitude changes in GUIDED, AUTO, QRTL"),
+    def("WP_SPEED_DN", F32, "m/s", (0.1, 5.0), 0.5, RW, "Descent rate of altitude changes in GUIDED, AUTO, QRTL"),
+    def("NAV_RADIUS_MAX", F32, "m", (1.0, 10000.0), 100.0, RW, "Targets farther from home are refused"),
+    def("NAV_ALT_MAX", F32, "m", (1.0, 1000.0), 50.0, RW, "Targets higher above home are refused"),
+    def("BATT_CAPACITY", I32, "mAh", (100.0, 100_000.0), 1300.0, RW, "Battery capacity (after restart)"),
+    def("SIM_BATT_VOLTAGE", F32, "V", (1.0, 60.0), 12.6, RW, "Voltage of the full battery at rest (after restart)"),
+    def("ARMING_CHECK", I32, "", (0.0, 1.0), 1.0, RO, "Pre-arm checks (calibration, crash, mode, landed, level): 1 = all, always on"),
 ];
 
 /// Why a write was refused or a name not found.
@@ -447,6 +459,25 @@ impl Params {
     #[must_use]
     pub fn gains(&self) -> Gains {
         gains_of(&self.values)
+    }
+
+    /// Where `SIM_HOME_LAT`/`LON`/`ALT` put the motion-capture origin on the globe.
+    #[must_use]
+    pub fn origin(&self) -> crate::globe::Origin {
+        crate::globe::Origin::from_degrees(
+            self.value("SIM_HOME_LAT"),
+            self.value("SIM_HOME_LON"),
+            self.value("SIM_HOME_ALT"),
+        )
+    }
+
+    /// The battery `BATT_CAPACITY` and `SIM_BATT_VOLTAGE` describe.
+    #[must_use]
+    pub fn battery(&self) -> crate::plant::battery::BatteryConfig {
+        crate::plant::battery::BatteryConfig {
+            capacity_mah: self.value("BATT_CAPACITY"),
+            full_voltage_v: self.value("SIM_BATT_VOLTAGE"),
+        }
     }
 
     /// The table as `.parm` text: names sorted, `%-16.16s %f` for floats and `%-16.16s %d` for

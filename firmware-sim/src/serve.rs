@@ -28,6 +28,8 @@
 //! - `--loss FRACTION` drops that fraction of frames in each direction, drawn from a generator
 //!   seeded by `--seed`; `--latency MS` delays every frame by that much in each direction. A
 //!   lossy radio is then tested with real frames, retries and all.
+//! - `--param-file FILE`: the parameters, and the mission beside them (`FILE` with the
+//!   `.waypoints` extension, QGC WPL 110), loaded at start and saved on every change.
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
@@ -71,6 +73,7 @@ use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, Li
 use crate::clock::{BATCH, ClockMode, SimClock};
 use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
 use crate::harness::{Call, Harness, Reply, Request};
+use crate::mission;
 use crate::params::{ParamFileError, Params};
 use crate::tlog::{TlogError, TlogSink};
 
@@ -148,7 +151,8 @@ impl Default for ServeConfig {
 
 impl ServeConfig {
     /// Loads the parameter file if one is given (a missing file starts from defaults and is
-    /// created on the first change; a corrupt one is an error, never silently replaced).
+    /// created on the first change; a corrupt one is an error, never silently replaced), and
+    /// the mission saved beside it.
     ///
     /// # Errors
     /// [`ServeError::Params`].
@@ -157,6 +161,16 @@ impl ServeConfig {
             && path.exists()
         {
             self.endpoint.params = Params::load(path)?;
+        }
+        // The mission lives beside the parameter file, with the same rules.
+        if let Some(path) = self
+            .endpoint
+            .param_file
+            .as_deref()
+            .map(mission::file_beside)
+            && path.exists()
+        {
+            self.endpoint.mission = mission::Mission::load(&path)?;
         }
         Ok(())
     }
@@ -171,6 +185,9 @@ pub enum ServeError {
     /// The parameter file is unusable.
     #[error(transparent)]
     Params(#[from] ParamFileError),
+    /// The mission file beside it is unusable.
+    #[error(transparent)]
+    Mission(#[from] mission::MissionFileError),
     /// The tokio runtime could not start.
     #[error("cannot start the runtime: {0}")]
     Runtime(std::io::Error),

@@ -269,6 +269,12 @@ pub fn vehicle_config(cfg: &SimulateConfig) -> Result<(VehicleConfig, Params), S
     if !(cfg.duration_s > 0.0 && cfg.duration_s <= 86_400.0) {
         return Err(bad("--duration must be in (0, 86400] s".into()));
     }
+    if cfg.mode.is_autonomous() {
+        return Err(bad(format!(
+            "--mode {} needs a ground station's targets or a mission: fly it with `serve`",
+            cfg.mode
+        )));
+    }
     // Parameters: the vehicle's own table, one set.
     for (name, _) in &cfg.params {
         if Params::index_of(name).is_some() && !OFFLINE_PARAMS.contains(&name.as_str()) {

@@ -31,8 +31,9 @@ use crate::control::{
 use crate::estimator::Estimator;
 use crate::frames::Euler;
 use crate::integrator::rk4_step;
-use crate::mode::FlightMode;
+use crate::mode::{FlightMode, Guidance};
 use crate::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
+use crate::plant::battery::{Battery, BatteryConfig, BatteryState};
 use crate::plant::rigid_body::{EulerTrig, RigidBody};
 use crate::plant::{self, PlantInput, PlantState, ground};
 use crate::sensors::{self, Sensors};
@@ -53,6 +54,9 @@ pub const LAND_DISARM_DELAY_S: f64 = 0.5;
 pub const ARM_MAX_TILT_RAD: f64 = 0.2;
 /// Correlation time of the gust model (first-order Gauss–Markov per axis), s.
 pub const GUST_TIME_CONSTANT_S: f64 = 1.0;
+/// Period of the battery model, s: it drains slowly, so 10 Hz is plenty and costs the control
+/// loop nothing.
+const BATTERY_PERIOD_S: f64 = 0.1;
 /// Seed offset of the wind RNG, so that turning wind on leaves the sensor noise unchanged.
 const WIND_SEED_SALT: u64 = 0x5749_4e44;
 
@@ -105,6 +109,8 @@ pub struct VehicleConfig {
     pub position_setpoint_m: Option<Vector3<f64>>,
     /// RC receiver pulse widths at start, µs (0 = no signal), as [`Vehicle::set_rc_input`].
     pub rc_us: [u16; 8],
+    /// The flight battery (full at start).
+    pub battery: BatteryConfig,
 }
 
 impl Default for VehicleConfig {
@@ -125,6 +131,7 @@ impl Default for VehicleConfig {
             calibrated: false,
             position_setpoint_m: None,
             rc_us: [0; 8],
+            battery: BatteryConfig::default(),
         }
     }
 }
@@ -154,6 +161,9 @@ pub enum ArmError {
     /// Disarming in flight needs force.
     #[error("refusing to disarm in flight (use force)")]
     InFlight,
+    /// The mode can only come down.
+    #[error("mode {0} cannot take off")]
+    Mode(FlightMode),
 }
 
 /// Snapshot of everything the twin can report.
@@ -195,6 +205,8 @@ pub struct Telemetry {
     pub mode: FlightMode,
     /// System state.
     pub state: SystemState,
+    /// The flight battery.
+    pub battery: BatteryState,
 }
 
 /// Steady wind plus a seeded first-order Gauss–Markov gust (inertial frame).
@@ -266,6 +278,11 @@ pub struct Vehicle {
     push_torque_body_nm: Vector3<f64>,
     push_steps_left: u64,
     wind: Wind,
+    /// What GUIDED, AUTO and QRTL fly (set by the navigator).
+    guidance: Guidance,
+    battery: Battery,
+    /// Time not yet drawn from the battery, s.
+    battery_pending_s: f64,
     telemetry: Telemetry,
 }
 
@@ -336,6 +353,9 @@ impl Vehicle {
             push_torque_body_nm: Vector3::zeros(),
             push_steps_left: 0,
             wind: Wind::new(config.seed, dt_s),
+            guidance: Guidance::Idle,
+            battery: Battery::new(config.battery),
+            battery_pending_s: 0.0,
             telemetry: Telemetry {
                 mode: config.mode,
                 armed: config.armed,
@@ -347,6 +367,7 @@ impl Vehicle {
                     pwm_us: DISARMED_PWM_US,
                     ..ControlOutput::default()
                 },
+                battery: *Battery::new(config.battery).state(),
                 ..Telemetry::default()
             },
             config,
@@ -462,11 +483,11 @@ impl Vehicle {
             }
         }
 
-        // Landed bookkeeping and QLAND's automatic disarm.
+        // Landed bookkeeping and the automatic disarm of QLAND's law.
         if self.on_ground {
             self.landed_time_s += dt;
             if self.telemetry.armed
-                && self.telemetry.mode == FlightMode::QLand
+                && self.law() == Some(FlightMode::QLand)
                 && self.landed_time_s >= LAND_DISARM_DELAY_S
             {
                 self.set_disarmed();
@@ -525,11 +546,14 @@ impl Vehicle {
         }
 
         let truth_vel = self.telemetry.vel_m_s;
+        // The law flown this tick: the mode's own, or the autonomous modes' guidance (None:
+        // armed and idle on the ground).
+        let law = self.law();
         let truth = model == ModelMode::Paper || self.config.perfect_state;
         let input = if truth {
             ControlInput {
                 dt_s: self.control_dt_s,
-                mode: self.telemetry.mode,
+                mode: law.unwrap_or(FlightMode::QStabilize),
                 euler: self.plant.euler,
                 omega_body_rad_s: self.plant.omega_body_rad_s,
                 pos_m: self.plant.pos_m,
@@ -542,7 +566,7 @@ impl Vehicle {
         } else {
             ControlInput {
                 dt_s: self.control_dt_s,
-                mode: self.telemetry.mode,
+                mode: law.unwrap_or(FlightMode::QStabilize),
                 euler: Euler {
                     psi: crate::frames::wrap_pi(
                         self.estimator.euler().psi + self.chain_heading_error_rad,
@@ -560,7 +584,7 @@ impl Vehicle {
         };
         self.last_control_input = input;
 
-        let out = if self.telemetry.armed {
+        let out = if self.telemetry.armed && law.is_some() {
             self.controller.update(&input, &self.config.gains)
         } else {
             ControlOutput {
@@ -575,6 +599,17 @@ impl Vehicle {
         self.telemetry.adc_counts = imu.adc_counts;
         self.telemetry.euler_est = input.euler;
         self.telemetry.omega_est_rad_s = input.omega_body_rad_s;
+        self.battery_pending_s += self.control_dt_s;
+        if self.battery_pending_s >= BATTERY_PERIOD_S - 1e-9 {
+            self.battery.step(
+                self.battery_pending_s,
+                self.actuators.state.rotor_speed_rad_s,
+                af.rotor_arm_m,
+                af.k_drag_n_per_rad2_s2,
+            );
+            self.battery_pending_s = 0.0;
+            self.telemetry.battery = *self.battery.state();
+        }
         if self.telemetry.armed && self.telemetry.state != SystemState::Emergency {
             // Failsafe: flying on pilot throttle with no receiver signal.
             let rc_lost = !sensors::rc_has_signal(&rc);
@@ -595,6 +630,36 @@ impl Vehicle {
         t.omega_body_rad_s = self.plant.omega_body_rad_s;
         t.rotor_speed_rad_s = self.actuators.state.rotor_speed_rad_s;
         t.landed = self.on_ground;
+    }
+
+    /// The control law flown now: the mode's own, or for GUIDED, AUTO and QRTL the one their
+    /// guidance asks for (QLOITER's to a point, QLAND's), or `None` when idle on the ground.
+    #[must_use]
+    pub fn law(&self) -> Option<FlightMode> {
+        let mode = self.telemetry.mode;
+        if !mode.is_autonomous() {
+            return Some(mode);
+        }
+        match self.guidance {
+            Guidance::Idle => None,
+            Guidance::Position(_) => Some(FlightMode::QLoiter),
+            Guidance::Land => Some(FlightMode::QLand),
+        }
+    }
+
+    /// What GUIDED, AUTO and QRTL fly from the next control tick on. A position also becomes
+    /// the setpoint QLOITER holds.
+    pub fn set_guidance(&mut self, guidance: Guidance) {
+        if let Guidance::Position(p) = guidance {
+            self.setpoint_m = p;
+        }
+        self.guidance = guidance;
+    }
+
+    /// The current guidance.
+    #[must_use]
+    pub fn guidance(&self) -> Guidance {
+        self.guidance
     }
 
     fn crash(&mut self) {
@@ -681,6 +746,9 @@ impl Vehicle {
         if !force {
             if self.telemetry.state == SystemState::Emergency {
                 return Err(ArmError::PreArm("vehicle crashed"));
+            }
+            if !self.telemetry.mode.allows_arming() {
+                return Err(ArmError::Mode(self.telemetry.mode));
             }
             if !self.estimator.is_calibrated() {
                 return Err(ArmError::PreArm("gyro calibration in progress"));

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 
 use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
+use super::statustext::TextAssembler;
 
 /// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
 /// way (half the exchanges failing) almost never exhausts them.
@@ -59,6 +60,8 @@ pub struct CommandMachine {
     deadline: Instant,
     in_progress: bool,
     texts: Vec<String>,
+    /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
+    assembler: TextAssembler,
     refused: Option<(MavResult, Instant)>,
     /// Set once an ACK for the first send arrived before any retry (for the RTT estimate).
     pub first_try_rtt: Option<Duration>,
@@ -87,6 +90,7 @@ impl CommandMachine {
             deadline: now,
             in_progress: false,
             texts: Vec::new(),
+            assembler: TextAssembler::default(),
             refused: None,
             first_try_rtt: None,
             result: None,
@@ -138,9 +142,9 @@ impl Machine for CommandMachine {
         match &m.msg {
             MavMessage::STATUSTEXT(t) => {
                 if (t.severity as u32) <= apm::MavSeverity::MAV_SEVERITY_WARNING as u32
-                    && let Ok(s) = t.text.to_str()
+                    && let Some(s) = self.assembler.push(t)
                 {
-                    self.texts.push(s.trim_end_matches('\0').to_owned());
+                    self.texts.push(s);
                     if let Some((r, _)) = self.refused {
                         self.finish(r, now);
                     }

@@ -15,6 +15,7 @@ pub mod machine;
 pub mod param;
 pub mod probe;
 mod session;
+pub mod statustext;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};

@@ -304,6 +304,8 @@ pub struct ParamMachine {
     deadline: Instant,
     last_echo: Option<f32>,
     refused: Option<(String, Instant)>,
+    /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
+    assembler: super::statustext::TextAssembler,
     /// Round trip of an exchange answered on its first send.
     pub first_try_rtt: Option<Duration>,
     done: Option<Result<Param, ParamFailure>>,
@@ -348,6 +350,7 @@ impl ParamMachine {
             deadline: now,
             last_echo: None,
             refused: None,
+            assembler: super::statustext::TextAssembler::default(),
             first_try_rtt: None,
             done: None,
         }
@@ -416,10 +419,13 @@ impl Machine for ParamMachine {
                     self.deadline = now + REASON_GRACE;
                 }
             }
-            MavMessage::STATUSTEXT(t) if self.refused.is_some() => {
-                let text = t.text.to_str().unwrap_or("").trim_end_matches('\0');
-                if text.contains(self.name.as_str()) {
-                    self.done = Some(Err(ParamFailure::Refused(text.to_owned())));
+            MavMessage::STATUSTEXT(t) => {
+                // Long reasons come in chunks: put them together first.
+                if let Some(text) = self.assembler.push(t)
+                    && self.refused.is_some()
+                    && text.contains(self.name.as_str())
+                {
+                    self.done = Some(Err(ParamFailure::Refused(text)));
                 }
             }
             _ => {}

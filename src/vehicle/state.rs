@@ -169,6 +169,8 @@ pub struct VehicleState {
     /// Every message seen, by (system, component, message id).
     pub messages: BTreeMap<(u8, u8, u32), MessageStats>,
     last_seq: HashMap<(LinkId, u8, u8), u8>,
+    /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
+    text_chunks: HashMap<(u8, u8), crate::client::statustext::TextAssembler>,
 }
 
 impl Default for VehicleState {
@@ -200,6 +202,7 @@ impl VehicleState {
             links: BTreeMap::new(),
             messages: BTreeMap::new(),
             last_seq: HashMap::new(),
+            text_chunks: HashMap::new(),
         }
     }
 
@@ -316,11 +319,12 @@ impl VehicleState {
                 ];
             }
             MavMessage::STATUSTEXT(t) => {
-                if v.status_texts.len() == STATUS_TEXTS_KEPT {
-                    v.status_texts.pop_front();
+                if let Some(text) = self.text_chunks.entry(key).or_default().push(t) {
+                    if v.status_texts.len() == STATUS_TEXTS_KEPT {
+                        v.status_texts.pop_front();
+                    }
+                    v.status_texts.push_back((t.severity as u8, text));
                 }
-                let text = t.text.to_str().unwrap_or("<invalid utf-8>").to_owned();
-                v.status_texts.push_back((t.severity as u8, text));
             }
             _ => {}
         }

@@ -268,10 +268,11 @@ MAVPROXY_MODULES = "log,signing,ftp,param,arm,mode,cmdlong,misc"
 
 @contextmanager
 def mavproxy(master: str, workdir: Path, *, interactive: bool = True, cmd: str | None = None,
-             timeout: float = 60) -> Iterator[pexpect.spawn]:
+             timeout: float = 60, modules: str | None = MAVPROXY_MODULES) -> Iterator[pexpect.spawn]:
     """MAVProxy on `master`, with HOME `workdir/home`, state under `workdir/state` (aircraft
-    "twin") and its output in `workdir/mavproxy.out`; no stream-rate requests. Yields the pexpect
-    child; stops it with SIGTERM at the end (its quit handler)."""
+    "twin") and its output in `workdir/mavproxy.out`; no stream-rate requests; the modules
+    `modules` (None: MAVProxy's own default list, wp, fence, rally, battery… included). Yields
+    the pexpect child; stops it with SIGTERM at the end (its quit handler)."""
     home = workdir / "home"
     home.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MAVLINK20")}
@@ -285,8 +286,9 @@ def mavproxy(master: str, workdir: Path, *, interactive: bool = True, cmd: str |
         "--streamrate=-1",
         "--state-basedir", str(workdir / "state"),
         "--aircraft", "twin",
-        "--default-modules", MAVPROXY_MODULES,
     ]
+    if modules is not None:
+        args += ["--default-modules", modules]
     if cmd is not None:
         args += ["--cmd", cmd]
     with open(workdir / "mavproxy.out", "w") as log:

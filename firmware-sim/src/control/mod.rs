@@ -420,8 +420,14 @@ impl Controller {
         let eta_dot = kin.rates_from_body(&omega);
         let (psi_dot, theta_dot, phi_dot) = (eta_dot[0], eta_dot[1], eta_dot[2]);
 
+        // The autonomous modes fly QLOITER's law to the setpoint their navigator chose (the
+        // vehicle passes the law itself as the mode; these arms keep a direct caller safe).
         let (tau_theta, tau_phi) = match mode {
-            FlightMode::QLoiter | FlightMode::QLand => {
+            FlightMode::QLoiter
+            | FlightMode::QLand
+            | FlightMode::Guided
+            | FlightMode::Auto
+            | FlightMode::QRtl => {
                 let target = match (mode, self.land_hold_xy_m) {
                     (FlightMode::QLand, Some(hold)) => hold,
                     _ => setpoint.xy(),
@@ -474,7 +480,11 @@ impl Controller {
                 self.yaw_offset_rad = wrap_pi(target - yaw_setpoint);
                 (target, rate)
             }
-            FlightMode::QLoiter | FlightMode::QLand => (yaw_setpoint, 0.0),
+            FlightMode::QLoiter
+            | FlightMode::QLand
+            | FlightMode::Guided
+            | FlightMode::Auto
+            | FlightMode::QRtl => (yaw_setpoint, 0.0),
         };
         self.yaw_target_rad = psi_target;
         let tau_psi = yaw::yaw_tau(
@@ -490,13 +500,9 @@ impl Controller {
         // 3. Thrust.
         let fz_max = 2.0 * a.k_thrust_n_per_rad2_s2 * a.rotor_speed_max_rad_s.powi(2);
         let r_z = match mode {
-            FlightMode::QLoiter => Some(altitude::altitude_accel_m_s2(
-                gains.alt_kd,
-                gains.alt_kp,
-                pos.z,
-                vel.z,
-                setpoint.z,
-            )),
+            FlightMode::QLoiter | FlightMode::Guided | FlightMode::Auto | FlightMode::QRtl => Some(
+                altitude::altitude_accel_m_s2(gains.alt_kd, gains.alt_kp, pos.z, vel.z, setpoint.z),
+            ),
             FlightMode::QHover => Some(altitude::altitude_accel_m_s2(
                 gains.alt_kd,
                 gains.alt_kp,

@@ -3,7 +3,13 @@
 //! Every COMMAND_LONG/COMMAND_INT addressed to us gets exactly one COMMAND_ACK, built from raw
 //! bytes so that command ids the dialect does not know still get `UNSUPPORTED`. A retransmission
 //! (`confirmation` > 0) of the command last done for the same sender gets the same result again
-//! without acting twice.
+//! without acting twice. SET_MODE gets one too, COMMAND_ACK with `command` = 11, as ArduPilot
+//! answers it.
+//!
+//! Modes: the twin's own (`FlightMode`); RTL (11) is flown as QRTL, as ArduPlane does with
+//! `Q_RTL_MODE` = QRTL always, since the twin cannot fly as a plane; any other mode number is
+//! refused with a reason. Navigation commands (take-off, reposition, mission start, home) are
+//! `guided`'s.
 
 use mavlink::dialects::ardupilotmega as apm;
 
@@ -44,7 +50,29 @@ pub mod cmd {
     pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 = 520;
     /// MAV_CMD_DO_VTOL_TRANSITION.
     pub const DO_VTOL_TRANSITION: u16 = 3000;
+    /// MAV_CMD_NAV_RETURN_TO_LAUNCH.
+    pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
+    /// MAV_CMD_NAV_TAKEOFF.
+    pub const NAV_TAKEOFF: u16 = 22;
+    /// MAV_CMD_NAV_VTOL_TAKEOFF.
+    pub const NAV_VTOL_TAKEOFF: u16 = 84;
+    /// MAV_CMD_DO_SET_HOME.
+    pub const DO_SET_HOME: u16 = 179;
+    /// MAV_CMD_DO_REPOSITION.
+    pub const DO_REPOSITION: u16 = 192;
+    /// MAV_CMD_DO_SET_MISSION_CURRENT.
+    pub const DO_SET_MISSION_CURRENT: u16 = 224;
+    /// MAV_CMD_MISSION_START.
+    pub const MISSION_START: u16 = 300;
+    /// MAV_CMD_GET_HOME_POSITION.
+    pub const GET_HOME_POSITION: u16 = 410;
 }
+
+/// ArduPlane's RTL mode number, flown as QRTL.
+pub const RTL_MODE: u32 = 11;
+
+/// SET_MODE's message id, which its COMMAND_ACK carries as `command` (ArduPilot).
+const SET_MODE_ID: u16 = 11;
 
 /// The force-arm magic number (ArduPilot, common.xml).
 pub const FORCE_MAGIC: f32 = 21196.0;
@@ -157,17 +185,25 @@ impl Endpoint {
                 // Hover (MC) is all the twin models; asking for it is a no-op success.
                 3 => result::ACCEPTED,
                 4 => {
-                    self.send(
+                    self.say(
                         link,
-                        &streams::statustext(
-                            apm::MavSeverity::MAV_SEVERITY_WARNING,
-                            "Forward flight is not modelled",
-                        ),
+                        apm::MavSeverity::MAV_SEVERITY_WARNING,
+                        "Forward flight is not modelled",
                     );
                     result::DENIED
                 }
                 _ => result::DENIED,
             },
+            cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF => self.cmd_takeoff(link, p[6]),
+            cmd::DO_REPOSITION => self.cmd_reposition(link, c),
+            cmd::NAV_RETURN_TO_LAUNCH => self.apply_custom_mode(link, RTL_MODE),
+            cmd::MISSION_START => self.cmd_mission_start(link, p[0]),
+            cmd::DO_SET_MISSION_CURRENT => self.set_mission_current(link, p[0]),
+            cmd::GET_HOME_POSITION => {
+                after.push(self.home_position());
+                result::ACCEPTED
+            }
+            cmd::DO_SET_HOME => self.cmd_set_home(link, c),
             cmd::PREFLIGHT_REBOOT_SHUTDOWN => match p[0].round() {
                 // Reboot the autopilot: only on the ground, disarmed, as ArduPilot does.
                 1.0 if self.vehicle.telemetry().armed => result::DENIED,
@@ -205,26 +241,31 @@ impl Endpoint {
                 let text = match e {
                     ArmError::PreArm(_) => format!("PreArm: {e}"),
                     ArmError::InFlight => format!("Disarm: {e}"),
+                    ArmError::Mode(_) => format!("Arm: {e}"),
                 };
-                let msg = streams::statustext(apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
-                self.send(link, &msg);
+                self.say(link, apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
                 result::FAILED
             }
         }
     }
 
-    fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
-        match FlightMode::from_custom_mode(custom_mode) {
+    pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
+        let wanted = if custom_mode == RTL_MODE {
+            FlightMode::QRtl.custom_mode()
+        } else {
+            custom_mode
+        };
+        match FlightMode::from_custom_mode(wanted) {
             Some(mode) => {
                 self.vehicle.set_mode(mode);
+                // The navigator takes over at once, so an autonomous mode never flies a
+                // stale guidance for a navigation period.
+                self.navigate();
                 result::ACCEPTED
             }
             None => {
                 let text = format!("Mode {custom_mode} not available");
-                self.send(
-                    link,
-                    &streams::statustext(apm::MavSeverity::MAV_SEVERITY_WARNING, &text),
-                );
+                self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &text);
                 result::FAILED
             }
         }
@@ -233,18 +274,21 @@ impl Endpoint {
     // SET_MODE and REQUEST_DATA_STREAM are deprecated in common.xml, but MAVProxy and older
     // GCSs still send them (A.5).
     #[allow(deprecated)]
-    /// SET_MODE (11): like DO_SET_MODE, without an ACK (A.5: COMMAND_ACK(11) is not encodable).
-    pub(super) fn on_set_mode(&mut self, m: &apm::SET_MODE_DATA) {
-        if m.target_system != self.sysid
-            || !m
-                .base_mode
-                .contains(apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
-        {
+    /// SET_MODE (11): like DO_SET_MODE, answered with COMMAND_ACK(`command` = 11) as ArduPilot
+    /// does (built from raw bytes: the crate's `MavCmd` has no 11).
+    pub(super) fn on_set_mode(&mut self, link: LinkKey, frame: &InFrame, m: &apm::SET_MODE_DATA) {
+        if m.target_system != self.sysid && m.target_system != 0 {
             return;
         }
-        if let Some(mode) = FlightMode::from_custom_mode(m.custom_mode) {
-            self.vehicle.set_mode(mode);
-        }
+        let r = if m
+            .base_mode
+            .contains(apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+        {
+            self.apply_custom_mode(link, m.custom_mode)
+        } else {
+            result::DENIED
+        };
+        self.ack(link, frame, SET_MODE_ID, r);
     }
 
     #[allow(deprecated)]

@@ -54,6 +54,10 @@ impl Endpoint {
             // Pilot throttle: ArduPlane flags manual input in its pilot-driven modes.
             base_mode |= apm::MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED;
         }
+        if t.mode.is_autonomous() {
+            // ArduPlane flags GUIDED in AUTO, GUIDED and QRTL (never AUTO_ENABLED).
+            base_mode |= apm::MavModeFlag::MAV_MODE_FLAG_GUIDED_ENABLED;
+        }
         apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
             custom_mode: t.mode.custom_mode(),
             mavtype: apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,

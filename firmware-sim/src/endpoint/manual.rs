@@ -97,8 +97,13 @@ impl Endpoint {
     }
 
     /// SET_POSITION_TARGET_LOCAL_NED in LOCAL_NED (1) with the position not masked out moves
-    /// the hover point (QLOITER), converted from NED to the twin's z-up frame.
-    pub(super) fn on_position_target(&mut self, t: &apm::SET_POSITION_TARGET_LOCAL_NED_DATA) {
+    /// the hover point (QLOITER), converted from NED to the twin's z-up frame; in GUIDED it is
+    /// a guided target (checked against the flight envelope).
+    pub(super) fn on_position_target(
+        &mut self,
+        link: super::LinkKey,
+        t: &apm::SET_POSITION_TARGET_LOCAL_NED_DATA,
+    ) {
         use apm::PositionTargetTypemask as Mask;
         if t.coordinate_frame != apm::MavFrame::MAV_FRAME_LOCAL_NED {
             return;
@@ -110,7 +115,9 @@ impl Endpoint {
             return;
         }
         let ned = Vector3::new(f64::from(t.x), f64::from(t.y), f64::from(t.z));
-        if ned.iter().all(|v| v.is_finite()) {
+        if self.vehicle.telemetry().mode == crate::mode::FlightMode::Guided {
+            self.guided_target(link, ned);
+        } else if ned.iter().all(|v| v.is_finite()) {
             self.vehicle.set_position_setpoint(ned_to_paper(&ned));
         }
     }

@@ -10,13 +10,20 @@
 //! One concern per file: [`heartbeat`] (HEARTBEAT, GCS failsafe), [`streams`] (telemetry and
 //! rates), [`params_protocol`], [`commands`] (COMMAND_LONG/INT and legacy SET_MODE /
 //! REQUEST_DATA_STREAM), [`manual`] (MANUAL_CONTROL, RC_CHANNELS_OVERRIDE, position targets),
-//! [`ftp`] (the NAK that sends MAVProxy to the parameter protocol), [`wire`] (framing).
+//! [`mission`] (the mission protocol), [`guided`] (GUIDED, AUTO and QRTL: the navigator, home,
+//! take-off and reposition), [`position`] (telemetry on the globe, battery), [`statustext`]
+//! (texts in chunks), [`ftp`] (the NAK that sends MAVProxy to the parameter protocol),
+//! [`wire`] (framing).
 
 pub mod commands;
 pub mod ftp;
+pub mod guided;
 pub mod heartbeat;
 pub mod manual;
+pub mod mission;
 pub mod params_protocol;
+pub mod position;
+pub mod statustext;
 pub mod streams;
 pub mod wire;
 
@@ -25,6 +32,9 @@ use std::path::PathBuf;
 
 use mavlink::dialects::ardupilotmega as apm;
 
+use crate::globe::Origin;
+use crate::mission::Mission;
+use crate::navigation::Navigator;
 use crate::params::Params;
 use crate::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
 
@@ -60,10 +70,13 @@ pub struct EndpointConfig {
     pub vehicle: VehicleConfig,
     /// Parameter values at start (defaults, or loaded from `param_file`).
     pub params: Params,
-    /// Where accepted parameter changes are saved (atomically), if anywhere.
+    /// Where accepted parameter changes are saved (atomically), if anywhere. The mission is
+    /// saved beside it ([`crate::mission::file_beside`]).
     pub param_file: Option<PathBuf>,
     /// System id override (`--sysid`); None = `SYSID_THISMAV`.
     pub sysid: Option<u8>,
+    /// The mission at start (empty, or loaded from beside `param_file`).
+    pub mission: Mission,
 }
 
 /// Counters for diagnostics and tests.
@@ -111,6 +124,24 @@ pub struct Endpoint {
     sysid_override: Option<u8>,
     /// While rebooting (after MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN): silent until this sim time, µs.
     rebooting_until_us: Option<u64>,
+    /// The stored mission (item 0 is the home slot).
+    mission: Mission,
+    /// Where the mission is saved, if anywhere.
+    mission_file: Option<PathBuf>,
+    /// A mission upload in progress.
+    upload: Option<mission::Upload>,
+    /// The last finished upload (to repeat its ACK).
+    finished: Option<mission::Finished>,
+    /// GUIDED, AUTO and QRTL.
+    navigator: Navigator,
+    /// Sim time of the next navigation step, µs.
+    next_nav_us: u64,
+    /// The motion-capture frame on the globe (`SIM_HOME_*`, read at start and reboot).
+    origin: Origin,
+    /// Home, local NED, m.
+    home_ned_m: nalgebra::Vector3<f64>,
+    /// Id of the last STATUSTEXT sent in chunks.
+    text_id: u16,
 }
 
 /// How long a reboot keeps the twin silent, µs: a small autopilot restarting (ArduPilot's own
@@ -126,14 +157,19 @@ impl Endpoint {
             params,
             param_file,
             sysid,
+            mission,
         } = config;
         vehicle.gains = params.gains();
         vehicle.control_rate_hz = params.value("CTRL_RATE_HZ");
+        vehicle.battery = params.battery();
+        let mission_file = param_file.as_deref().map(crate::mission::file_beside);
+        let origin = params.origin();
         let sysid_override = sysid;
         let sysid = sysid.unwrap_or(params.value("SYSID_THISMAV") as u8);
         let vehicle = Vehicle::new(vehicle);
         let last_armed = vehicle.telemetry().armed;
         let last_state = vehicle.telemetry().state;
+        let home_ned_m = crate::frames::paper_to_ned(&vehicle.telemetry().pos_m);
         let mut ep = Self {
             sysid,
             vehicle,
@@ -152,9 +188,30 @@ impl Endpoint {
             last_state,
             sysid_override,
             rebooting_until_us: None,
+            mission,
+            mission_file,
+            upload: None,
+            finished: None,
+            navigator: Navigator::new(),
+            next_nav_us: 0,
+            origin,
+            home_ned_m,
+            text_id: 0,
         };
         ep.apply_wind();
         ep
+    }
+
+    /// The stored mission.
+    #[must_use]
+    pub fn mission(&self) -> &Mission {
+        &self.mission
+    }
+
+    /// Home, local NED, m.
+    #[must_use]
+    pub fn home_ned_m(&self) -> nalgebra::Vector3<f64> {
+        self.home_ned_m
     }
 
     /// Our system id.
@@ -243,7 +300,13 @@ impl Endpoint {
         config.rc_us = [0; 8];
         config.gains = self.params.gains();
         config.control_rate_hz = self.params.value("CTRL_RATE_HZ");
+        config.battery = self.params.battery();
         self.vehicle = Vehicle::new(config);
+        self.origin = self.params.origin();
+        self.home_ned_m = crate::frames::paper_to_ned(&self.vehicle.telemetry().pos_m);
+        self.navigator = Navigator::new();
+        self.upload = None;
+        self.finished = None;
         self.sysid = self
             .sysid_override
             .unwrap_or(self.params.value("SYSID_THISMAV") as u8);
@@ -293,6 +356,9 @@ impl Endpoint {
         while self.now_us + STEP_US <= now_us {
             self.vehicle.step();
             self.now_us += STEP_US;
+            if self.now_us >= self.next_nav_us {
+                self.navigate();
+            }
         }
         if let Some(until) = self.rebooting_until_us {
             if self.now_us < until {
@@ -307,6 +373,7 @@ impl Endpoint {
         self.expire_pushes();
         self.check_failsafe();
         self.report_vehicle_events();
+        self.mission_timeouts();
         self.drain_param_queues();
         let errors_comm = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
         let keys: Vec<LinkKey> = self.links.keys().copied().collect();
@@ -336,6 +403,17 @@ impl Endpoint {
             streams::id::NAMED_VALUE_FLOAT => {
                 streams::controller_outputs(self.vehicle.telemetry()).into()
             }
+            position::MISSION_CURRENT => vec![self.mission_current()],
+            id if position::builds(id) => position::GlobeView {
+                t: self.vehicle.telemetry(),
+                origin: self.origin,
+                home_ned_m: self.home_ned_m,
+                target_ned_m: self.navigator.target_ned_m(),
+                capacity_mah: self.params.value("BATT_CAPACITY"),
+            }
+            .build(id)
+            .into_iter()
+            .collect(),
             _ => streams::build(msgid, self.vehicle.telemetry(), errors_comm)
                 .into_iter()
                 .collect(),
@@ -351,6 +429,10 @@ impl Endpoint {
             } else {
                 self.stats.not_for_us += 1;
             }
+            return;
+        }
+        // Mission items, raw too: an unsupported command must still get its refusal.
+        if self.mission_raw(link, frame) {
             return;
         }
         let msg = match frame.decode() {
@@ -381,11 +463,27 @@ impl Endpoint {
                 let name = s.param_id.to_str().unwrap_or("").to_owned();
                 self.param_set(link, frame, &name, s.param_value);
             }
-            M::SET_MODE(m) => self.on_set_mode(&m),
+            M::SET_MODE(m) => self.on_set_mode(link, frame, &m),
             M::REQUEST_DATA_STREAM(r) => self.on_request_data_stream(link, &r),
             M::MANUAL_CONTROL(m) => self.on_manual_control(frame, &m),
             M::RC_CHANNELS_OVERRIDE(o) => self.on_rc_override(frame, &o),
-            M::SET_POSITION_TARGET_LOCAL_NED(t) => self.on_position_target(&t),
+            M::SET_POSITION_TARGET_LOCAL_NED(t) => self.on_position_target(link, &t),
+            M::SET_POSITION_TARGET_GLOBAL_INT(t) => self.on_position_target_global(link, &t),
+            M::MISSION_COUNT(m) => self.on_mission_count(link, frame, &m),
+            M::MISSION_REQUEST_LIST(m) => self.on_mission_request_list(link, frame, &m),
+            M::MISSION_REQUEST_INT(m) => {
+                self.on_mission_request(link, frame, m.seq, m.mission_type as u8, true);
+            }
+            M::MISSION_REQUEST(m) => {
+                self.on_mission_request(link, frame, m.seq, m.mission_type as u8, false);
+            }
+            M::MISSION_CLEAR_ALL(m) => self.on_mission_clear_all(link, frame, &m),
+            M::MISSION_SET_CURRENT(m) => {
+                self.set_mission_current(link, f32::from(m.seq));
+            }
+            M::MISSION_WRITE_PARTIAL_LIST(m) => {
+                self.on_mission_partial(link, frame, m.mission_type as u8);
+            }
             M::FILE_TRANSFER_PROTOCOL(f) => self.on_ftp(link, frame, &f),
             M::TIMESYNC(t) => self.on_timesync(link, frame, &t),
             _ => {}
@@ -440,13 +538,7 @@ impl Endpoint {
         }
     }
 
-    /// A STATUSTEXT on every link (events concern every GCS).
-    fn announce(&mut self, severity: apm::MavSeverity, text: &str) {
-        tracing::info!(target: "firmware_sim::endpoint", "{text}");
-        self.broadcast(&streams::statustext(severity, text));
-    }
-
-    fn group_rates_from_params(&self) -> [Option<f64>; 6] {
+    fn group_rates_from_params(&self) -> [Option<f64>; streams::Group::ALL.len()] {
         streams::Group::ALL.map(|g| {
             let v = self.params.value(g.param());
             (v >= 0.0).then_some(v)
@@ -473,6 +565,10 @@ impl Endpoint {
         let t = *self.vehicle.telemetry();
         if t.armed != self.last_armed {
             self.last_armed = t.armed;
+            if t.armed {
+                // Home is where the vehicle was armed (ArduPlane).
+                self.set_home(crate::frames::paper_to_ned(&t.pos_m));
+            }
             let text = if t.armed {
                 "Arming motors"
             } else {
@@ -489,5 +585,7 @@ impl Endpoint {
     }
 }
 
+#[cfg(test)]
+mod mission_tests;
 #[cfg(test)]
 mod tests;

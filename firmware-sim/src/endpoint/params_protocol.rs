@@ -66,10 +66,7 @@ impl Endpoint {
     }
 
     pub(super) fn param_request_list(&mut self, link: LinkKey) {
-        self.send(
-            link,
-            &streams::statustext(apm::MavSeverity::MAV_SEVERITY_INFO, BANNER),
-        );
+        self.say(link, apm::MavSeverity::MAV_SEVERITY_INFO, BANNER);
         let count = self.params.count() as u16;
         if let Some(l) = self.links.get_mut(&link) {
             // A new request restarts the transfer rather than queueing a second copy.
@@ -135,10 +132,7 @@ impl Endpoint {
                 // ArduPilot's wording; the full reason goes to the log, a short one fits STATUSTEXT.
                 tracing::warn!("param write denied: {e}");
                 let text = format!("Param write denied ({name}: {})", e.short_reason());
-                self.send(
-                    link,
-                    &streams::statustext(apm::MavSeverity::MAV_SEVERITY_WARNING, &text),
-                );
+                self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &text);
             }
         }
     }

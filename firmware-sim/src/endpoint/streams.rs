@@ -44,6 +44,10 @@ pub mod id {
     /// NAMED_VALUE_FLOAT: the controller's outputs, one message per value
     /// ([`super::CONTROLLER_OUTPUT_NAMES`]).
     pub const NAMED_VALUE_FLOAT: u32 = 251;
+    pub use super::super::position::{
+        BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, HOME_POSITION, MISSION_CURRENT,
+        NAV_CONTROLLER_OUTPUT, VFR_HUD,
+    };
 }
 
 /// Names of the controller's outputs sent as NAMED_VALUE_FLOAT, in order: τ̃φ, τ̃θ, τ̃ψ (rad/s²,
@@ -65,20 +69,23 @@ pub enum Group {
     Extra1,
     /// EXTRA3 (12): `SR0_EXTRA3`.
     Extra3,
+    /// EXTRA2 (11): `SR0_EXTRA2`.
+    Extra2,
 }
 
 impl Group {
     /// Every group, in `GROUP_PARAMS` order.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::RawSensors,
         Self::ExtendedStatus,
         Self::RcChannels,
         Self::Position,
         Self::Extra1,
         Self::Extra3,
+        Self::Extra2,
     ];
 
-    /// The group for a `MAV_DATA_STREAM` number (EXTRA2 and RAW_CONTROLLER have no members).
+    /// The group for a `MAV_DATA_STREAM` number (RAW_CONTROLLER has no members).
     #[must_use]
     pub fn from_stream_id(n: u8) -> Option<Self> {
         Some(match n {
@@ -87,6 +94,7 @@ impl Group {
             3 => Self::RcChannels,
             6 => Self::Position,
             10 => Self::Extra1,
+            11 => Self::Extra2,
             12 => Self::Extra3,
             _ => return None,
         })
@@ -102,6 +110,7 @@ impl Group {
             Self::Position => "SR0_POSITION",
             Self::Extra1 => "SR0_EXTRA1",
             Self::Extra3 => "SR0_EXTRA3",
+            Self::Extra2 => "SR0_EXTRA2",
         }
     }
 
@@ -122,7 +131,7 @@ pub struct StreamDef {
 }
 
 /// Every message the twin streams, with its default rate.
-pub const STREAMABLE: [StreamDef; 12] = [
+pub const STREAMABLE: [StreamDef; 19] = [
     StreamDef {
         msgid: id::HEARTBEAT,
         default_hz: 1.0,
@@ -183,6 +192,43 @@ pub const STREAMABLE: [StreamDef; 12] = [
         msgid: id::NAMED_VALUE_FLOAT,
         default_hz: 10.0,
         group: Some(Group::Extra1),
+    },
+    // On the globe and about the flight (`position`, `mission`).
+    StreamDef {
+        msgid: id::GLOBAL_POSITION_INT,
+        default_hz: 10.0,
+        group: Some(Group::Position),
+    },
+    StreamDef {
+        msgid: id::GPS_RAW_INT,
+        default_hz: 2.0,
+        group: Some(Group::ExtendedStatus),
+    },
+    StreamDef {
+        msgid: id::VFR_HUD,
+        default_hz: 4.0,
+        group: Some(Group::Extra2),
+    },
+    StreamDef {
+        msgid: id::BATTERY_STATUS,
+        default_hz: 1.0,
+        group: Some(Group::Extra3),
+    },
+    StreamDef {
+        msgid: id::MISSION_CURRENT,
+        default_hz: 1.0,
+        group: Some(Group::ExtendedStatus),
+    },
+    StreamDef {
+        msgid: id::NAV_CONTROLLER_OUTPUT,
+        default_hz: 2.0,
+        group: Some(Group::ExtendedStatus),
+    },
+    // On request and when home moves.
+    StreamDef {
+        msgid: id::HOME_POSITION,
+        default_hz: 0.0,
+        group: None,
     },
 ];
 
@@ -329,13 +375,17 @@ fn clamp_i16(v: f64) -> i16 {
     v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
 }
 
-/// Sensor bits SYS_STATUS reports: rate gyros, accelerometer, the external position sensor, the
-/// control loops, motor outputs and the RC receiver.
+/// Sensor bits SYS_STATUS reports: rate gyros, accelerometer, the external position sensor (also
+/// reported as the GPS), the attitude estimator, the control loops, motor outputs, the RC
+/// receiver and the battery monitor.
 fn sensors() -> apm::MavSysStatusSensor {
     use apm::MavSysStatusSensor as S;
     S::MAV_SYS_STATUS_SENSOR_3D_GYRO
         | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL
         | S::MAV_SYS_STATUS_SENSOR_VISION_POSITION
+        | S::MAV_SYS_STATUS_SENSOR_GPS
+        | S::MAV_SYS_STATUS_AHRS
+        | S::MAV_SYS_STATUS_SENSOR_BATTERY
         | S::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
         | S::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
         | S::MAV_SYS_STATUS_SENSOR_YAW_POSITION
@@ -354,25 +404,34 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
     let [p, q, r] = body_rates_to_frd(&t.omega_est_rad_s);
     Some(match msgid {
         id::SYS_STATUS => {
+            use apm::MavSysStatusSensor as S;
             let present = sensors();
             let mut enabled = present;
             if !t.armed {
-                enabled.remove(apm::MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS);
+                enabled.remove(S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS);
             }
+            // ArduPilot's convention: a bit is healthy unless something is wrong, so the
+            // geofence (which the twin does not have) is healthy, not breached.
+            let mut health = present | S::MAV_SYS_STATUS_GEOFENCE;
+            if t.state == crate::vehicle::SystemState::Calibrating {
+                // No navigation solution yet: no fix, estimator settling.
+                health.remove(S::MAV_SYS_STATUS_SENSOR_GPS | S::MAV_SYS_STATUS_AHRS);
+            }
+            let b = &t.battery;
             M::SYS_STATUS(apm::SYS_STATUS_DATA {
                 onboard_control_sensors_present: present,
                 onboard_control_sensors_enabled: enabled,
-                onboard_control_sensors_health: present,
+                onboard_control_sensors_health: health,
                 load: 0,
-                voltage_battery: u16::MAX,
-                current_battery: -1,
+                voltage_battery: (b.voltage_v * 1000.0).round().clamp(0.0, 65534.0) as u16,
+                current_battery: (b.current_a * 100.0).round().clamp(0.0, 32767.0) as i16,
                 drop_rate_comm: 0,
                 errors_comm,
                 errors_count1: 0,
                 errors_count2: 0,
                 errors_count3: 0,
                 errors_count4: 0,
-                battery_remaining: -1,
+                battery_remaining: (b.remaining * 100.0).round().clamp(0.0, 100.0) as i8,
                 onboard_control_sensors_present_extended: apm::MavSysStatusSensorExtended::empty(),
                 onboard_control_sensors_enabled_extended: apm::MavSysStatusSensorExtended::empty(),
                 onboard_control_sensors_health_extended: apm::MavSysStatusSensorExtended::empty(),
@@ -580,7 +639,7 @@ mod tests {
 
     #[test]
     fn default_rates_and_overrides() {
-        let mut s = Schedule::new([None; 6]);
+        let mut s = Schedule::new([None; Group::ALL.len()]);
         assert_eq!(s.interval_us(id::ATTITUDE), Some(50_000));
         assert_eq!(s.interval_us(id::ATTITUDE_QUATERNION), Some(-1));
         assert_eq!(s.interval_us(id::AUTOPILOT_VERSION), None);
@@ -601,7 +660,7 @@ mod tests {
 
     #[test]
     fn due_keeps_the_average_rate() {
-        let mut s = Schedule::new([None; 6]);
+        let mut s = Schedule::new([None; Group::ALL.len()]);
         let mut count = 0;
         // 10 s in 7 ms ticks: ATTITUDE at 20 Hz gives 200 (± the first one).
         let mut t = 0;

@@ -178,6 +178,12 @@ pub struct RawCommand {
     pub confirmation: u8,
     /// Came as COMMAND_INT.
     pub is_int: bool,
+    /// COMMAND_INT's x as sent (latitude in 1e-7 degree in global frames); 0 for COMMAND_LONG.
+    pub x: i32,
+    /// COMMAND_INT's y as sent (longitude in 1e-7 degree); 0 for COMMAND_LONG.
+    pub y: i32,
+    /// COMMAND_INT's `MAV_FRAME`; 0 for COMMAND_LONG.
+    pub frame: u8,
 }
 
 /// COMMAND_LONG id.
@@ -204,6 +210,9 @@ pub fn raw_command(frame: &InFrame) -> Option<RawCommand> {
                 target_component: p[31],
                 confirmation: p[32],
                 is_int: false,
+                x: 0,
+                y: 0,
+                frame: 0,
             })
         }
         COMMAND_INT_ID => {
@@ -225,6 +234,9 @@ pub fn raw_command(frame: &InFrame) -> Option<RawCommand> {
                 target_component: p[31],
                 confirmation: 0,
                 is_int: true,
+                x: i32_at(&p, 16),
+                y: i32_at(&p, 20),
+                frame: p[32],
             })
         }
         _ => None,

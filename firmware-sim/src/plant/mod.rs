@@ -7,9 +7,10 @@
 //! Ω = (p, q, r) in B. Each force and torque comes from its own small model function
 //! ([`rotors`], [`surfaces`], [`disturbances`]); they are summed here and integrated once by
 //! [`crate::integrator`]. Actuator dynamics ([`actuators`]) and ground contact ([`ground`]) act
-//! between integration steps.
+//! between integration steps; the flight [`battery`] drains with the rotors' shaft power.
 
 pub mod actuators;
+pub mod battery;
 pub mod disturbances;
 pub mod ground;
 pub mod rigid_body;

@@ -1,0 +1,583 @@
+//! State-machine tests of the mission protocol, GUIDED/AUTO/QRTL and the globe telemetry:
+//! frames in, frames out, sim time only.
+
+use mavlink::dialects::ardupilotmega as apm;
+
+use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
+use super::wire::{encode_v2, encode_v2_raw, parse_frame};
+use super::*;
+use crate::globe::GeoPoint;
+use crate::mission::{MissionItem, cmd as mcmd, frame};
+use crate::mode::FlightMode;
+
+const GCS: LinkKey = LinkKey(1);
+const OTHER: LinkKey = LinkKey(2);
+const GCS_SYSID: u8 = 255;
+const GCS_COMPID: u8 = 190;
+
+fn endpoint_with(param_file: Option<PathBuf>) -> Endpoint {
+    let mut config = EndpointConfig::default();
+    config.vehicle.ideal_sensors = true;
+    config.vehicle.perfect_state = true;
+    config.param_file = param_file;
+    let mut ep = Endpoint::new(config);
+    ep.add_link(GCS);
+    ep
+}
+
+fn endpoint() -> Endpoint {
+    endpoint_with(None)
+}
+
+fn from(compid: u8, msg: &apm::MavMessage) -> Vec<u8> {
+    encode_v2(3, GCS_SYSID, compid, msg)
+}
+
+fn v2(msg: &apm::MavMessage) -> Vec<u8> {
+    from(GCS_COMPID, msg)
+}
+
+fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
+    out.iter()
+        .filter_map(|o| parse_frame(&o.frame).ok()?.decode().ok())
+        .collect()
+}
+
+fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
+    out.iter()
+        .filter_map(|o| parse_frame(&o.frame).ok())
+        .filter(|f| f.msgid == 77)
+        .map(|f| {
+            let p = f.padded(10);
+            (u16::from_le_bytes([p[0], p[1]]), p[2])
+        })
+        .collect()
+}
+
+fn texts(out: &[Outbound]) -> Vec<apm::STATUSTEXT_DATA> {
+    decode(out)
+        .into_iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::STATUSTEXT(t) => Some(t),
+            _ => None,
+        })
+        .collect()
+}
+
+fn mission_acks(out: &[Outbound]) -> Vec<apm::MavMissionResult> {
+    decode(out)
+        .into_iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::MISSION_ACK(a) => Some(a.mavtype),
+            _ => None,
+        })
+        .collect()
+}
+
+#[allow(deprecated)] // MISSION_REQUEST: what ArduPilot (and so the twin) asks with
+fn requests(out: &[Outbound]) -> Vec<u16> {
+    decode(out)
+        .into_iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::MISSION_REQUEST(r) => Some(r.seq),
+            _ => None,
+        })
+        .collect()
+}
+
+fn reached(out: &[Outbound]) -> Vec<u16> {
+    decode(out)
+        .into_iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::MISSION_ITEM_REACHED(r) => Some(r.seq),
+            _ => None,
+        })
+        .collect()
+}
+
+fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
+    let mut out = Vec::new();
+    let mut t = ep.now_us();
+    while t < until_us {
+        t = (t + 5_000).min(until_us);
+        out.extend(ep.tick(t));
+    }
+    out
+}
+
+fn command(command: u16, p: [f32; 7]) -> Vec<u8> {
+    let mut payload = [0u8; 33];
+    for (k, v) in p.iter().enumerate() {
+        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    payload[28..30].copy_from_slice(&command.to_le_bytes());
+    payload[30] = 1;
+    encode_v2_raw(5, GCS_SYSID, GCS_COMPID, 76, &payload)
+}
+
+fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) -> Vec<u8> {
+    let mut payload = [0u8; 35];
+    for (k, v) in p.iter().enumerate() {
+        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    payload[16..20].copy_from_slice(&x.to_le_bytes());
+    payload[20..24].copy_from_slice(&y.to_le_bytes());
+    payload[24..28].copy_from_slice(&z.to_le_bytes());
+    payload[28..30].copy_from_slice(&command.to_le_bytes());
+    payload[30] = 1;
+    payload[32] = frame_no;
+    encode_v2_raw(5, GCS_SYSID, GCS_COMPID, 75, &payload)
+}
+
+fn set_mode(ep: &mut Endpoint, mode: FlightMode) -> Vec<Outbound> {
+    ep.handle(
+        GCS,
+        &command(
+            176,
+            [1.0, mode.custom_mode() as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+    )
+}
+
+fn count_msg(count: u16) -> apm::MavMessage {
+    apm::MavMessage::MISSION_COUNT(apm::MISSION_COUNT_DATA {
+        count,
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+        opaque_id: 0,
+    })
+}
+
+fn item_frame(seq: u16, it: &MissionItem) -> Vec<u8> {
+    encode_v2_raw(
+        9,
+        GCS_SYSID,
+        GCS_COMPID,
+        MISSION_ITEM_INT_ID,
+        &item_payload(seq, it, (1, 1), true),
+    )
+}
+
+/// A point `north_m`, `east_m` from the origin at `alt` m above home.
+fn item(command: u16, north_m: f64, east_m: f64, alt: f32) -> MissionItem {
+    let o = Params::new().origin();
+    let p: GeoPoint = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
+    MissionItem {
+        params: [0.0, 0.0, 0.0, f32::NAN],
+        x: p.lat_e7,
+        y: p.lon_e7,
+        z: alt,
+        command,
+        frame: frame::GLOBAL_RELATIVE_ALT_INT,
+        current: 0,
+        autocontinue: 1,
+    }
+}
+
+fn flight_plan() -> Vec<MissionItem> {
+    let mut loiter = item(mcmd::NAV_LOITER_TIME, 3.0, 2.0, 2.0);
+    loiter.params[0] = 1.0;
+    vec![
+        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        MissionItem {
+            x: 0,
+            y: 0,
+            ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 2.0)
+        },
+        item(mcmd::NAV_WAYPOINT, 3.0, 0.0, 2.5),
+        loiter,
+        item(mcmd::NAV_VTOL_LAND, 0.0, 2.0, 0.0),
+    ]
+}
+
+/// Uploads `items` item by item as a GCS answering each request; returns everything sent back.
+fn upload(ep: &mut Endpoint, items: &[MissionItem]) -> Vec<Outbound> {
+    let mut out = ep.handle(GCS, &v2(&count_msg(items.len() as u16)));
+    let mut all = out.clone();
+    while let Some(&seq) = requests(&out).last() {
+        out = ep.handle(GCS, &item_frame(seq, &items[usize::from(seq)]));
+        all.extend(out.iter().cloned());
+    }
+    all
+}
+
+/// Downloads the stored mission with MISSION_REQUEST_INT; returns each item's raw payload.
+fn download(ep: &mut Endpoint) -> Vec<Vec<u8>> {
+    let list = apm::MavMessage::MISSION_REQUEST_LIST(apm::MISSION_REQUEST_LIST_DATA {
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+    });
+    let count = decode(&ep.handle(GCS, &v2(&list)))
+        .into_iter()
+        .find_map(|m| match m {
+            apm::MavMessage::MISSION_COUNT(c) => Some(c.count),
+            _ => None,
+        })
+        .expect("MISSION_COUNT");
+    (0..count)
+        .map(|seq| {
+            let req = apm::MavMessage::MISSION_REQUEST_INT(apm::MISSION_REQUEST_INT_DATA {
+                seq,
+                target_system: 1,
+                target_component: 1,
+                mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+            });
+            let out = ep.handle(GCS, &v2(&req));
+            let f = parse_frame(&out[0].frame).unwrap();
+            assert_eq!(f.msgid, MISSION_ITEM_INT_ID);
+            f.padded(38)
+        })
+        .collect()
+}
+
+#[test]
+fn upload_then_download_is_byte_identical() {
+    let mut ep = endpoint();
+    let items = flight_plan();
+    let out = upload(&mut ep, &items);
+    assert_eq!(requests(&out), vec![0, 1, 2, 3, 4], "one request per item");
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    let back = download(&mut ep);
+    assert_eq!(back.len(), items.len());
+    for (seq, (payload, it)) in back.iter().zip(&items).enumerate() {
+        let sent = item_payload(seq as u16, it, (GCS_SYSID, GCS_COMPID), true);
+        // Everything but the target (ours on upload, the GCS's on download) is the same bytes.
+        assert_eq!(&payload[..32], &sent[..32], "item {seq}");
+        assert_eq!(&payload[34..37], &sent[34..37], "item {seq}");
+        assert_eq!((payload[32], payload[33]), (GCS_SYSID, GCS_COMPID));
+    }
+    // The legacy MISSION_REQUEST gets MISSION_ITEM (degrees as floats).
+    #[allow(deprecated)]
+    let req = apm::MavMessage::MISSION_REQUEST(apm::MISSION_REQUEST_DATA {
+        seq: 2,
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+    });
+    let f = parse_frame(&ep.handle(GCS, &v2(&req))[0].frame).unwrap();
+    assert_eq!(f.msgid, MISSION_ITEM_ID);
+    let r = raw_item(&f).unwrap();
+    assert!((r.item.x - items[2].x).abs() < 40);
+    // Past the end: INVALID_SEQUENCE.
+    let req = apm::MavMessage::MISSION_REQUEST_INT(apm::MISSION_REQUEST_INT_DATA {
+        seq: 5,
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+    });
+    assert_eq!(
+        mission_acks(&ep.handle(GCS, &v2(&req))),
+        vec![apm::MavMissionResult::MAV_MISSION_INVALID_SEQUENCE]
+    );
+}
+
+#[test]
+fn a_refused_item_leaves_the_stored_mission_unchanged() {
+    let mut ep = endpoint();
+    upload(&mut ep, &flight_plan());
+    let before = ep.mission().clone();
+    // DO_SET_SERVO (183) in the middle.
+    let mut bad = flight_plan();
+    bad[2].command = 183;
+    let out = upload(&mut ep, &bad);
+    assert_eq!(
+        requests(&out),
+        vec![0, 1, 2],
+        "the upload stops at the bad item"
+    );
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_UNSUPPORTED]
+    );
+    let t = texts(&out);
+    assert_eq!(
+        t.last().unwrap().text.to_str().unwrap(),
+        "Mission item 2: DO_SET_SERVO is not supported"
+    );
+    assert_eq!(ep.mission(), &before);
+    // A command id the dialect does not know is refused the same way (read raw).
+    bad[2].command = 65000;
+    let out = upload(&mut ep, &bad);
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_UNSUPPORTED]
+    );
+    assert_eq!(ep.mission(), &before);
+    // Outside the envelope: a 64-character reason, in two chunks of one text.
+    let mut far = flight_plan();
+    far[2] = item(mcmd::NAV_WAYPOINT, 111.0, 0.0, 2.0);
+    let out = upload(&mut ep, &far);
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_INVALID_PARAM5_X]
+    );
+    let t = texts(&out);
+    let chunks: Vec<_> = t.iter().filter(|s| s.id != 0).collect();
+    assert_eq!(chunks.len(), 2, "{t:?}");
+    assert_eq!((chunks[0].chunk_seq, chunks[1].chunk_seq), (0, 1));
+    assert_eq!(chunks[0].id, chunks[1].id);
+    let whole = format!(
+        "{}{}",
+        chunks[0].text.to_str().unwrap(),
+        chunks[1].text.to_str().unwrap()
+    );
+    assert_eq!(
+        whole,
+        "Mission item 2 is 111.0 m from home, beyond NAV_RADIUS_MAX 100 m"
+    );
+    assert_eq!(ep.mission(), &before);
+}
+
+#[test]
+fn upload_edge_cases() {
+    let mut ep = endpoint();
+    let items = flight_plan();
+    // An item ahead of the one asked for is answered by asking again.
+    ep.handle(GCS, &v2(&count_msg(5)));
+    let out = ep.handle(GCS, &item_frame(2, &items[2]));
+    assert_eq!(requests(&out), vec![0]);
+    // Another GCS meanwhile is refused.
+    let out = ep.handle(OTHER, &from(191, &count_msg(2)));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_DENIED]
+    );
+    // Silence: the request is repeated, then the upload is cancelled.
+    let out = run_until(&mut ep, 2_100_000);
+    assert!(requests(&out).iter().all(|&s| s == 0) && !requests(&out).is_empty());
+    let out = run_until(&mut ep, 9_000_000);
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_OPERATION_CANCELLED]
+    );
+    assert!(ep.mission().is_empty());
+    // Too many items; a count of 0 clears.
+    let out = ep.handle(GCS, &v2(&count_msg(5000)));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_NO_SPACE]
+    );
+    upload(&mut ep, &items);
+    assert_eq!(ep.mission().count(), 5);
+    let out = ep.handle(GCS, &v2(&count_msg(0)));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    assert!(ep.mission().is_empty());
+    // Fences and rally points: none, and none accepted.
+    let fence = apm::MavMessage::MISSION_REQUEST_LIST(apm::MISSION_REQUEST_LIST_DATA {
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_FENCE,
+    });
+    let c = decode(&ep.handle(GCS, &v2(&fence)));
+    assert!(matches!(&c[..], [apm::MavMessage::MISSION_COUNT(c)] if c.count == 0));
+    let rally = apm::MavMessage::MISSION_COUNT(apm::MISSION_COUNT_DATA {
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_RALLY,
+        ..match count_msg(1) {
+            apm::MavMessage::MISSION_COUNT(c) => c,
+            _ => unreachable!(),
+        }
+    });
+    assert_eq!(
+        mission_acks(&ep.handle(GCS, &v2(&rally))),
+        vec![apm::MavMissionResult::MAV_MISSION_UNSUPPORTED]
+    );
+}
+
+#[test]
+fn mission_is_saved_beside_the_param_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let parm = dir.path().join("twin.parm");
+    let mut ep = endpoint_with(Some(parm.clone()));
+    upload(&mut ep, &flight_plan());
+    let saved = crate::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
+    assert_eq!(&saved, ep.mission());
+    let clear = apm::MavMessage::MISSION_CLEAR_ALL(apm::MISSION_CLEAR_ALL_DATA {
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+    });
+    assert_eq!(
+        mission_acks(&ep.handle(GCS, &v2(&clear))),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    let saved = crate::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
+    assert!(saved.is_empty());
+}
+
+#[test]
+fn legacy_set_mode_rtl_and_arming_refusals() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 100_000);
+    // Arming in QLAND is refused with the reason.
+    set_mode(&mut ep, FlightMode::QLand);
+    let out = ep.handle(GCS, &command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
+    assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+    assert_eq!(
+        texts(&out)[0].text.to_str().unwrap(),
+        "Arm: mode QLAND cannot take off"
+    );
+    // RTL (11) is flown as QRTL; an unknown mode is refused.
+    #[allow(deprecated)]
+    let legacy = |custom_mode| {
+        apm::MavMessage::SET_MODE(apm::SET_MODE_DATA {
+            custom_mode,
+            target_system: 1,
+            base_mode: apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        })
+    };
+    assert_eq!(acks(&ep.handle(GCS, &v2(&legacy(11)))), vec![(11, 0)]);
+    assert_eq!(ep.vehicle().telemetry().mode, FlightMode::QRtl);
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&legacy(0)))),
+        vec![(11, commands::result::FAILED)]
+    );
+    let out = ep.handle(GCS, &command(20, [0.0; 7]));
+    assert_eq!(acks(&out), vec![(20, 0)]);
+}
+
+#[test]
+fn telemetry_on_the_globe_and_a_healthy_fence() {
+    let mut ep = endpoint();
+    let out = run_until(&mut ep, 1_200_000);
+    let msgs = decode(&out);
+    let sys = msgs
+        .iter()
+        .rev()
+        .find_map(|m| match m {
+            apm::MavMessage::SYS_STATUS(s) => Some(s.clone()),
+            _ => None,
+        })
+        .unwrap();
+    use apm::MavSysStatusSensor as S;
+    assert!(
+        sys.onboard_control_sensors_health
+            .contains(S::MAV_SYS_STATUS_GEOFENCE),
+        "MAVProxy reports a fence breach when this bit is clear"
+    );
+    assert!(
+        sys.onboard_control_sensors_present
+            .contains(S::MAV_SYS_STATUS_SENSOR_GPS | S::MAV_SYS_STATUS_SENSOR_BATTERY)
+    );
+    assert!((12_000..=12_600).contains(&sys.voltage_battery), "{sys:?}");
+    assert_eq!(sys.battery_remaining, 100);
+    let gpi = msgs
+        .iter()
+        .find_map(|m| match m {
+            apm::MavMessage::GLOBAL_POSITION_INT(g) => Some(g.clone()),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(
+        (gpi.lat, gpi.lon, gpi.alt),
+        (-353_632_610, 1_491_652_300, 584_000)
+    );
+    for id in [24u32, 74, 147, 42] {
+        assert!(
+            out.iter()
+                .any(|o| parse_frame(&o.frame).is_ok_and(|f| f.msgid == id)),
+            "message {id} streamed"
+        );
+    }
+    // HOME_POSITION on request.
+    let out = ep.handle(GCS, &command(410, [0.0; 7]));
+    assert_eq!(acks(&out), vec![(410, 0)]);
+    assert!(
+        decode(&out)
+            .iter()
+            .any(|m| matches!(m, apm::MavMessage::HOME_POSITION(h) if h.altitude == 584_000))
+    );
+}
+
+/// Arm in GUIDED, take off, reposition (a refused one too), fly the mission in AUTO, land.
+#[test]
+fn guided_take_off_reposition_and_auto_mission() {
+    let mut ep = endpoint();
+    upload(&mut ep, &flight_plan());
+    run_until(&mut ep, 200_000);
+    assert_eq!(acks(&set_mode(&mut ep, FlightMode::Guided)), vec![(176, 0)]);
+    // Take-off before arming: FAILED, with the reason.
+    let out = ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]));
+    assert_eq!(acks(&out), vec![(22, commands::result::FAILED)]);
+    assert_eq!(
+        texts(&out)[0].text.to_str().unwrap(),
+        "Takeoff: must be armed"
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+        vec![(400, 0)]
+    );
+    // 60 m is above NAV_ALT_MAX: DENIED.
+    let out = ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 60.0]));
+    assert_eq!(acks(&out), vec![(22, commands::result::DENIED)]);
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]))),
+        vec![(22, 0)]
+    );
+    run_until(&mut ep, 6_000_000);
+    let z = ep.vehicle().telemetry().pos_m.z;
+    assert!((z - 2.0).abs() < 0.15, "hovering at 2 m: {z}");
+    // Reposition 3 m north (COMMAND_INT, relative altitude).
+    let o = ep.params().origin();
+    let p = o.to_global(&nalgebra::Vector3::new(3.0, 0.0, 0.0));
+    let out = ep.handle(
+        GCS,
+        &command_int(
+            192,
+            frame::GLOBAL_RELATIVE_ALT_INT,
+            [-1.0, 1.0, 0.0, 0.0],
+            p.lat_e7,
+            p.lon_e7,
+            2.0,
+        ),
+    );
+    assert_eq!(acks(&out), vec![(192, 0)]);
+    // 150 m away: DENIED, reason over 60 characters in chunks.
+    let far = o.to_global(&nalgebra::Vector3::new(150.0, 0.0, 0.0));
+    let out = ep.handle(
+        GCS,
+        &command_int(
+            192,
+            frame::GLOBAL_RELATIVE_ALT_INT,
+            [-1.0, 0.0, 0.0, 0.0],
+            far.lat_e7,
+            far.lon_e7,
+            2.0,
+        ),
+    );
+    assert_eq!(acks(&out), vec![(192, commands::result::DENIED)]);
+    let t = texts(&out);
+    let whole: String = t
+        .iter()
+        .map(|s| s.text.to_str().unwrap().to_owned())
+        .collect();
+    assert_eq!(
+        whole,
+        "Reposition refused: 150.0 m from home, beyond NAV_RADIUS_MAX 100 m"
+    );
+    assert!(t.len() == 2 && t[0].id != 0 && t[0].id == t[1].id);
+    run_until(&mut ep, 14_000_000);
+    let pos = ep.vehicle().telemetry().pos_m;
+    // Paper frame: x is south.
+    assert!((pos.x + 3.0).abs() < 0.3 && pos.y.abs() < 0.3, "{pos}");
+    // AUTO: every item reached, landing at the last one.
+    let mut out = set_mode(&mut ep, FlightMode::Auto);
+    assert_eq!(acks(&out), vec![(176, 0)]);
+    // Already at the take-off altitude: item 1 is reached at once.
+    out.extend(run_until(&mut ep, 60_000_000));
+    assert_eq!(reached(&out), vec![1, 2, 3, 4]);
+    let t = ep.vehicle().telemetry();
+    assert!(!t.armed && t.landed, "landed and disarmed");
+    assert!(
+        (t.pos_m.y - 2.0).abs() < 0.15 && t.pos_m.x.abs() < 0.15,
+        "{}",
+        t.pos_m
+    );
+}
