@@ -96,6 +96,17 @@ def test_keyed_twin_takes_only_rightly_signed_fresh_frames(twin_factory):
     logs = twin.stderr() + "\n".join(twin.stdout_lines)
     assert KEY.hex() not in logs and PASSPHRASE not in logs
 
+    # Restarted on the same files, the twin signs on from the saved timestamp, even one ahead
+    # of the wall clock (here moved 10 minutes on).
+    ahead = saved + 10 * 60 * 100_000
+    state_file = twin.param_file.with_suffix(".signing")
+    state_file.write_text(state.replace(f"timestamp = {saved}", f"timestamp = {ahead}"))
+    again = twin_factory(speed=4, param_file=twin.param_file, extra=["--signing-passphrase", PASSPHRASE])
+    with Gcs(again.tcp) as g:
+        g.m.setup_signing(KEY, sign_outgoing=True)
+        assert g.wait_vehicle_heartbeat().get_signed()
+        assert g.mav.signing.stream_timestamps[(0, VEHICLE_SYSID, VEHICLE_COMPID)] > ahead
+
 
 def test_key_file_signs_and_a_bad_one_is_one_clear_error(twin_factory, tmp_path):
     key_file = tmp_path / "twin.key"
