@@ -15,7 +15,7 @@ use firmware_sim::simulate::{self, InitialArg, Push, SimulateConfig};
 use firmware_sim::{FlightMode, ModelMode};
 use nalgebra::Vector3;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{LinkOptions, LinkUrl};
+use vtol_link::{LinkOptions, LinkUrl, SigningKey};
 
 /// The simulated twin of the two-rotor convertible VTOL (Escareño, Salazar & Lozano, CDC 2006).
 #[derive(Debug, Parser)]
@@ -224,6 +224,14 @@ struct ServeArgs {
     /// Delay of every frame in each direction, milliseconds.
     #[arg(long, default_value_t = 0, value_name = "MS")]
     latency: u64,
+    /// MAVLink 2 signing with the key SHA-256(TEXT), as MAVProxy's `signing setup TEXT`: the
+    /// twin signs what it sends and ignores unsigned (except RADIO_STATUS), wrongly signed and
+    /// replayed frames. Key and timestamp are kept beside --param-file (NAME.signing).
+    #[arg(long, value_name = "TEXT", conflicts_with = "signing_key_file")]
+    signing_passphrase: Option<String>,
+    /// MAVLink 2 signing with the key in FILE (64 hex characters); as --signing-passphrase.
+    #[arg(long, value_name = "FILE")]
+    signing_key_file: Option<std::path::PathBuf>,
 }
 
 /// `--initial` of `serve`: a start on the ground, so x, y and psi only.
@@ -294,6 +302,11 @@ impl ServeArgs {
             },
             control: self.control.clone(),
             tlog: self.tlog.clone(),
+            signing: match (&self.signing_passphrase, &self.signing_key_file) {
+                (Some(text), _) => Some(SigningKey::from_passphrase(text)),
+                (None, Some(file)) => Some(SigningKey::from_key_file(file)?),
+                (None, None) => None,
+            },
         };
         config.load_param_file()?;
         Ok(config)

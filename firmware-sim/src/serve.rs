@@ -61,13 +61,14 @@
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
+use vtol_link::signing::{Signing, SigningFileError, SigningKey, SigningState};
 use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkUrl};
 
 use crate::clock::{BATCH, ClockMode, SimClock};
@@ -108,6 +109,10 @@ pub struct ServeConfig {
     pub control: Option<LinkUrl>,
     /// The twin's own tlog, if any (created; never overwritten).
     pub tlog: Option<PathBuf>,
+    /// MAVLink 2 signing key: with one, the twin signs everything it sends and drops unsigned
+    /// frames (except RADIO_STATUS), wrongly signed ones and replays. Its key and timestamp
+    /// are kept in [`signing_file_beside`] the parameter file, if there is one.
+    pub signing: Option<SigningKey>,
 }
 
 /// A lossy, slow radio between the twin and its links, in each direction.
@@ -145,6 +150,7 @@ impl Default for ServeConfig {
             impairment: Impairment::default(),
             control: None,
             tlog: None,
+            signing: None,
         }
     }
 }
@@ -205,9 +211,73 @@ pub enum ServeError {
     /// The tlog could not be created.
     #[error(transparent)]
     Tlog(#[from] TlogError),
+    /// The signing state file beside the parameter file is unusable.
+    #[error(transparent)]
+    Signing(#[from] SigningFileError),
     /// `--lockstep` with a simulated radio delay, which would make runs differ.
     #[error("--latency cannot be used with --lockstep: the delay runs on the wall clock")]
     LockstepLatency,
+}
+
+/// Where a keyed twin keeps its signing key and last timestamp: beside the parameter file,
+/// with the extension `signing` (`params.parm` → `params.signing`).
+#[must_use]
+pub fn signing_file_beside(param_file: &Path) -> PathBuf {
+    let p = param_file.with_extension("signing");
+    if p == param_file {
+        let mut s = param_file.as_os_str().to_owned();
+        s.push(".state.signing");
+        PathBuf::from(s)
+    } else {
+        p
+    }
+}
+
+/// How often a keyed twin saves its signing timestamp (the spec asks for at least once a
+/// minute), besides at start and at shutdown.
+const SIGNING_SAVE_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// A keyed twin's signing: the shared implementation, where it is saved, what it refused.
+struct TwinSigning {
+    signing: Signing,
+    file: Option<PathBuf>,
+    saved_at: Instant,
+    refused: u64,
+}
+
+impl TwinSigning {
+    /// Signing with `key`, continuing from the timestamp saved in `file` (if it exists), and
+    /// saved there at once so an unwritable place is an error at start.
+    fn start(key: SigningKey, file: Option<PathBuf>) -> Result<Self, SigningFileError> {
+        let saved = match &file {
+            Some(f) => SigningState::load_if_exists(f)?.map_or(0, |s| s.timestamp),
+            None => 0,
+        };
+        let mut s = Self {
+            signing: Signing::new(key, 0, saved),
+            file,
+            saved_at: Instant::now(),
+            refused: 0,
+        };
+        s.save()?;
+        Ok(s)
+    }
+
+    fn save(&mut self) -> Result<(), SigningFileError> {
+        self.saved_at = Instant::now();
+        match &self.file {
+            Some(f) => self.signing.state(std::time::SystemTime::now()).save(f),
+            None => Ok(()),
+        }
+    }
+
+    fn save_if_due(&mut self) {
+        if self.saved_at.elapsed() >= SIGNING_SAVE_EVERY
+            && let Err(e) = self.save()
+        {
+            tracing::warn!("{e}");
+        }
+    }
 }
 
 /// One opened endpoint and where it ended up.
@@ -278,6 +348,17 @@ impl Twin {
             Some(other) => return Err(ServeError::ControlUrl(other.to_string())),
         };
         let tlog = config.tlog.as_deref().map(TlogSink::create).transpose()?;
+        let signing = match config.signing.take() {
+            Some(key) => Some(TwinSigning::start(
+                key,
+                config
+                    .endpoint
+                    .param_file
+                    .as_deref()
+                    .map(signing_file_beside),
+            )?),
+            None => None,
+        };
         let (calls_tx, calls) = mpsc::channel(HARNESS_QUEUE);
         let harness = Harness::new(calls_tx);
         let (control, control_task) = match control_addr {
@@ -321,6 +402,7 @@ impl Twin {
             links: HashMap::new(),
             radio: Radio::new(config.impairment),
             tlog,
+            signing,
             reserve: config.link_options.queue_len / 4,
             cancel: cancel.clone(),
         };
@@ -449,6 +531,8 @@ struct Shell {
     links: HashMap<LinkId, LinkEntry>,
     radio: Radio,
     tlog: Option<TlogSink>,
+    /// With a key: verifies what comes in, signs what goes out.
+    signing: Option<TwinSigning>,
     /// Free queue places kept for replies: below this, telemetry is shed.
     reserve: usize,
     /// Stops the loop, also while it waits for a lockstep reader.
@@ -491,6 +575,9 @@ impl Shell {
                         entry.flush_backlog();
                     }
                     self.note_bad_frames();
+                    if let Some(s) = &mut self.signing {
+                        s.save_if_due();
+                    }
                     self.tick().await;
                     if let Some(t) = &mut self.tlog {
                         t.hand_over();
@@ -509,6 +596,12 @@ impl Shell {
         }
         if let Some(t) = self.tlog.take() {
             let _ = tokio::task::spawn_blocking(move || t.finish()).await;
+        }
+        if let Some(s) = &mut self.signing {
+            tracing::info!(refused = s.refused, "signing: frames refused");
+            if let Err(e) = s.save() {
+                tracing::warn!("{e}");
+            }
         }
         self.endpoint
     }
@@ -549,6 +642,15 @@ impl Shell {
     }
 
     async fn on_frame(&mut self, id: LinkId, frame: &Frame) {
+        // A keyed twin takes only rightly signed, fresh frames (and unsigned RADIO_STATUS):
+        // anything else changes nothing and gets no answer.
+        if let Some(s) = &mut self.signing
+            && let Err(refusal) = s.signing.verify(frame, std::time::SystemTime::now())
+        {
+            s.refused += 1;
+            tracing::debug!(%id, %refusal, "frame refused");
+            return;
+        }
         if self.tlog.is_some() {
             let stamp = self.stamp_us();
             if let Some(t) = &mut self.tlog {
@@ -641,16 +743,28 @@ impl Shell {
         let stamp = self.stamp_us();
         for o in out {
             let id = LinkId(o.link.0 as u32);
-            if let Some(t) = &mut self.tlog {
-                t.record(stamp, true, &o.frame);
-            }
-            match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
-                Ok(f) => {
-                    if let Some(f) = self.radio.pass(Way::Out, id, f, o.telemetry) {
-                        self.deliver(id, f, o.telemetry).await;
-                    }
+            let f = match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
+                Ok(f) => f,
+                Err(e) => {
+                    tracing::error!("endpoint produced a bad frame: {e}");
+                    continue;
                 }
-                Err(e) => tracing::error!("endpoint produced a bad frame: {e}"),
+            };
+            let f = match &mut self.signing {
+                None => f,
+                Some(s) => match s.signing.sign(&f, std::time::SystemTime::now()) {
+                    Ok(signed) => signed,
+                    Err(e) => {
+                        tracing::error!("cannot sign an outgoing frame: {e}");
+                        continue;
+                    }
+                },
+            };
+            if let Some(t) = &mut self.tlog {
+                t.record(stamp, true, f.as_bytes());
+            }
+            if let Some(f) = self.radio.pass(Way::Out, id, f, o.telemetry) {
+                self.deliver(id, f, o.telemetry).await;
             }
         }
     }

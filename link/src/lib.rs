@@ -3,6 +3,8 @@
 //! - [`frame`]: [`Frame`], one raw MAVLink v1/v2 frame (cheap to clone, forwarded unchanged),
 //!   with header accessors, routing targets, typed decoding and hand-built COMMAND_ACKs.
 //! - [`decoder`]: [`FrameDecoder`], a streaming parser with CRC checks, resync and counters.
+//! - [`signing`]: MAVLink 2 signing: [`SigningKey`], signing and verifying frames with the
+//!   spec's replay rules, the timestamp source and the persisted key and timestamp.
 //! - [`url`]: [`LinkUrl`], pymavlink-style link addresses.
 //! - [`transport`]: tokio endpoints (udpin, udpout, tcpin, tcp, serial, in-memory streams)
 //!   reporting [`LinkEvent`]s, each link with a bounded egress queue.
@@ -12,6 +14,7 @@
 
 pub mod decoder;
 pub mod frame;
+pub mod signing;
 pub mod transport;
 pub mod url;
 
@@ -24,6 +27,10 @@ pub use decoder::{DecodeStats, FrameDecoder};
 pub use frame::{
     Frame, FrameError, RawCommand, RawCommandAck, RawCommandKind, frame_len_from_prefix,
     gcs_heartbeat,
+};
+pub use signing::{
+    Accepted, Refusal, SignError, Signing, SigningFileError, SigningKey, SigningState,
+    TimestampSource,
 };
 pub use transport::{
     EgressFilter, EndpointHandle, Events, LinkError, LinkEvent, LinkEventHandler, LinkId,
