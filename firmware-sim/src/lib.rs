@@ -4,6 +4,7 @@
 //! it.
 
 pub mod airframe;
+pub mod atomic_file;
 pub mod clock;
 pub mod control;
 pub mod endpoint;

@@ -22,7 +22,6 @@
 //! that cannot be read is an error at start, never silently replaced.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use mavlink::dialects::ardupilotmega::MavMissionResult;
@@ -585,17 +584,12 @@ impl Mission {
     /// # Errors
     /// [`MissionFileError::Io`].
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
-        let io = |source| MissionFileError::Io {
-            path: path.to_owned(),
-            source,
-        };
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        let tmp = path.with_file_name(format!(".{}.tmp", name.unwrap_or_default()));
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
-        f.write_all(self.to_wpl_string().as_bytes()).map_err(io)?;
-        f.sync_all().map_err(io)?;
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(io)
+        crate::atomic_file::write(path, self.to_wpl_string().as_bytes()).map_err(|source| {
+            MissionFileError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        })
     }
 }
 

@@ -27,7 +27,6 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::control::{GainError, Gains, SaturationLevels};
@@ -576,17 +575,12 @@ impl Params {
     /// # Errors
     /// [`ParamFileError::Io`].
     pub fn save(&self, path: &Path) -> Result<(), ParamFileError> {
-        let io = |source| ParamFileError::Io {
-            path: path.to_owned(),
-            source,
-        };
-        let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        let tmp = path.with_file_name(format!(".{}.tmp", file_name.unwrap_or_default()));
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
-        f.write_all(self.to_parm_string().as_bytes()).map_err(io)?;
-        f.sync_all().map_err(io)?;
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(io)
+        crate::atomic_file::write(path, self.to_parm_string().as_bytes()).map_err(|source| {
+            ParamFileError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        })
     }
 }
 
