@@ -41,6 +41,11 @@ pub struct LinkRow {
     pub own: bool,
     /// Counters.
     pub stats: vtol_link::LinkStatsSnapshot,
+    /// A client endpoint's policy when it is not the default, and what it did.
+    pub policy: Option<(
+        crate::router::policy::EndpointPolicy,
+        crate::router::policy::PolicyCountersSnapshot,
+    )>,
 }
 
 /// Router-wide counters.
@@ -870,16 +875,21 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             } else {
                 Style::new()
             };
+            // A policy shows beside the peer; rate-limit drops count with queue-full drops.
+            let (peer, rate_dropped) = match &l.policy {
+                Some((p, c)) => (format!("{} [{}]", l.peer, p.trust), c.dropped_rate),
+                None => (l.peer.clone(), 0),
+            };
             Row::new(vec![
                 l.id.to_string(),
                 side.to_owned(),
-                l.peer.clone(),
+                peer,
                 rate,
                 loss,
                 if lost { format!("LOST {heard}") } else { heard },
                 l.stats.rx_frames.to_string(),
                 l.stats.tx_frames.to_string(),
-                l.stats.tx_dropped_queue_full.to_string(),
+                (l.stats.tx_dropped_queue_full + rate_dropped).to_string(),
                 l.stats.bad_crc.to_string(),
             ])
             .style(style)
