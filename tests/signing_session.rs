@@ -190,7 +190,12 @@ async fn a_signed_session_survives_idle_and_outage() {
     let saved = vehicle.state(now()).timestamp;
     let mut vehicle = Signing::new(key, 0, saved);
     let mut link = open_vehicle_link(&router, &cancel).await;
-    exchange(&mut link, &mut vehicle, "after an outage and a vehicle restart").await;
+    exchange(
+        &mut link,
+        &mut vehicle,
+        "after an outage and a vehicle restart",
+    )
+    .await;
 
     let c = counters.snapshot();
     assert_eq!(c.refused(), 0, "the daemon refused vehicle frames: {c:?}");
