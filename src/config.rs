@@ -131,11 +131,22 @@ pub struct FileConfig {
     /// Wait for a serial vehicle device that does not exist yet instead of failing at start.
     pub wait_for_device: Option<bool>,
     /// MAVLink 2 signing key as SHA-256 of this passphrase.
-    pub signing_passphrase: Option<String>,
+    pub signing_passphrase: Option<Passphrase>,
     /// MAVLink 2 signing key file (64 hex characters).
     pub signing_key_file: Option<String>,
     /// Where the daemon keeps its signing timestamp.
     pub signing_state: Option<String>,
+}
+
+/// A signing passphrase from the file: its `Debug` shows no text.
+#[derive(Clone, Deserialize)]
+#[serde(transparent)]
+pub struct Passphrase(pub String);
+
+impl std::fmt::Debug for Passphrase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Passphrase(<secret>)")
+    }
 }
 
 /// A configuration problem.
@@ -259,7 +270,7 @@ impl FileConfig {
                     message: "give signing_passphrase or signing_key_file, not both".into(),
                 });
             }
-            (Some(text), None) => config.signing = Some(SigningKey::from_passphrase(&text)),
+            (Some(text), None) => config.signing = Some(SigningKey::from_passphrase(&text.0)),
             (None, Some(file)) => {
                 let key = SigningKey::from_key_file(Path::new(&file)).map_err(|e| {
                     ConfigError::Value {
@@ -321,5 +332,58 @@ mod tests {
             .apply(&mut c)
             .unwrap_err();
         assert!(e.to_string().contains("udp_peer_timeout_s"), "{e}");
+        let e = FileConfig::parse("serve = [\"tcpin:127.0.0.1:0?trust=root\"]")
+            .unwrap()
+            .apply(&mut c)
+            .unwrap_err();
+        assert!(e.to_string().contains("unknown trust 'root'"), "{e}");
+    }
+
+    #[test]
+    fn signing_and_policies_from_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let key_file = dir.path().join("k");
+        let hex = "ab".repeat(32);
+        std::fs::write(&key_file, &hex).unwrap();
+        let text = format!(
+            "serve = [\"tcpin:127.0.0.1:0?trust=read-only&rate=20\"]\n\
+             signing_key_file = \"{}\"\nsigning_state = \"/tmp/s.toml\"\n",
+            key_file.display()
+        );
+        let mut c = Config::default();
+        let file = FileConfig::parse(&text).unwrap();
+        file.apply(&mut c).unwrap();
+        assert_eq!(
+            c.serve[0].policy.trust,
+            crate::router::policy::Trust::ReadOnly
+        );
+        assert_eq!(
+            c.signing.as_ref().map(SigningKey::to_hex),
+            Some(hex.clone())
+        );
+        assert_eq!(c.signing_state, Some(PathBuf::from("/tmp/s.toml")));
+        assert!(!format!("{c:?}").contains(&hex));
+
+        let both = format!(
+            "signing_passphrase = \"p\"\nsigning_key_file = \"{}\"\n",
+            key_file.display()
+        );
+        let e = FileConfig::parse(&both)
+            .unwrap()
+            .apply(&mut Config::default())
+            .unwrap_err();
+        assert!(e.to_string().contains("not both"), "{e}");
+        let secret = FileConfig::parse("signing_passphrase = \"hunter2\"").unwrap();
+        assert!(!format!("{secret:?}").contains("hunter2"));
+        std::fs::write(&key_file, "nothex").unwrap();
+        let e = FileConfig::parse(&format!("signing_key_file = \"{}\"", key_file.display()))
+            .unwrap()
+            .apply(&mut Config::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("signing_key_file") && !e.contains("nothex"),
+            "{e}"
+        );
     }
 }
