@@ -11,7 +11,6 @@ daemon's own status line to count the refusal, then sends the barrier.
 from __future__ import annotations
 
 import hashlib
-import re
 import select
 import socket
 import subprocess
@@ -56,14 +55,7 @@ def signing_args(workdir: Path) -> list[str]:
 
 def wait_status(daemon, pattern: str, timeout: float = 10.0) -> str:
     """The first status line (printed every 0.1 s here) matching `pattern`."""
-    rx = re.compile(pattern)
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        for line in list(daemon.stdout_lines):
-            if rx.search(line):
-                return line
-        time.sleep(0.05)  # polls the drained stdout; the deadline bounds the wait
-    raise AssertionError(f"no status line matching {pattern!r} in {timeout} s\n{daemon.tail()}")
+    return daemon.wait_line(pattern, timeout)
 
 
 def fast_status_config(workdir: Path, extra: str = "") -> list[str]:
