@@ -205,3 +205,43 @@ async fn a_signed_session_survives_idle_and_outage() {
     cancel.cancel();
     router.close();
 }
+
+/// `vtol-gcs run --signing-passphrase …` with the embedded twin (also what the terminal UI
+/// runs): the twin is keyed too, the daemon's own client (the UI's commands) is heard, the
+/// twin's frames are verified and none is refused, and the timestamp is saved.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_keyed_daemon_commands_its_keyed_embedded_twin() {
+    let dir = tempfile::tempdir().unwrap();
+    let state_file = dir.path().join("signing.toml");
+    let config = vtol_gcs::config::Config {
+        serve: Vec::new(),
+        log_dir: None,
+        signing: Some(SigningKey::from_passphrase("embedded")),
+        signing_state: Some(state_file.clone()),
+        ..vtol_gcs::config::Config::default()
+    };
+    let cancel = CancellationToken::new();
+    let mut tasks = tokio::task::JoinSet::new();
+    let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks)
+        .await
+        .expect("daemon starts");
+    assert!(state_file.exists(), "state saved at start");
+    let client = running.client.clone();
+    let limit = Duration::from_secs(20);
+    client.wait_target(limit).await.expect("vehicle heard");
+    tokio::time::timeout(limit, client.param_set("HOVER_ALT", 1.25))
+        .await
+        .expect("in time")
+        .expect("the keyed twin took the daemon's signed PARAM_SET");
+    tokio::time::timeout(limit, client.set_mode("QHOVER"))
+        .await
+        .expect("in time")
+        .expect("the keyed twin took the daemon's signed mode change");
+    let c = running.router.signing.as_ref().unwrap().snapshot();
+    assert!(c.verified > 0 && c.signed > 0, "{c:?}");
+    assert_eq!(c.refused(), 0, "{c:?}");
+    cancel.cancel();
+    while tasks.join_next().await.is_some() {}
+    let saved = vtol_link::SigningState::load(&state_file).unwrap();
+    assert!(saved.timestamp > 0);
+}

@@ -66,6 +66,11 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
         withheld_signing: s.withheld_signing.load(Ordering::Relaxed),
         dropped_link_closed: s.dropped_link_closed.load(Ordering::Relaxed),
         dropped_tap: s.dropped_tap.load(Ordering::Relaxed),
+        signing_refused: running
+            .router
+            .signing
+            .as_ref()
+            .map_or(0, |c| c.snapshot().refused()),
     };
     let tlog = running.tlog_path.as_ref().map(|p| {
         let st = running.tlog_stats.as_deref();

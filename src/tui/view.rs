@@ -63,6 +63,8 @@ pub struct RouterCounters {
     pub dropped_link_closed: u64,
     /// Tracker behind.
     pub dropped_tap: u64,
+    /// Vehicle frames refused by the signing check (0 without a key).
+    pub signing_refused: u64,
 }
 
 /// The tlog as shown.
@@ -922,8 +924,14 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
         .iter()
         .filter(|l| l.side == Side::Client && !l.own)
         .count();
+    // Refused vehicle frames share the signing line, shown only when there are some.
+    let refused = if r.signing_refused > 0 {
+        format!("  refused {}", r.signing_refused)
+    } else {
+        String::new()
+    };
     let text = format!(
-        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}\nlink closed    {}\ntracker behind {}",
+        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}{refused}\nlink closed    {}\ntracker behind {}",
         r.frames_in,
         r.frames_out,
         r.unroutable,
