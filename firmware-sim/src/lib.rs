@@ -9,6 +9,7 @@ pub mod clock;
 pub mod control;
 pub mod endpoint;
 pub mod estimator;
+pub mod fleet;
 pub mod frames;
 pub mod globe;
 pub mod harness;

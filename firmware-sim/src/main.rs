@@ -9,8 +9,9 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use firmware_sim::clock::ClockMode;
 use firmware_sim::endpoint::EndpointConfig;
+use firmware_sim::fleet::{Fleet, FleetError};
 use firmware_sim::params::Params;
-use firmware_sim::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError, Twin};
+use firmware_sim::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError};
 use firmware_sim::simulate::{self, InitialArg, Push, SimulateConfig};
 use firmware_sim::{FlightMode, ModelMode};
 use nalgebra::Vector3;
@@ -215,9 +216,13 @@ struct ServeArgs {
     /// Perfect sensing: no noise, bias or quantisation, and the controller reads the true state.
     #[arg(long)]
     ideal_sensors: bool,
-    /// MAVLink system id (overrides SYSID_THISMAV), 1–255.
+    /// MAVLink system id (overrides SYSID_THISMAV), 1–255; with --count, the first twin's.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..))]
     sysid: Option<u8>,
+    /// Run N twins (system ids --sysid (default 1) to --sysid + N - 1) on the same endpoints;
+    /// each keeps its files as NAME-sysS.EXT beside --param-file and --tlog.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=255))]
+    count: u16,
     /// Fraction of frames dropped in each direction (0 to 1, seeded by --seed).
     #[arg(long, default_value_t = 0.0, value_parser = parse_loss)]
     loss: f64,
@@ -262,10 +267,13 @@ fn parse_speed(s: &str) -> Result<f64, String> {
 impl ServeArgs {
     /// The configuration these flags describe, parameter file loaded.
     ///
+    /// The configuration these flags describe (parameter files are loaded by the fleet, one
+    /// per twin).
+    ///
     /// # Errors
-    /// [`ServeError::Params`] for an unusable parameter file.
+    /// [`ServeError::Signing`] for an unusable key file.
     fn to_config(&self) -> Result<ServeConfig, ServeError> {
-        let mut config = ServeConfig {
+        let config = ServeConfig {
             listen: self.listen.clone(),
             clock: if self.lockstep {
                 ClockMode::Lockstep
@@ -308,7 +316,6 @@ impl ServeArgs {
                 (None, None) => None,
             },
         };
-        config.load_param_file()?;
         Ok(config)
     }
 }
@@ -336,14 +343,14 @@ fn run_serve(args: &ServeArgs) -> anyhow::Result<()> {
         .map_err(ServeError::Runtime)?;
     runtime.block_on(async {
         let cancel = CancellationToken::new();
-        let twin = Twin::start(config, cancel.clone()).await?;
+        let fleet = Fleet::start(config, args.count, cancel.clone()).await?;
         {
             use std::io::Write as _;
             let mut out = std::io::stdout().lock();
-            for b in twin.bound() {
+            for b in fleet.bound() {
                 let _ = writeln!(out, "listening {}", b.resolved_url());
             }
-            if let Some(url) = twin.control_url() {
+            if let Some(url) = fleet.control_url() {
                 let _ = writeln!(out, "control {url}");
             }
             let _ = out.flush();
@@ -351,8 +358,8 @@ fn run_serve(args: &ServeArgs) -> anyhow::Result<()> {
         shutdown_signal().await;
         tracing::info!("shutting down");
         cancel.cancel();
-        twin.join().await;
-        Ok::<(), ServeError>(())
+        fleet.join().await;
+        Ok::<(), FleetError>(())
     })?;
     Ok(())
 }

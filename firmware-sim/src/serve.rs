@@ -7,7 +7,7 @@
 //! firmware-sim serve [--listen URL]... [--speed N | --fast | --lockstep] [--control URL]
 //!                    [--tlog FILE] [--param-file FILE] [--seed N] [--model paper|physical]
 //!                    [--ideal-sensors] [--sysid N] [--initial x=..,y=..,psi=..]
-//!                    [--boot-calibration] [--loss FRACTION] [--latency MS]
+//!                    [--boot-calibration] [--loss FRACTION] [--latency MS] [--count N]
 //! ```
 //!
 //! - `--listen URL`, repeatable, default `tcpin:127.0.0.1:5760` (SITL's SERIAL0): `tcpin:` accepts
@@ -30,6 +30,7 @@
 //!   lossy radio is then tested with real frames, retries and all.
 //! - `--param-file FILE`: the parameters, and the mission beside them (`FILE` with the
 //!   `.waypoints` extension, QGC WPL 110), loaded at start and saved on every change.
+//! - `--count N`: N twins on the same endpoints ([`crate::fleet`]).
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
@@ -433,6 +434,11 @@ impl Twin {
     pub fn control_url(&self) -> Option<String> {
         self.control
             .map(|a| format!("tcpin:{}:{}", bracket(&a.ip().to_string()), a.port()))
+    }
+
+    /// The twin's event queue, for a fleet's shared endpoints ([`crate::fleet`]).
+    pub(crate) fn events(&self) -> mpsc::Sender<LinkEvent> {
+        self.events.clone()
     }
 
     /// The opened endpoints, in `listen` order.

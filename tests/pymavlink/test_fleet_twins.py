@@ -1,0 +1,92 @@
+"""`firmware-sim serve --count 3`: three twins behind one endpoint, each its own vehicle.
+
+A pymavlink script on the shared TCP listener hears three vehicles, arms one of them (only that
+one arms) and writes a parameter of another (only that one's file changes)."""
+
+import time
+
+from conftest import (
+    FLAG_ARMED,
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_RESULT_ACCEPTED,
+    MAV_TYPE_GCS,
+    Timeout,
+    f32,
+)
+
+COUNT = 3
+
+
+def heartbeats_by_sysid(g, want: set[int], pred=lambda h: True, timeout: float = 15.0) -> dict:
+    """The first vehicle HEARTBEAT satisfying pred from each sysid in `want`."""
+    seen: dict = {}
+    deadline = time.monotonic() + timeout
+    while set(seen) != want:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise Timeout(f"heartbeats from {sorted(seen)} only, wanted {sorted(want)}")
+        hb = g.recv("HEARTBEAT", sysid=None, timeout=left, pred=lambda h: h.type != MAV_TYPE_GCS)
+        s = hb.get_srcSystem()
+        if s in want and s not in seen and pred(hb):
+            seen[s] = hb
+    return seen
+
+
+def test_three_twins_one_endpoint(twin_factory, gcs_factory, tmp_path):
+    twin = twin_factory(speed=4, extra=["--count", str(COUNT)])
+    g = gcs_factory(twin.tcp)
+    ids = {1, 2, 3}
+    first = heartbeats_by_sysid(g, ids)
+    assert all(not hb.base_mode & FLAG_ARMED for hb in first.values())
+
+    # Arm vehicle 2 only: its ACK comes from system 2, and only it reports armed afterwards.
+    g.drain()
+    g.mav.command_long_send(2, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    ack = g.recv("COMMAND_ACK", sysid=2, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
+    assert ack.result == MAV_RESULT_ACCEPTED, ack
+    g.drain()
+    after = heartbeats_by_sysid(g, ids)
+    armed = {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED}
+    assert armed == {2}, after
+
+    # A parameter written on vehicle 3 changes vehicle 3 and its own file, nothing else.
+    g.drain()
+    g.mav.param_set_send(3, 1, b"HOVER_ALT", 3.25, 9)
+    echo = g.recv("PARAM_VALUE", sysid=3, pred=lambda p: p.param_id == "HOVER_ALT")
+    assert echo.param_value == f32(3.25)
+    g.mav.param_request_read_send(1, 1, b"HOVER_ALT", -1)
+    other = g.recv("PARAM_VALUE", sysid=1, pred=lambda p: p.param_id == "HOVER_ALT")
+    assert other.param_value != f32(3.25)
+    base = twin.param_file
+    mine = base.with_name(f"{base.stem}-sys3{base.suffix}")
+    assert mine.exists() and "HOVER_ALT" in mine.read_text()
+    assert not base.with_name(f"{base.stem}-sys1{base.suffix}").exists()
+    assert not base.exists()
+
+
+def test_count_with_control_is_refused(tmp_path):
+    import subprocess
+
+    from conftest import TWIN_BIN
+
+    r = subprocess.run(
+        [str(TWIN_BIN), "serve", "--listen", "tcpin:127.0.0.1:0", "--count", "2",
+         "--control", "tcpin:127.0.0.1:0"],
+        capture_output=True, text=True, timeout=20,
+    )
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--count" in lines[0], r.stderr
+
+
+def test_count_past_255_is_refused():
+    import subprocess
+
+    from conftest import TWIN_BIN
+
+    r = subprocess.run(
+        [str(TWIN_BIN), "serve", "--listen", "tcpin:127.0.0.1:0", "--count", "10", "--sysid", "250"],
+        capture_output=True, text=True, timeout=20,
+    )
+    assert r.returncode != 0
+    assert r.stderr.strip().splitlines() == ["error: --count 10 from system id 250 passes 255"], r.stderr
