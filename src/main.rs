@@ -281,6 +281,11 @@ async fn print_status_lines(
                     &state, &links, records, unroutable, vtol_gcs::vehicle::now(),
                 );
                 line.push_str(&vtol_gcs::status::policy_part(&links, signing.as_ref()));
+                line.push_str(&vtol_gcs::status::fleet_part(
+                    &state,
+                    &running.router.conflicts.borrow(),
+                    vtol_gcs::vehicle::now(),
+                ));
                 println!("{line}");
             }
         }

@@ -111,3 +111,41 @@ pub fn policy_part(links: &[LinkInfo], signing: Option<&SigningSnapshot>) -> Str
     }
     s
 }
+
+/// The status line's fleet part: with more than one vehicle, each one's system id, mode, armed
+/// state and health; and every system id two vehicle links claim. Empty for one vehicle and no
+/// conflict.
+#[must_use]
+pub fn fleet_part(
+    state: &VehicleState,
+    conflicts: &[crate::router::SysidConflict],
+    now: Instant,
+) -> String {
+    let mut s = String::new();
+    if state.vehicles.len() > 1 {
+        let _ = write!(s, " | fleet");
+        for v in state.vehicles.values() {
+            if v.is_lost(now) {
+                let _ = write!(s, " [{} LOST]", v.system_id);
+            } else {
+                let _ = write!(
+                    s,
+                    " [{} {} {} {:.0} Hz {:.1}%]",
+                    v.system_id,
+                    v.mode_name(),
+                    if v.armed { "ARMED" } else { "disarmed" },
+                    v.rate_hz(now),
+                    v.loss_pct(now)
+                );
+            }
+        }
+    }
+    for c in conflicts {
+        let _ = write!(
+            s,
+            " | CONFLICT sys {} on {} and {} (kept {})",
+            c.system, c.owner, c.claimant, c.owner
+        );
+    }
+    s
+}

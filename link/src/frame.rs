@@ -483,6 +483,22 @@ impl Frame {
         Some((system, read(info.target_component_offset)))
     }
 
+    /// The sender's (system, component), typed.
+    #[must_use]
+    pub fn sender(&self) -> (crate::SystemId, crate::ComponentId) {
+        (
+            crate::SystemId(self.system_id()),
+            crate::ComponentId(self.component_id()),
+        )
+    }
+
+    /// [`Frame::target`], typed.
+    #[must_use]
+    pub fn target_ids(&self) -> Option<(crate::SystemId, crate::ComponentId)> {
+        self.target()
+            .map(|(s, c)| (crate::SystemId(s), crate::ComponentId(c)))
+    }
+
     /// Decodes the payload into a typed ardupilotmega message. Failure (unknown id, enum value
     /// the dialect rejects) leaves the frame intact for forwarding.
     pub fn decode(&self) -> Result<MavMessage, FrameError> {

@@ -14,6 +14,7 @@
 
 pub mod decoder;
 pub mod frame;
+pub mod ids;
 pub mod signing;
 pub mod transport;
 pub mod url;
@@ -28,6 +29,7 @@ pub use frame::{
     Frame, FrameError, RawCommand, RawCommandAck, RawCommandKind, frame_len_from_prefix,
     gcs_heartbeat,
 };
+pub use ids::{ComponentId, SystemId};
 pub use signing::{
     Accepted, Refusal, SignError, Signing, SigningFileError, SigningKey, SigningState,
     TimestampSource,

@@ -116,6 +116,8 @@ pub struct ClientHandle {
     out: mpsc::Sender<MavMessage>,
     inbound: broadcast::Sender<Arc<Inbound>>,
     target: watch::Receiver<Option<(u8, u8)>>,
+    /// The session's target, for [`ClientHandle::select_vehicle`].
+    select: watch::Sender<Option<(u8, u8)>>,
     links_up: watch::Receiver<usize>,
     rtt: Arc<Mutex<Rtt>>,
     shared: Arc<session::Shared>,
@@ -161,7 +163,7 @@ impl ClientHandle {
             links_up: links_up_tx,
             me,
             inbound: inbound.clone(),
-            target: target_tx,
+            target: target_tx.clone(),
             fixed_target: config.target.is_some(),
             shared: Arc::clone(&shared),
             signing,
@@ -172,6 +174,7 @@ impl ClientHandle {
             out,
             inbound,
             target,
+            select: target_tx,
             links_up,
             rtt: Arc::new(Mutex::new(Rtt::default())),
             shared,
@@ -246,6 +249,17 @@ impl ClientHandle {
     #[must_use]
     pub fn target(&self) -> Option<(u8, u8)> {
         *self.target.borrow()
+    }
+
+    /// Makes `system`/`component` the vehicle every later request goes to (the terminal UI's
+    /// vehicle switch). The parameter cache belonged to the previous vehicle and is emptied.
+    pub fn select_vehicle(&self, system: vtol_link::SystemId, component: vtol_link::ComponentId) {
+        let next = Some((system.0, component.0));
+        if self.select.send_replace(next) != next
+            && let Ok(mut c) = self.cache.lock()
+        {
+            *c = ParamSet::new();
+        }
     }
 
     /// Which frames the client reads: the message types it uses and, until the vehicle is

@@ -38,6 +38,7 @@ use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use vtol_link::{
     Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, LinkStats, SendSummary,
+    SystemId,
 };
 
 use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
@@ -98,6 +99,20 @@ pub struct RouterStats {
     pub dropped_rate: AtomicU64,
     /// Frames from `sign` links that could not be signed (MAVLink 1), not routed.
     pub unsignable: AtomicU64,
+    /// Vehicle frames whose system id another vehicle link owns: not routed, logged or tracked.
+    pub sysid_conflicts: AtomicU64,
+}
+
+/// A system id claimed by two vehicle links: the owner keeps it, the claimant's frames under
+/// that id go nowhere while both are up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct SysidConflict {
+    /// The disputed system id.
+    pub system: SystemId,
+    /// The vehicle link that had it first.
+    pub owner: LinkId,
+    /// The other vehicle link sending as that system.
+    pub claimant: LinkId,
 }
 
 /// A frame as the taps see it.
@@ -120,6 +135,8 @@ pub struct RouterHandle {
     pub links: watch::Receiver<Vec<LinkInfo>>,
     /// Signing counters, when the daemon has a key.
     pub signing: Option<Arc<SigningCounters>>,
+    /// System ids that two vehicle links claim, while both are up.
+    pub conflicts: watch::Receiver<Vec<SysidConflict>>,
 }
 
 struct Egress {
@@ -146,6 +163,7 @@ pub struct Router {
     pending_log: Vec<Record>,
     tap: Option<mpsc::Sender<Tapped>>,
     signing: Option<DaemonSigning>,
+    conflicts_tx: watch::Sender<Vec<SysidConflict>>,
 }
 
 impl std::fmt::Debug for Router {
@@ -167,6 +185,7 @@ impl Router {
     ) -> (Self, RouterHandle) {
         let (links_tx, links) = watch::channel(Vec::new());
         let stats = Arc::new(RouterStats::default());
+        let (conflicts_tx, conflicts) = watch::channel(Vec::new());
         let router = Self {
             table: RoutingTable::new(),
             egress: BTreeMap::new(),
@@ -178,6 +197,7 @@ impl Router {
             pending_log: Vec::with_capacity(BATCH),
             tap,
             signing: None,
+            conflicts_tx,
         };
         (
             router,
@@ -185,6 +205,7 @@ impl Router {
                 stats,
                 links,
                 signing: None,
+                conflicts,
             },
         )
     }
@@ -345,10 +366,34 @@ impl Router {
                 self.send_runs();
                 self.egress.remove(&id);
                 self.table.forget_link(id);
+                self.conflicts_tx.send_if_modified(|c| {
+                    let before = c.len();
+                    c.retain(|x| x.owner != id && x.claimant != id);
+                    c.len() != before
+                });
                 self.publish_links();
             }
             LinkEvent::Frame { id, frame } => self.route(id, side, frame, t_us, now),
         }
+    }
+
+    /// Counts a frame refused for a disputed system id; a new dispute is logged and published.
+    fn note_conflict(&mut self, system: SystemId, owner: LinkId, claimant: LinkId) {
+        self.stats.sysid_conflicts.fetch_add(1, Ordering::Relaxed);
+        let c = SysidConflict {
+            system,
+            owner,
+            claimant,
+        };
+        self.conflicts_tx.send_if_modified(|all| {
+            if all.contains(&c) {
+                return false;
+            }
+            tracing::warn!(%system, %owner, %claimant, "system id claimed by two vehicle links");
+            all.push(c);
+            all.sort();
+            true
+        });
     }
 
     fn publish_links(&mut self) {
@@ -422,12 +467,17 @@ impl Router {
         let Some(frame) = self.admit(ingress, side, frame) else {
             return;
         };
-        self.table
-            .learn(ingress, frame.system_id(), frame.component_id());
+        let (system, component) = frame.sender();
+        if side == Side::Vehicle
+            && let Err(owner) = self.table.claim(ingress, system)
+        {
+            self.note_conflict(system, owner, ingress);
+            return;
+        }
+        self.table.learn(ingress, system, component);
         let addressing = addressing(&frame);
         if let Some(command) = addressing.command {
-            self.table
-                .note_command(ingress, frame.system_id(), frame.component_id(), command);
+            self.table.note_command(ingress, system, component, command);
         }
         if let Some(tap) = &self.tap
             && tap
@@ -560,7 +610,7 @@ impl LinkEventHandler for SideHandler {
 #[must_use]
 pub fn addressing(frame: &Frame) -> Addressing {
     let mut a = Addressing {
-        target: frame.target(),
+        target: frame.target_ids(),
         ..Addressing::default()
     };
     if let Some(cmd) = frame.raw_command() {

@@ -9,6 +9,10 @@
 //! - a targeted frame whose system was never seen goes nowhere (counted as unroutable);
 //! - never back to the ingress link.
 //!
+//! Vehicles are kept apart by system id: the first vehicle-side link a system id is heard on
+//! owns it while that link lives ([`RoutingTable::claim`]); the same id from another vehicle
+//! link is a conflict, and the router never merges it (its frames go nowhere and are counted).
+//!
 //! One refinement for shared ground stations: pymavlink scripts all speak as (255, 0), so a
 //! COMMAND_ACK for (255, 0) would reach every script. The table remembers which link last sent
 //! each command id from each sender and delivers the ACK to that link only, so each script
@@ -16,7 +20,7 @@
 
 use std::collections::HashMap;
 
-use vtol_link::LinkId;
+use vtol_link::{ComponentId, LinkId, SystemId};
 
 /// Where a frame goes, as decided by [`RoutingTable::route`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,7 +37,7 @@ pub enum Route {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Addressing {
     /// `target_system`/`target_component`, if the message has them.
-    pub target: Option<(u8, u8)>,
+    pub target: Option<(SystemId, ComponentId)>,
     /// For COMMAND_ACK: the command it answers.
     pub ack_of_command: Option<u16>,
     /// For COMMAND_LONG/COMMAND_INT: the command it carries.
@@ -44,11 +48,13 @@ pub struct Addressing {
 #[derive(Debug, Default, Clone)]
 pub struct RoutingTable {
     /// (system, component) → links it was seen on (almost always one).
-    components: HashMap<(u8, u8), Vec<LinkId>>,
+    components: HashMap<(SystemId, ComponentId), Vec<LinkId>>,
     /// system → links any of its components was seen on.
-    systems: HashMap<u8, Vec<LinkId>>,
+    systems: HashMap<SystemId, Vec<LinkId>>,
     /// (sender system, sender component, command) → the link that sent it last.
-    pending_commands: HashMap<(u8, u8, u16), LinkId>,
+    pending_commands: HashMap<(SystemId, ComponentId, u16), LinkId>,
+    /// Vehicle system → the vehicle-side link that owns it.
+    claims: HashMap<SystemId, LinkId>,
 }
 
 fn add_unique(v: &mut Vec<LinkId>, link: LinkId) {
@@ -65,7 +71,7 @@ impl RoutingTable {
     }
 
     /// Learns that `(system, component)` sits behind `link`.
-    pub fn learn(&mut self, link: LinkId, system: u8, component: u8) {
+    pub fn learn(&mut self, link: LinkId, system: SystemId, component: ComponentId) {
         let known = self.components.entry((system, component)).or_default();
         if known.contains(&link) {
             return;
@@ -75,7 +81,13 @@ impl RoutingTable {
     }
 
     /// Remembers that `link` sent `command` as (system, component), so the ACK goes back there.
-    pub fn note_command(&mut self, link: LinkId, system: u8, component: u8, command: u16) {
+    pub fn note_command(
+        &mut self,
+        link: LinkId,
+        system: SystemId,
+        component: ComponentId,
+        command: u16,
+    ) {
         self.pending_commands
             .insert((system, component, command), link);
     }
@@ -91,11 +103,35 @@ impl RoutingTable {
             !v.is_empty()
         });
         self.pending_commands.retain(|_, l| *l != link);
+        self.claims.retain(|_, l| *l != link);
+    }
+
+    /// A vehicle-side `link` sends as `system`: `Ok` when the link owns the id (claimed now if
+    /// nobody did), `Err(owner)` when another vehicle link owns it. The claim lasts until the
+    /// owner goes down ([`RoutingTable::forget_link`]).
+    ///
+    /// # Errors
+    /// The owning link, for a conflict.
+    pub fn claim(&mut self, link: LinkId, system: SystemId) -> Result<(), LinkId> {
+        match self.claims.entry(system) {
+            std::collections::hash_map::Entry::Occupied(o) if *o.get() != link => Err(*o.get()),
+            std::collections::hash_map::Entry::Occupied(_) => Ok(()),
+            std::collections::hash_map::Entry::Vacant(v) => {
+                v.insert(link);
+                Ok(())
+            }
+        }
+    }
+
+    /// The vehicle link that owns `system`, if any.
+    #[must_use]
+    pub fn owner_of(&self, system: SystemId) -> Option<LinkId> {
+        self.claims.get(&system).copied()
     }
 
     /// Links where `(system, component)` was seen.
     #[must_use]
-    pub fn links_of(&self, system: u8, component: u8) -> &[LinkId] {
+    pub fn links_of(&self, system: SystemId, component: ComponentId) -> &[LinkId] {
         self.components
             .get(&(system, component))
             .map_or(&[], Vec::as_slice)
@@ -103,7 +139,7 @@ impl RoutingTable {
 
     /// Whether any component of `system` was seen on `link`.
     #[must_use]
-    pub fn system_seen_on(&self, system: u8, link: LinkId) -> bool {
+    pub fn system_seen_on(&self, system: SystemId, link: LinkId) -> bool {
         self.systems.get(&system).is_some_and(|v| v.contains(&link))
     }
 
@@ -117,7 +153,7 @@ impl RoutingTable {
         out: &mut Vec<LinkId>,
     ) -> Route {
         out.clear();
-        let Some((system, component)) = addressing.target.filter(|(s, _)| *s != 0) else {
+        let Some((system, component)) = addressing.target.filter(|(s, _)| !s.is_broadcast()) else {
             out.extend(links.iter().copied().filter(|l| *l != ingress));
             return Route::Broadcast;
         };
@@ -131,7 +167,7 @@ impl RoutingTable {
             return Route::Targeted;
         }
         let exact = self.links_of(system, component);
-        let candidates = if component != 0 && !exact.is_empty() {
+        let candidates = if component != ComponentId::ALL && !exact.is_empty() {
             exact
         } else {
             self.systems.get(&system).map_or(&[][..], Vec::as_slice)
@@ -153,6 +189,10 @@ impl RoutingTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn ids(s: u8, c: u8) -> (SystemId, ComponentId) {
+        (SystemId(s), ComponentId(c))
+    }
     use proptest::prelude::*;
 
     const VEHICLE: LinkId = LinkId(1);
@@ -161,9 +201,9 @@ mod tests {
 
     fn table() -> RoutingTable {
         let mut t = RoutingTable::new();
-        t.learn(VEHICLE, 1, 1);
-        t.learn(SCRIPT_A, 255, 0);
-        t.learn(SCRIPT_B, 255, 0);
+        t.learn(VEHICLE, SystemId(1), ComponentId(1));
+        t.learn(SCRIPT_A, SystemId(255), ComponentId(0));
+        t.learn(SCRIPT_B, SystemId(255), ComponentId(0));
         t
     }
 
@@ -186,7 +226,7 @@ mod tests {
         let mut t = table();
         let mut out = Vec::new();
         let a = Addressing {
-            target: Some((1, 0)),
+            target: Some(ids(1, 0)),
             ..Default::default()
         };
         assert_eq!(
@@ -195,13 +235,13 @@ mod tests {
         );
         assert_eq!(out, vec![VEHICLE]);
         let a = Addressing {
-            target: Some((1, 100)),
+            target: Some(ids(1, 100)),
             ..Default::default()
         };
         t.route(SCRIPT_A, &a, &[VEHICLE, SCRIPT_A, SCRIPT_B], &mut out);
         assert_eq!(out, vec![VEHICLE]);
         let a = Addressing {
-            target: Some((9, 1)),
+            target: Some(ids(9, 1)),
             ..Default::default()
         };
         assert_eq!(
@@ -215,10 +255,10 @@ mod tests {
     fn command_ack_goes_to_the_link_that_sent_the_command() {
         let mut t = table();
         let links = [VEHICLE, SCRIPT_A, SCRIPT_B];
-        t.note_command(SCRIPT_B, 255, 0, 400);
+        t.note_command(SCRIPT_B, SystemId(255), ComponentId(0), 400);
         let mut out = Vec::new();
         let ack = Addressing {
-            target: Some((255, 0)),
+            target: Some(ids(255, 0)),
             ack_of_command: Some(400),
             command: None,
         };
@@ -233,17 +273,31 @@ mod tests {
     fn forgetting_a_link_removes_its_routes() {
         let mut t = table();
         t.forget_link(SCRIPT_A);
-        assert_eq!(t.links_of(255, 0), &[SCRIPT_B]);
+        assert_eq!(t.links_of(SystemId(255), ComponentId(0)), &[SCRIPT_B]);
         t.forget_link(VEHICLE);
         let mut out = Vec::new();
         let a = Addressing {
-            target: Some((1, 1)),
+            target: Some(ids(1, 1)),
             ..Default::default()
         };
         assert_eq!(
             t.route(SCRIPT_B, &a, &[SCRIPT_B], &mut out),
             Route::Unroutable
         );
+    }
+
+    #[test]
+    fn a_system_id_belongs_to_the_first_vehicle_link_until_it_goes() {
+        let mut t = RoutingTable::new();
+        let (a, b) = (LinkId(7), LinkId(8));
+        assert_eq!(t.claim(a, SystemId(1)), Ok(()));
+        assert_eq!(t.claim(b, SystemId(2)), Ok(()));
+        assert_eq!(t.claim(a, SystemId(1)), Ok(()));
+        assert_eq!(t.claim(b, SystemId(1)), Err(a));
+        assert_eq!(t.owner_of(SystemId(1)), Some(a));
+        t.forget_link(a);
+        assert_eq!(t.claim(b, SystemId(1)), Ok(()));
+        assert_eq!(t.owner_of(SystemId(1)), Some(b));
     }
 
     proptest! {
@@ -259,17 +313,17 @@ mod tests {
             let links: Vec<LinkId> = (1..6).map(LinkId).collect();
             let mut t = RoutingTable::new();
             for (l, s, c) in learned {
-                t.learn(LinkId(l), s, c);
+                t.learn(LinkId(l), SystemId(s), ComponentId(c));
             }
             let mut out = Vec::new();
             for (ingress, target, ack) in frames {
                 let ingress = LinkId(ingress);
                 if let Some(cmd) = ack {
                     // The router learns a sender before it notes its command.
-                    t.learn(ingress, 255, 0);
-                    t.note_command(ingress, 255, 0, cmd);
+                    t.learn(ingress, SystemId(255), ComponentId(0));
+                    t.note_command(ingress, SystemId(255), ComponentId(0), cmd);
                 }
-                let a = Addressing { target, ack_of_command: ack, command: None };
+                let a = Addressing { target: target.map(|(s, c)| ids(s, c)), ack_of_command: ack, command: None };
                 let route = t.route(ingress, &a, &links, &mut out);
                 prop_assert!(!out.contains(&ingress));
                 let mut dedup = out.clone();
@@ -279,7 +333,7 @@ mod tests {
                 match target {
                     Some((s, _)) if s != 0 => {
                         for l in &out {
-                            prop_assert!(t.system_seen_on(s, *l), "{l} never showed system {s}");
+                            prop_assert!(t.system_seen_on(SystemId(s), *l), "{l} never showed system {s}");
                         }
                         prop_assert_ne!(route, Route::Broadcast);
                     }

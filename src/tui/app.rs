@@ -8,6 +8,8 @@ use std::time::Instant;
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 
+use vtol_link::{ComponentId, SystemId};
+
 use crate::vehicle::{VehicleState, VehicleView};
 
 /// Step of the QLOITER position target per arrow key, m.
@@ -263,6 +265,8 @@ pub struct App {
     pub target_ned: Option<[f32; 3]>,
     /// What the operator did and what came of it, newest last.
     pub log: VecDeque<(Level, String)>,
+    /// The vehicle the UI shows and commands (`v`/`V` switch); `None` = the first listed.
+    pub selected: Option<(SystemId, ComponentId)>,
     /// Set by `q`.
     pub quit: bool,
 }
@@ -279,18 +283,57 @@ impl Default for App {
             messages: MessagesState::default(),
             target_ned: None,
             log: VecDeque::new(),
+            selected: None,
             quit: false,
         }
     }
 }
 
-/// The vehicle the UI commands: the first one heard.
-#[must_use]
-pub fn first_vehicle(state: &VehicleState) -> Option<&VehicleView> {
-    state.vehicles.values().next()
-}
-
 impl App {
+    /// The vehicle the UI shows and commands: the selected one while it is listed, else the
+    /// first (lowest system id).
+    #[must_use]
+    pub fn vehicle<'a>(&self, state: &'a VehicleState) -> Option<&'a VehicleView> {
+        self.selected
+            .and_then(|k| state.vehicles.get(&k))
+            .or_else(|| state.vehicles.values().next())
+    }
+
+    /// Selects the next (`step` 1) or previous (`step` -1) vehicle in system id order; the
+    /// parameter view empties and the new vehicle's table is asked for.
+    fn switch_vehicle(&mut self, state: &VehicleState, step: isize) -> Vec<Request> {
+        let keys: Vec<_> = state.vehicles.keys().copied().collect();
+        if keys.len() < 2 {
+            self.note(Level::Info, "only one vehicle");
+            return Vec::new();
+        }
+        let now = self
+            .vehicle(state)
+            .map(|v| (v.system_id, v.component_id))
+            .and_then(|k| keys.iter().position(|x| *x == k))
+            .unwrap_or(0);
+        let n = keys.len() as isize;
+        let next = keys[(now as isize + step).rem_euclid(n) as usize];
+        self.selected = Some(next);
+        self.note(
+            Level::Info,
+            format!("vehicle {} (component {}) selected", next.0, next.1),
+        );
+        self.vehicle_changed()
+    }
+
+    /// The client now commands another vehicle: forget what belonged to the last one and ask
+    /// for the new one's parameter table.
+    pub fn vehicle_changed(&mut self) -> Vec<Request> {
+        self.params.table.clear();
+        self.params.status.clear();
+        self.params.diff = None;
+        self.params.selected = 0;
+        self.params.progress = Some(("download".into(), 0, 0));
+        self.target_ned = None;
+        vec![Request::ParamsPull]
+    }
+
     /// Adds a line to the event log.
     pub fn note(&mut self, level: Level, text: impl Into<String>) {
         if self.log.len() == LOG_KEPT {
@@ -341,6 +384,8 @@ impl App {
                 self.view = View::ALL[(self.view.index() + View::ALL.len() - 1) % View::ALL.len()];
                 return Vec::new();
             }
+            KeyCode::Char('v') => return self.switch_vehicle(state, 1),
+            KeyCode::Char('V') => return self.switch_vehicle(state, -1),
             _ => {}
         }
         // View keys first (lists take the arrows), then the flight commands.
@@ -557,7 +602,7 @@ impl App {
 
     /// Flight commands: arm, modes, QLOITER target, pushes, chart window.
     fn on_command_key(&mut self, key: KeyEvent, state: &VehicleState) -> Vec<Request> {
-        let vehicle = first_vehicle(state);
+        let vehicle = self.vehicle(state);
         match key.code {
             KeyCode::Char('a') => self.confirm = Some(Confirm::Arm { force: false }),
             KeyCode::Char('A') => self.confirm = Some(Confirm::Arm { force: true }),

@@ -217,4 +217,14 @@ impl Control for ClientControl {
         };
         let _ = out.send(outcome).await;
     }
+
+    fn select_vehicle(
+        &self,
+        system: vtol_link::SystemId,
+        component: vtol_link::ComponentId,
+    ) -> bool {
+        let before = self.client.target();
+        self.client.select_vehicle(system, component);
+        before.is_some() && before != Some((system.0, component.0))
+    }
 }

@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
+use vtol_link::{ComponentId, SystemId};
 
 use crate::daemon::{OWN_TRAFFIC_PEER, Running, describe};
 use crate::router::policy::EndpointPolicy;
@@ -38,6 +39,35 @@ pub trait Control: Clone + Send + Sync + 'static {
         request: Request,
         out: mpsc::Sender<Outcome>,
     ) -> impl Future<Output = ()> + Send;
+
+    /// Makes `system`/`component` the vehicle later requests go to; true when that changed
+    /// the client's vehicle. Called before the requests of the same key are carried out.
+    fn select_vehicle(&self, system: SystemId, component: ComponentId) -> bool {
+        let _ = (system, component);
+        false
+    }
+}
+
+/// Keeps the client on the vehicle the UI shows (the operator's choice, else the first one
+/// listed). True when the client had to change vehicle.
+fn sync_selection<C: Control>(
+    app: &mut App,
+    state: &crate::vehicle::VehicleState,
+    control: &C,
+    sent: &mut Option<(SystemId, ComponentId)>,
+) -> bool {
+    let Some(v) = app.vehicle(state) else {
+        return false;
+    };
+    let key = (v.system_id, v.component_id);
+    if app.selected.is_none() {
+        app.selected = Some(key);
+    }
+    if *sent == Some(key) {
+        return false;
+    }
+    *sent = Some(key);
+    control.select_vehicle(key.0, key.1)
 }
 
 /// Builds what one frame shows from the running daemon.
@@ -71,6 +101,8 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
             .signing
             .as_ref()
             .map_or(0, |c| c.snapshot().refused()),
+        sysid_conflicts: s.sysid_conflicts.load(Ordering::Relaxed),
+        conflict: running.router.conflicts.borrow().first().copied(),
     };
     let tlog = running.tlog_path.as_ref().map(|p| {
         let st = running.tlog_stats.as_deref();
@@ -184,6 +216,7 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
     let mut tick = tokio::time::interval(FRAME_INTERVAL);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut dirty = true;
+    let mut selected = None;
     let mut last_draw = Instant::now()
         .checked_sub(IDLE_REDRAW)
         .unwrap_or_else(Instant::now);
@@ -203,7 +236,9 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
-                        for req in app.on_key(k, &state, crate::vehicle::now()) {
+                        let reqs = app.on_key(k, &state, crate::vehicle::now());
+                        sync_selection(&mut app, &state, &control, &mut selected);
+                        for req in reqs {
                             let c = control.clone();
                             let out = out_tx.clone();
                             tokio::spawn(async move { c.execute(req, out).await });
@@ -228,6 +263,18 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                     return Ok(());
                 }
                 dirty = true;
+                let changed = {
+                    let state = state_rx.borrow_and_update();
+                    sync_selection(&mut app, &state, &control, &mut selected)
+                };
+                if changed {
+                    // The client was on another vehicle: its table is not this one's.
+                    for req in app.vehicle_changed() {
+                        let c = control.clone();
+                        let out = out_tx.clone();
+                        tokio::spawn(async move { c.execute(req, out).await });
+                    }
+                }
             }
             _ = tick.tick() => {
                 if last_draw.elapsed() >= IDLE_REDRAW {

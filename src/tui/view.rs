@@ -17,7 +17,7 @@ use ratatui::widgets::{
 };
 use vtol_link::dialect::MavState;
 
-use super::app::{App, Confirm, Level, ParamStatus, SeriesKey, View, first_vehicle};
+use super::app::{App, Confirm, Level, ParamStatus, SeriesKey, View};
 use super::fields;
 use crate::router::Side;
 use crate::vehicle::history::{History, TimedFrame};
@@ -65,6 +65,10 @@ pub struct RouterCounters {
     pub dropped_tap: u64,
     /// Vehicle frames refused by the signing check (0 without a key).
     pub signing_refused: u64,
+    /// Vehicle frames refused because another vehicle link owns their system id.
+    pub sysid_conflicts: u64,
+    /// A system id two vehicle links claim now (the first, if several).
+    pub conflict: Option<crate::router::SysidConflict>,
 }
 
 /// The tlog as shown.
@@ -217,13 +221,26 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         );
         return;
     }
+    let fleet = snap.state.vehicles.len() > 1;
     let [header, body, footer] = Layout::vertical([
-        Constraint::Length(2),
+        Constraint::Length(if fleet { 3 } else { 2 }),
         Constraint::Min(10),
         Constraint::Length(1),
     ])
     .areas(area);
     draw_header(f, app, snap, header);
+    if fleet {
+        draw_vehicle_list(
+            f,
+            app,
+            snap,
+            Rect {
+                y: header.y + 2,
+                height: 1,
+                ..header
+            },
+        );
+    }
     match app.view {
         View::Flight => draw_flight(f, app, snap, body),
         View::Charts => draw_charts(f, app, snap, body),
@@ -246,13 +263,13 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
         " vtol-gcs ",
         Style::new().add_modifier(Modifier::REVERSED),
     )];
-    match first_vehicle(snap.state) {
+    match app.vehicle(snap.state) {
         None => spans.push(Span::styled(
             " waiting for a vehicle heartbeat",
             Style::new().fg(Color::Yellow),
         )),
         Some(v) => {
-            let lost = snap.state.vehicle_lost(now);
+            let lost = v.is_lost(now);
             spans.push(Span::raw(format!(" sys {} ", v.system_id)));
             spans.push(Span::styled(
                 v.mode_name(),
@@ -300,6 +317,18 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
             )));
         }
     }
+    if let Some(c) = snap.router.conflict {
+        spans.push(Span::styled(
+            format!(
+                " │ CONFLICT sys {} on {} and {} ",
+                c.system, c.owner, c.claimant
+            ),
+            Style::new()
+                .fg(Color::White)
+                .bg(Color::Red)
+                .add_modifier(Modifier::BOLD),
+        ));
+    }
     let mut tabs = Vec::new();
     for v in View::all() {
         let style = if *v == app.view {
@@ -318,6 +347,51 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
         Paragraph::new(vec![Line::from(spans), Line::from(tabs)]),
         area,
     );
+}
+
+/// One line per fleet: each vehicle with its link health, the selected one highlighted.
+fn draw_vehicle_list(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
+    let now = snap.now;
+    let selected = app
+        .vehicle(snap.state)
+        .map(|v| (v.system_id, v.component_id));
+    let mut spans = vec![Span::styled(
+        " vehicles (v/V) ",
+        Style::new().fg(Color::DarkGray),
+    )];
+    for (key, v) in &snap.state.vehicles {
+        let text = if v.is_lost(now) {
+            format!(
+                " {} LOST {:.0} s ",
+                v.system_id,
+                now.saturating_duration_since(v.last_heartbeat)
+                    .as_secs_f64()
+            )
+        } else {
+            format!(
+                " {} {} {} {:.0} Hz {:.1}% ",
+                v.system_id,
+                v.mode_name(),
+                if v.armed { "ARMED" } else { "disarmed" },
+                v.rate_hz(now),
+                v.loss_pct(now)
+            )
+        };
+        let mut style = if v.is_lost(now) {
+            Style::new().fg(Color::Red)
+        } else if v.armed {
+            Style::new().fg(Color::Yellow)
+        } else {
+            Style::new()
+        };
+        if Some(*key) == selected {
+            style = style.add_modifier(Modifier::REVERSED | Modifier::BOLD);
+        }
+        spans.push(Span::styled(text, style));
+        spans.push(Span::raw("│"));
+    }
+    spans.pop();
+    f.render_widget(Paragraph::new(Line::from(spans)), area);
 }
 
 fn draw_footer(f: &mut Frame<'_>, app: &App, area: Rect) {
@@ -377,6 +451,7 @@ fn draw_confirm(f: &mut Frame<'_>, app: &App, c: &Confirm, area: Rect) {
 
 const HELP: &[(&str, &str)] = &[
     ("Tab / Shift-Tab", "next / previous view"),
+    ("v / V", "next / previous vehicle (when several)"),
     ("?", "this help (any key closes it)"),
     ("q, Ctrl-C", "quit"),
     ("a / A / d", "arm / force arm / disarm (then y to confirm)"),
@@ -423,7 +498,7 @@ fn draw_help(f: &mut Frame<'_>, area: Rect) {
 fn age_s(snap: &Snapshot<'_>, v: &VehicleView, msg: u32) -> Option<f64> {
     snap.state
         .messages
-        .get(&(v.system_id, v.component_id, msg))
+        .get(&(v.system_id.0, v.component_id.0, msg))
         .map(|m| snap.now.saturating_duration_since(m.last_at).as_secs_f64())
 }
 
@@ -445,7 +520,7 @@ fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
         Layout::vertical([Constraint::Min(12), Constraint::Length(bottom_rows)]).areas(area);
     let [left, right] =
         Layout::horizontal([Constraint::Percentage(45), Constraint::Percentage(55)]).areas(top);
-    let vehicle = first_vehicle(snap.state);
+    let vehicle = app.vehicle(snap.state);
     let att = vehicle.and_then(|v| v.attitude);
     let stale_att = vehicle
         .and_then(|v| age_s(snap, v, 30))
@@ -747,7 +822,7 @@ const COLOURS: [Color; 8] = [
 ];
 
 fn draw_charts(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
-    let Some(v) = first_vehicle(snap.state) else {
+    let Some(v) = app.vehicle(snap.state) else {
         f.render_widget(Paragraph::new("no vehicle yet"), area);
         return;
     };
@@ -930,8 +1005,13 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
     } else {
         String::new()
     };
+    let conflicts = if r.sysid_conflicts > 0 {
+        format!("\nsysid conflict {}", r.sysid_conflicts)
+    } else {
+        String::new()
+    };
     let text = format!(
-        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}{refused}\nlink closed    {}\ntracker behind {}",
+        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}{refused}\nlink closed    {}\ntracker behind {}{conflicts}",
         r.frames_in,
         r.frames_out,
         r.unroutable,

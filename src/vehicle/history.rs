@@ -53,7 +53,7 @@ pub struct History {
     /// Sample times count from here.
     pub epoch: Instant,
     /// Typed series per vehicle (system, component).
-    pub vehicles: BTreeMap<(u8, u8), VehicleHistory>,
+    pub vehicles: BTreeMap<(vtol_link::SystemId, vtol_link::ComponentId), VehicleHistory>,
     /// Raw frames per (system, component, message id).
     pub frames: HashMap<(u8, u8, u32), VecDeque<TimedFrame>>,
     next_index: u64,
@@ -89,10 +89,10 @@ impl History {
     /// is a message of a known vehicle (attitude, outputs, position go to the typed series).
     pub fn record(&mut self, frame: &Frame, decoded: Option<&MavMessage>, now: Instant) {
         let t_s = self.t_s(now);
-        let key = (frame.system_id(), frame.component_id());
+        let key = frame.sender();
         let ring = self
             .frames
-            .entry((key.0, key.1, frame.message_id()))
+            .entry((key.0.0, key.1.0, frame.message_id()))
             .or_default();
         let oldest = t_s - KEEP.as_secs_f64();
         while ring.len() >= MAX_FRAMES || ring.front().is_some_and(|f| f.t_s < oldest) {
@@ -169,7 +169,7 @@ mod tests {
             let f = Frame::encode_v2(1, 1, (i % 256) as u8, &msg);
             h.record(&f, Some(&msg), t0 + Duration::from_millis(i * 20));
         }
-        let att = &h.vehicles[&(1, 1)].attitude;
+        let att = &h.vehicles[&(vtol_link::SystemId(1), vtol_link::ComponentId(1))].attitude;
         let span = att.back().unwrap().0 - att.front().unwrap().0;
         assert!(span <= KEEP.as_secs_f64() + 1e-9, "span {span}");
         assert!(span > 110.0, "span {span}");

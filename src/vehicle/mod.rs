@@ -200,7 +200,7 @@ mod tests {
                     let t = rx
                         .borrow_and_update()
                         .vehicles
-                        .get(&(1, 1))
+                        .get(&(vtol_link::SystemId(1), vtol_link::ComponentId(1)))
                         .map(|v| v.last_heartbeat);
                     if let Some(t) = t
                         && after.is_none_or(|a| t > a)

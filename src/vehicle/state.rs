@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
-use vtol_link::{Frame, LinkId};
+use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
 use super::window::Window;
 use crate::router::Side;
@@ -43,9 +43,18 @@ pub struct LocalPosition {
 #[derive(Debug, Clone, PartialEq)]
 pub struct VehicleView {
     /// System id.
-    pub system_id: u8,
+    pub system_id: SystemId,
     /// Component id.
-    pub component_id: u8,
+    pub component_id: ComponentId,
+    /// The link it was last heard on.
+    pub link: LinkId,
+    /// Its frames received (all message types, this vehicle only).
+    pub frames: u64,
+    /// Its frames missing by sequence gaps.
+    pub lost: u64,
+    /// Its frames received and lost over the last seconds: this vehicle's link health, apart
+    /// from other vehicles sharing the link.
+    pub window: Window,
     /// MAV_TYPE.
     pub mav_type: MavType,
     /// MAV_AUTOPILOT.
@@ -71,6 +80,24 @@ pub struct VehicleView {
 }
 
 impl VehicleView {
+    /// Whether no heartbeat came for [`LINK_TIMEOUT`].
+    #[must_use]
+    pub fn is_lost(&self, now: Instant) -> bool {
+        now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
+    }
+
+    /// Its frames per second over the last 2 s.
+    #[must_use]
+    pub fn rate_hz(&self, now: Instant) -> f64 {
+        self.window.rate_hz(now)
+    }
+
+    /// Its loss in percent over the last 10 s, from its sequence gaps.
+    #[must_use]
+    pub fn loss_pct(&self, now: Instant) -> f64 {
+        self.window.loss_pct(now)
+    }
+
     /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
     #[must_use]
     pub fn mode_name(&self) -> String {
@@ -162,15 +189,16 @@ pub struct MessageStats {
 pub struct VehicleState {
     /// The time windows count from (when the tracker started).
     pub epoch: Instant,
-    /// Vehicles by (system, component).
-    pub vehicles: BTreeMap<(u8, u8), VehicleView>,
+    /// Vehicles by (system, component); the router never lets two vehicle links share a
+    /// system id, so each entry is one vehicle.
+    pub vehicles: BTreeMap<(SystemId, ComponentId), VehicleView>,
     /// Links by id.
     pub links: BTreeMap<LinkId, LinkHealth>,
     /// Every message seen, by (system, component, message id).
     pub messages: BTreeMap<(u8, u8, u32), MessageStats>,
-    last_seq: HashMap<(LinkId, u8, u8), u8>,
+    last_seq: HashMap<(LinkId, SystemId, ComponentId), u8>,
     /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
-    text_chunks: HashMap<(u8, u8), crate::client::statustext::TextAssembler>,
+    text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
 }
 
 impl Default for VehicleState {
@@ -215,11 +243,17 @@ impl VehicleState {
         frame: &Frame,
         now: Instant,
     ) -> Option<MavMessage> {
-        self.account(link, side, frame, now);
-        let key = (frame.system_id(), frame.component_id());
+        let lost = self.account(link, side, frame, now);
+        let key = frame.sender();
         let epoch = self.epoch;
+        if let Some(v) = self.vehicles.get_mut(&key) {
+            v.link = link;
+            v.frames += 1;
+            v.lost += u64::from(lost);
+            v.window.add(now, 1, lost);
+        }
         self.messages
-            .entry((key.0, key.1, frame.message_id()))
+            .entry((key.0.0, key.1.0, frame.message_id()))
             .and_modify(|m| {
                 m.count += 1;
                 m.last = frame.clone();
@@ -256,6 +290,14 @@ impl VehicleState {
             let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
                 system_id: key.0,
                 component_id: key.1,
+                link,
+                frames: 1,
+                lost: 0,
+                window: {
+                    let mut w = Window::new(epoch);
+                    w.add(now, 1, 0);
+                    w
+                },
                 mav_type: hb.mavtype,
                 autopilot: hb.autopilot,
                 custom_mode: hb.custom_mode,
@@ -331,7 +373,9 @@ impl VehicleState {
         Some(msg)
     }
 
-    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) {
+    /// Counts a frame in its link's health; returns the frames its sender's sequence says
+    /// were lost just before it.
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) -> u32 {
         let epoch = self.epoch;
         let h = self.links.entry(link).or_insert_with(|| LinkHealth {
             side,
@@ -346,12 +390,13 @@ impl VehicleState {
         let mut lost = 0;
         if let Some(last) = self
             .last_seq
-            .insert((link, frame.system_id(), frame.component_id()), seq)
+            .insert((link, frame.sender().0, frame.sender().1), seq)
         {
             lost = u32::from(seq.wrapping_sub(last).wrapping_sub(1));
             h.lost += u64::from(lost);
         }
         h.window.add(now, 1, lost);
+        lost
     }
 
     /// Forgets a link that went down: its health and its sequence history (a link that comes
@@ -430,7 +475,7 @@ mod tests {
             &Frame::encode_v2(1, 1, 0, &v),
             now,
         );
-        let view = &s.vehicles[&(1, 1)];
+        let view = &s.vehicles[&(SystemId(1), ComponentId(1))];
         assert!(view.armed);
         assert_eq!(view.mode_name(), "QHOVER");
     }

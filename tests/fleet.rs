@@ -1,0 +1,372 @@
+//! Several vehicles in one daemon: a fleet of three real twins (`firmware_sim::fleet`) behind
+//! one TCP link into the daemon, the terminal UI switching between them and commanding only
+//! the selected one; the tracker keeping them apart; a system id claimed by two vehicle links
+//! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
+
+use std::time::{Duration, Instant};
+
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+use vtol_gcs::config::{Config, VehicleSource};
+use vtol_gcs::daemon;
+use vtol_gcs::router::{Router, Side, SysidConflict};
+use vtol_gcs::tui::app::App;
+use vtol_gcs::tui::exec::ClientControl;
+use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
+use vtol_gcs::vehicle::{History, VehicleState};
+use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::{
+    ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, SystemId, spawn_stream_link,
+};
+
+fn heartbeat(mode: u32, armed: bool) -> MavMessage {
+    let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+    if armed {
+        base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+    }
+    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+        custom_mode: mode,
+        mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
+        base_mode,
+        system_status: MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    })
+}
+
+fn key(c: char) -> Event {
+    Event::Key(KeyEvent::new(KeyCode::Char(c), KeyModifiers::NONE))
+}
+
+fn ids(s: u8) -> (SystemId, ComponentId) {
+    (SystemId(s), ComponentId(1))
+}
+
+#[test]
+fn the_tracker_keeps_vehicles_on_one_link_apart() {
+    let t0 = Instant::now();
+    let mut s = VehicleState::new(t0);
+    let link = LinkId(1);
+    // Three vehicles interleaved on one link; vehicle 3 loses one frame in four.
+    for n in 0u8..40 {
+        for sys in 1..=3u8 {
+            if sys == 3 && n % 4 == 3 {
+                continue;
+            }
+            let f = Frame::encode_v2(sys, 1, n, &heartbeat(17 + u32::from(sys), sys == 2));
+            s.apply(
+                link,
+                Side::Vehicle,
+                &f,
+                t0 + Duration::from_millis(u64::from(n) * 50),
+            );
+        }
+    }
+    let now = t0 + Duration::from_secs(2);
+    assert_eq!(s.vehicles.len(), 3);
+    let armed: Vec<_> = s
+        .vehicles
+        .values()
+        .filter(|v| v.armed)
+        .map(|v| v.system_id)
+        .collect();
+    assert_eq!(armed, [SystemId(2)]);
+    assert_eq!(s.vehicles[&ids(1)].mode_name(), "QHOVER");
+    assert_eq!(s.vehicles[&ids(3)].mode_name(), "QLAND");
+    assert_eq!(s.vehicles[&ids(1)].lost, 0);
+    assert_eq!(s.vehicles[&ids(2)].lost, 0);
+    assert_eq!(s.vehicles[&ids(3)].lost, 9);
+    assert!(s.vehicles[&ids(3)].loss_pct(now) > 20.0);
+    assert!(s.vehicles[&ids(1)].loss_pct(now) < 1e-9);
+    assert!(s.vehicles.values().all(|v| v.link == link));
+}
+
+/// Reads frames from `end` until `stop(frames)` holds or `limit` passes.
+async fn read_until(
+    end: &mut DuplexStream,
+    limit: Duration,
+    stop: impl Fn(&[Frame]) -> bool,
+) -> Vec<Frame> {
+    let mut dec = FrameDecoder::new();
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    let deadline = tokio::time::Instant::now() + limit;
+    while !stop(&got) {
+        match tokio::time::timeout_at(deadline, end.read(&mut buf)).await {
+            Ok(Ok(k)) if k > 0 => {
+                dec.push(&buf[..k]);
+                got.extend(dec.frames());
+            }
+            _ => break,
+        }
+    }
+    got
+}
+
+#[tokio::test]
+async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
+    let (vtx, vrx) = mpsc::channel(1024);
+    let (ctx, crx) = mpsc::channel(1024);
+    let cancel = CancellationToken::new();
+    let (router, handle) = Router::new(None, None);
+    let task = tokio::spawn(router.run(vrx, crx, cancel.clone()));
+    let (mut a, far) = tokio::io::duplex(1 << 16);
+    let a_id = spawn_stream_link(
+        far,
+        "vehicle a",
+        vtx.clone(),
+        LinkOptions::default(),
+        cancel.clone(),
+    )
+    .0;
+    let (mut b, far) = tokio::io::duplex(1 << 16);
+    let b_id = spawn_stream_link(
+        far,
+        "vehicle b",
+        vtx,
+        LinkOptions::default(),
+        cancel.clone(),
+    )
+    .0;
+    let (mut client, far) = tokio::io::duplex(1 << 16);
+    spawn_stream_link(far, "client", ctx, LinkOptions::default(), cancel.clone());
+    let mut links = handle.links.clone();
+    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 3))
+        .await
+        .expect("three links up")
+        .expect("router running");
+
+    // A is system 1 (QHOVER); B claims system 1 too (QLAND), and is also system 2.
+    a.write_all(Frame::encode_v2(1, 1, 0, &heartbeat(18, false)).as_bytes())
+        .await
+        .unwrap();
+    let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
+    assert_eq!(got.len(), 1, "A's heartbeat reaches the client");
+    let mut conflicts = handle.conflicts.clone();
+    b.write_all(Frame::encode_v2(1, 1, 0, &heartbeat(20, true)).as_bytes())
+        .await
+        .unwrap();
+    b.write_all(Frame::encode_v2(2, 1, 0, &heartbeat(17, false)).as_bytes())
+        .await
+        .unwrap();
+    let seen = tokio::time::timeout(
+        Duration::from_secs(5),
+        conflicts.wait_for(|c| !c.is_empty()),
+    )
+    .await
+    .expect("conflict reported")
+    .expect("router running")
+    .clone();
+    assert_eq!(
+        seen,
+        [SysidConflict {
+            system: SystemId(1),
+            owner: a_id,
+            claimant: b_id
+        }]
+    );
+    // Only B's system 2 arrives: its system 1 frames go nowhere.
+    let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].system_id(), 2);
+    assert!(
+        handle
+            .stats
+            .sysid_conflicts
+            .load(std::sync::atomic::Ordering::Relaxed)
+            >= 1
+    );
+
+    // A goes away: the dispute ends and B may now speak as system 1.
+    drop(a);
+    tokio::time::timeout(Duration::from_secs(5), conflicts.wait_for(Vec::is_empty))
+        .await
+        .expect("conflict cleared")
+        .expect("router running");
+    b.write_all(Frame::encode_v2(1, 1, 1, &heartbeat(20, true)).as_bytes())
+        .await
+        .unwrap();
+    let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].system_id(), 1);
+    cancel.cancel();
+    let _ = task.await;
+}
+
+fn render(app: &mut App, state: &VehicleState, history: &History, now: Instant) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(110, 30)).expect("test backend");
+    let snap = Snapshot {
+        now,
+        state,
+        history,
+        links: Vec::new(),
+        router: RouterCounters::default(),
+        tlog: None,
+        serving: vec!["tcpin:127.0.0.1:5770".into()],
+    };
+    let mut cache = SeriesCache::default();
+    terminal
+        .draw(|f| view::draw(f, app, &snap, &mut cache))
+        .expect("draw");
+    format!("{}", terminal.backend())
+}
+
+#[test]
+fn ui_lists_three_vehicles_and_switches() {
+    let t0 = Instant::now();
+    let mut state = VehicleState::new(t0);
+    let history = History::new(t0);
+    // 1 hovers, 2 is armed in QLOITER, 3 fell silent 6 s ago.
+    for n in 0u8..10 {
+        let t = t0 + Duration::from_secs(u64::from(n));
+        state.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, n, &heartbeat(18, true)),
+            t,
+        );
+        state.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, n, &heartbeat(19, true)),
+            t,
+        );
+        if n < 4 {
+            state.apply(
+                LinkId(1),
+                Side::Vehicle,
+                &Frame::encode_v2(3, 1, n, &heartbeat(17, false)),
+                t,
+            );
+        }
+    }
+    let now = t0 + Duration::from_millis(9_500);
+    let mut app = App::default();
+    insta::assert_snapshot!(
+        "fleet_three_vehicles",
+        render(&mut app, &state, &history, now)
+    );
+    let press = |app: &mut App, c: char| {
+        let Event::Key(k) = key(c) else {
+            unreachable!()
+        };
+        app.on_key(k, &state, now)
+    };
+    let reqs = press(&mut app, 'v');
+    assert_eq!(
+        reqs,
+        [vtol_gcs::tui::app::Request::ParamsPull],
+        "the new vehicle's table"
+    );
+    assert_eq!(app.selected, Some(ids(2)));
+    insta::assert_snapshot!(
+        "fleet_second_selected",
+        render(&mut app, &state, &history, now)
+    );
+    press(&mut app, 'v');
+    assert_eq!(app.selected, Some(ids(3)));
+    press(&mut app, 'v');
+    assert_eq!(app.selected, Some(ids(1)), "wraps around");
+    press(&mut app, 'V');
+    assert_eq!(app.selected, Some(ids(3)));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_twins_one_daemon_the_ui_commands_the_selected_vehicle() {
+    let cancel = CancellationToken::new();
+    let mut fleet_config = firmware_sim::serve::ServeConfig {
+        listen: vec!["tcpin:127.0.0.1:0".parse().unwrap()],
+        ..Default::default()
+    };
+    // Ready to arm at once, as `firmware-sim serve` starts.
+    fleet_config.endpoint.vehicle.calibrated = true;
+    let fleet = firmware_sim::fleet::Fleet::start(fleet_config, 3, cancel.clone())
+        .await
+        .expect("fleet starts");
+    let port = fleet.bound()[0].local_addr.expect("bound").port();
+    let config = Config {
+        serve: Vec::new(),
+        log_dir: None,
+        vehicle: VehicleSource::Url(format!("tcp:127.0.0.1:{port}").parse().unwrap()),
+        ..Config::default()
+    };
+    let mut tasks = tokio::task::JoinSet::new();
+    let running = daemon::start(&config, &cancel, &mut tasks)
+        .await
+        .expect("daemon starts");
+    let mut rx = running.state.clone();
+    tokio::time::timeout(
+        Duration::from_secs(10),
+        rx.wait_for(|s| s.vehicles.len() == 3),
+    )
+    .await
+    .expect("three vehicles heard")
+    .expect("tracker running");
+    let keys: Vec<_> = running.state.borrow().vehicles.keys().copied().collect();
+    assert_eq!(keys, [ids(1), ids(2), ids(3)]);
+
+    // The UI's own loop on a test terminal: `v` selects vehicle 2, `a` `y` arms it.
+    let control = ClientControl::new(running.client.clone());
+    let mut terminal = Terminal::new(TestBackend::new(110, 30)).expect("test backend");
+    let (events, events_rx) = mpsc::channel(16);
+    let ui_cancel = cancel.child_token();
+    let ui = vtol_gcs::tui::event_loop(&mut terminal, &running, control, events_rx, ui_cancel);
+    let driver = async {
+        for c in ['v', 'a', 'y'] {
+            events.send(key(c)).await.unwrap();
+        }
+        let mut rx = running.state.clone();
+        let armed = tokio::time::timeout(
+            Duration::from_secs(10),
+            rx.wait_for(|s| s.vehicles.get(&ids(2)).is_some_and(|v| v.armed)),
+        )
+        .await;
+        let armed_at = armed
+            .ok()
+            .and_then(Result::ok)
+            .map(|s| s.vehicles[&ids(2)].last_heartbeat);
+        let result = match armed_at {
+            Some(armed_at) => {
+                // A heartbeat from each of the others after that: still disarmed.
+                tokio::time::timeout(
+                    Duration::from_secs(10),
+                    rx.wait_for(|s| s.vehicles.values().all(|v| v.last_heartbeat > armed_at)),
+                )
+                .await
+                .ok()
+                .and_then(Result::ok)
+                .map(|s| {
+                    s.vehicles
+                        .values()
+                        .filter(|v| v.armed)
+                        .map(|v| v.system_id)
+                        .collect::<Vec<_>>()
+                })
+            }
+            None => None,
+        };
+        events.send(key('q')).await.unwrap();
+        result
+    };
+    let (r, armed) = tokio::join!(ui, driver);
+    r.expect("ui ran");
+    let screen = format!("{}", terminal.backend());
+    assert_eq!(
+        armed,
+        Some(vec![SystemId(2)]),
+        "only the selected vehicle armed; screen:\n{screen}"
+    );
+    assert_eq!(
+        running.client.target(),
+        Some((2, 1)),
+        "the client commands vehicle 2"
+    );
+    assert!(screen.contains("vehicles (v/V)"), "{screen}");
+    cancel.cancel();
+    while tasks.join_next().await.is_some() {}
+    fleet.join().await;
+}
