@@ -5,6 +5,7 @@ one arms) and writes a parameter of another (only that one's file changes)."""
 
 import time
 
+from daemon_support import daemon_factory, script  # noqa: F401 (fixture)
 from conftest import (
     FLAG_ARMED,
     MAV_CMD_COMPONENT_ARM_DISARM,
@@ -90,3 +91,40 @@ def test_count_past_255_is_refused():
     )
     assert r.returncode != 0
     assert r.stderr.strip().splitlines() == ["error: --count 10 from system id 250 passes 255"], r.stderr
+
+
+def test_three_twins_through_one_daemon(twin_factory, daemon_factory):  # noqa: F811
+    """A fleet of three behind one `vtol-gcs run --vehicle tcp:...`: a script on the daemon's
+    serve port sees the three vehicles with their own sequence numbers, arms one of them and
+    gets its ACK; only that one arms."""
+    twin = twin_factory(listen=["tcpin:127.0.0.1:0"], speed=1, extra=["--count", str(COUNT)])
+    host, port = twin.host_port("tcpin")
+    daemon = daemon_factory(vehicle=f"tcp:{host}:{port}", serve=["tcpin:127.0.0.1:0"], log=False)
+    g = script(daemon.tcp)
+    try:
+        ids = {1, 2, 3}
+        heartbeats_by_sysid(g, ids, timeout=20)
+        # Sequence numbers are each vehicle's own, unchanged through the daemon: no gaps.
+        last: dict = {}
+        gaps = 0
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            m = g.m.recv_match(blocking=True, timeout=0.25)
+            if m is None or m.get_srcSystem() not in ids or m.get_type() == "BAD_DATA":
+                continue
+            s, seq = m.get_srcSystem(), m.get_seq()
+            if s in last:
+                gaps += (seq - last[s] - 1) % 256
+            last[s] = seq
+        assert set(last) == ids and gaps == 0, (last, gaps)
+
+        g.drain()
+        g.mav.command_long_send(3, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        ack = g.recv("COMMAND_ACK", sysid=3, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
+        assert ack.result == MAV_RESULT_ACCEPTED, ack
+        g.drain()
+        after = heartbeats_by_sysid(g, ids)
+        assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {3}, after
+        assert daemon.alive(), daemon.tail()
+    finally:
+        g.close()
