@@ -247,3 +247,183 @@ impl TwinSigning {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use vtol_link::signing::SignatureFields;
+
+    use super::*;
+
+    const SYSID: u8 = 1;
+
+    /// The wall clock: what the twin saves with, so the timestamps compared here agree.
+    fn now() -> SystemTime {
+        SystemTime::now()
+    }
+
+    fn key(text: &str) -> SigningKey {
+        SigningKey::from_passphrase(text)
+    }
+
+    fn setup(new: &SigningKey, initial_timestamp: u64, target: (u8, u8)) -> Frame {
+        let msg = apm::MavMessage::SETUP_SIGNING(apm::SETUP_SIGNING_DATA {
+            initial_timestamp,
+            target_system: target.0,
+            target_component: target.1,
+            secret_key: *new.as_bytes(),
+        });
+        Frame::encode_v2(255, 190, 0, &msg)
+    }
+
+    fn param_read() -> Frame {
+        let msg = apm::MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
+            target_system: SYSID,
+            target_component: 1,
+        });
+        Frame::encode_v2(255, 190, 0, &msg)
+    }
+
+    /// A GCS signing with `k` on link id 1.
+    fn gcs(k: &SigningKey) -> Signing {
+        Signing::new(k.clone(), 1, 0)
+    }
+
+    fn admit(s: &mut TwinSigning, f: &Frame, local: bool) -> Admit {
+        s.admit(f, local, SYSID, now())
+    }
+
+    #[test]
+    fn unkeyed_twin_takes_setup_signing_only_on_a_local_link() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.signing");
+        let mut s = TwinSigning::start(None, Some(file.clone())).unwrap();
+        assert!(!s.is_keyed());
+        assert!(!file.exists(), "an unkeyed twin writes nothing at start");
+        assert_eq!(admit(&mut s, &param_read(), false), Admit::Pass);
+        // Unsigned, over the network: refused, nothing changes.
+        let new = key("new");
+        let f = setup(&new, 0, (SYSID, 1));
+        assert_eq!(
+            admit(&mut s, &f, false),
+            Admit::SetupSigning(SetupOutcome::Refused)
+        );
+        assert!(!s.is_keyed() && !file.exists());
+        assert_eq!(admit(&mut s, &param_read(), false), Admit::Pass);
+        // On the cable: keyed and saved.
+        assert_eq!(
+            admit(&mut s, &f, true),
+            Admit::SetupSigning(SetupOutcome::Keyed)
+        );
+        assert!(s.is_keyed());
+        assert_eq!(SigningState::load(&file).unwrap().key, new);
+        assert!(matches!(
+            admit(&mut s, &param_read(), false),
+            Admit::Refused(Refusal::Unsigned { message_id: 21 })
+        ));
+        let signed = gcs(&new).sign(&param_read(), now()).unwrap();
+        assert_eq!(admit(&mut s, &signed, false), Admit::Pass);
+        // What goes out is signed with the new key.
+        let out = s.outgoing(param_read(), now()).unwrap();
+        assert!(vtol_link::signing::signature_matches(&new, &out));
+        assert_eq!(s.refused(), 2);
+    }
+
+    #[test]
+    fn keyed_twin_is_rekeyed_only_by_a_frame_signed_with_its_key() {
+        let old = key("old");
+        let new = key("new");
+        let mut s = TwinSigning::start(Some(old.clone()), None).unwrap();
+        let mut gcs_old = gcs(&old);
+        // Unsigned, and signed with another key: refused, the old key still works.
+        for f in [
+            setup(&new, 0, (SYSID, 1)),
+            gcs(&new).sign(&setup(&new, 0, (SYSID, 1)), now()).unwrap(),
+        ] {
+            assert_eq!(
+                admit(&mut s, &f, false),
+                Admit::SetupSigning(SetupOutcome::Refused)
+            );
+        }
+        let f = gcs_old.sign(&param_read(), now()).unwrap();
+        assert_eq!(admit(&mut s, &f, false), Admit::Pass);
+        // Addressed elsewhere: ignored even when rightly signed.
+        let elsewhere = gcs_old.sign(&setup(&new, 0, (7, 1)), now()).unwrap();
+        assert_eq!(
+            admit(&mut s, &elsewhere, false),
+            Admit::SetupSigning(SetupOutcome::NotForUs)
+        );
+        // Signed with the current key, broadcast target: re-keyed.
+        let rekey = gcs_old.sign(&setup(&new, 0, (0, 0)), now()).unwrap();
+        assert_eq!(
+            admit(&mut s, &rekey, false),
+            Admit::SetupSigning(SetupOutcome::Keyed)
+        );
+        // Replayed: refused (the old key is gone, and so is its stream).
+        assert_eq!(
+            admit(&mut s, &rekey, false),
+            Admit::SetupSigning(SetupOutcome::Refused)
+        );
+        let f = gcs_old.sign(&param_read(), now()).unwrap();
+        assert_eq!(
+            admit(&mut s, &f, false),
+            Admit::Refused(Refusal::BadSignature)
+        );
+        let f = gcs(&new).sign(&param_read(), now()).unwrap();
+        assert_eq!(admit(&mut s, &f, false), Admit::Pass);
+    }
+
+    #[test]
+    fn zero_key_switches_signing_off_and_it_stays_off_after_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.signing");
+        let k = key("k");
+        let mut s = TwinSigning::start(Some(k.clone()), Some(file.clone())).unwrap();
+        let before = SigningState::load(&file).unwrap();
+        assert_eq!(before.key, k);
+        let zero = SigningKey::from_bytes([0; KEY_LEN]);
+        let off = gcs(&k).sign(&setup(&zero, 0, (SYSID, 1)), now()).unwrap();
+        assert_eq!(
+            admit(&mut s, &off, false),
+            Admit::SetupSigning(SetupOutcome::Disabled)
+        );
+        assert!(!s.is_keyed());
+        assert_eq!(admit(&mut s, &param_read(), false), Admit::Pass);
+        let out = s.outgoing(param_read(), now()).unwrap();
+        assert!(!out.is_signed());
+        let saved = SigningState::load(&file).unwrap();
+        assert!(saved.key.is_zero());
+        assert!(saved.timestamp >= before.timestamp, "the timestamp kept");
+        let restarted = TwinSigning::start(None, Some(file.clone())).unwrap();
+        assert!(!restarted.is_keyed());
+        // A key on the command line wins over the saved state.
+        assert!(TwinSigning::start(Some(k), Some(file)).unwrap().is_keyed());
+    }
+
+    #[test]
+    fn saved_key_is_used_at_restart_and_timestamps_never_go_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.signing");
+        let mut s = TwinSigning::start(None, Some(file.clone())).unwrap();
+        let new = key("new");
+        // An initial timestamp an hour ahead of the clock is honoured.
+        let ahead = vtol_link::signing::timestamp_at(now() + Duration::from_secs(3600));
+        let f = setup(&new, ahead, (SYSID, 0));
+        assert_eq!(
+            admit(&mut s, &f, true),
+            Admit::SetupSigning(SetupOutcome::Keyed)
+        );
+        let out = s.outgoing(param_read(), now()).unwrap();
+        assert!(SignatureFields::of(&out).unwrap().timestamp > ahead);
+        s.finish();
+        let mut again = TwinSigning::start(None, Some(file)).unwrap();
+        assert!(again.is_keyed());
+        let out2 = again.outgoing(param_read(), now()).unwrap();
+        assert!(vtol_link::signing::signature_matches(&new, &out2));
+        assert!(
+            SignatureFields::of(&out2).unwrap().timestamp
+                > SignatureFields::of(&out).unwrap().timestamp
+        );
+    }
+}
