@@ -854,6 +854,26 @@ mod tests {
     }
 
     #[test]
+    fn payload_built_by_hand_is_trimmed_and_read_back_zero_filled() {
+        // COMMAND_ACK (77): command 400, result 0, then zeros up to the targets (255, 190).
+        let mut p = [0u8; 10];
+        p[..2].copy_from_slice(&400u16.to_le_bytes());
+        p[3] = 0xFF;
+        let f = Frame::encode_payload_v2(1, 1, 4, MSG_ID_COMMAND_ACK, &p).unwrap();
+        assert!(f.is_verified());
+        assert_eq!(f.payload(), &p[..4], "trailing zeros stripped");
+        assert_eq!(f.payload_padded::<10>(), p);
+        assert_eq!(f.payload_padded::<2>(), [0x90, 0x01]);
+        // The same bytes as the dedicated builder's.
+        let ack = RawCommandAck::new(400, 0, 0, 0).to_frame(1, 1, 4);
+        assert_eq!(ack, f);
+        assert!(matches!(
+            Frame::encode_payload_v2(1, 1, 0, 60_000, &p),
+            Err(FrameError::UnknownMessage(60_000))
+        ));
+    }
+
+    #[test]
     fn unsupported_ack_for_unknown_command_decodes_in_raw_form() {
         // COMMAND_LONG with a command the dialect rejects, built by hand.
         let mut p = [0u8; 33];
