@@ -30,6 +30,8 @@
 //!   lossy radio is then tested with real frames, retries and all.
 //! - `--param-file FILE`: the parameters, and the mission beside them (`FILE` with the
 //!   `.waypoints` extension, QGC WPL 110), loaded at start and saved on every change.
+//! - `--signing-passphrase TEXT` / `--signing-key-file FILE`: MAVLink 2 signing, and
+//!   SETUP_SIGNING from a signed or serial link ([`crate::signing`]).
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
