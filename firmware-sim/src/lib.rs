@@ -21,6 +21,7 @@ pub mod params;
 pub mod plant;
 pub mod sensors;
 pub mod serve;
+pub mod signing;
 pub mod simulate;
 pub mod tlog;
 pub mod vehicle;

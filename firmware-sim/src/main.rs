@@ -231,7 +231,9 @@ struct ServeArgs {
     latency: u64,
     /// MAVLink 2 signing with the key SHA-256(TEXT), as MAVProxy's `signing setup TEXT`: the
     /// twin signs what it sends and ignores unsigned (except RADIO_STATUS), wrongly signed and
-    /// replayed frames. Key and timestamp are kept beside --param-file (NAME.signing).
+    /// replayed frames. Key and timestamp are kept beside --param-file (NAME.signing); without
+    /// a key flag the key saved there is used. SETUP_SIGNING is taken only when signed with the
+    /// current key or sent on a serial link.
     #[arg(long, value_name = "TEXT", conflicts_with = "signing_key_file")]
     signing_passphrase: Option<String>,
     /// MAVLink 2 signing with the key in FILE (64 hex characters); as --signing-passphrase.

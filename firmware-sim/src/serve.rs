@@ -31,6 +31,8 @@
 //! - `--param-file FILE`: the parameters, and the mission beside them (`FILE` with the
 //!   `.waypoints` extension, QGC WPL 110), loaded at start and saved on every change.
 //! - `--count N`: N twins on the same endpoints ([`crate::fleet`]).
+//! - `--signing-passphrase TEXT` / `--signing-key-file FILE`: MAVLink 2 signing, and
+//!   SETUP_SIGNING from a signed or serial link ([`crate::signing`]).
 //! - Ctrl-C or SIGTERM: every link is closed and the process exits 0.
 //!
 //! The flags, the runtime and the signal handling live in the binary (`main.rs`), as in the
@@ -60,16 +62,16 @@
 //! # Ok(()) }
 //! ```
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
-use vtol_link::signing::{Signing, SigningFileError, SigningKey, SigningState};
+use vtol_link::signing::{SigningFileError, SigningKey};
 use vtol_link::{Frame, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkUrl};
 
 use crate::clock::{BATCH, ClockMode, SimClock};
@@ -77,7 +79,10 @@ use crate::endpoint::{Endpoint, EndpointConfig, LinkKey, Outbound};
 use crate::harness::{Call, Harness, Reply, Request};
 use crate::mission;
 use crate::params::{ParamFileError, Params};
+use crate::signing::{Admit, SetupOutcome, TwinSigning};
 use crate::tlog::{TlogError, TlogSink};
+
+pub use crate::signing::signing_file_beside;
 
 /// Capacity of the harness → twin request queue.
 const HARNESS_QUEUE: usize = 64;
@@ -112,7 +117,8 @@ pub struct ServeConfig {
     pub tlog: Option<PathBuf>,
     /// MAVLink 2 signing key: with one, the twin signs everything it sends and drops unsigned
     /// frames (except RADIO_STATUS), wrongly signed ones and replays. Its key and timestamp
-    /// are kept in [`signing_file_beside`] the parameter file, if there is one.
+    /// are kept in [`signing_file_beside`] the parameter file, if there is one; without one the
+    /// key saved there (if any) is used. SETUP_SIGNING may change it ([`crate::signing`]).
     pub signing: Option<SigningKey>,
 }
 
@@ -220,67 +226,6 @@ pub enum ServeError {
     LockstepLatency,
 }
 
-/// Where a keyed twin keeps its signing key and last timestamp: beside the parameter file,
-/// with the extension `signing` (`params.parm` → `params.signing`).
-#[must_use]
-pub fn signing_file_beside(param_file: &Path) -> PathBuf {
-    let p = param_file.with_extension("signing");
-    if p == param_file {
-        let mut s = param_file.as_os_str().to_owned();
-        s.push(".state.signing");
-        PathBuf::from(s)
-    } else {
-        p
-    }
-}
-
-/// How often a keyed twin saves its signing timestamp (the spec asks for at least once a
-/// minute), besides at start and at shutdown.
-const SIGNING_SAVE_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
-
-/// A keyed twin's signing: the shared implementation, where it is saved, what it refused.
-struct TwinSigning {
-    signing: Signing,
-    file: Option<PathBuf>,
-    saved_at: Instant,
-    refused: u64,
-}
-
-impl TwinSigning {
-    /// Signing with `key`, continuing from the timestamp saved in `file` (if it exists), and
-    /// saved there at once so an unwritable place is an error at start.
-    fn start(key: SigningKey, file: Option<PathBuf>) -> Result<Self, SigningFileError> {
-        let saved = match &file {
-            Some(f) => SigningState::load_if_exists(f)?.map_or(0, |s| s.timestamp),
-            None => 0,
-        };
-        let mut s = Self {
-            signing: Signing::new(key, 0, saved),
-            file,
-            saved_at: Instant::now(),
-            refused: 0,
-        };
-        s.save()?;
-        Ok(s)
-    }
-
-    fn save(&mut self) -> Result<(), SigningFileError> {
-        self.saved_at = Instant::now();
-        match &self.file {
-            Some(f) => self.signing.state(std::time::SystemTime::now()).save(f),
-            None => Ok(()),
-        }
-    }
-
-    fn save_if_due(&mut self) {
-        if self.saved_at.elapsed() >= SIGNING_SAVE_EVERY
-            && let Err(e) = self.save()
-        {
-            tracing::warn!("{e}");
-        }
-    }
-}
-
 /// One opened endpoint and where it ended up.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Bound {
@@ -349,17 +294,14 @@ impl Twin {
             Some(other) => return Err(ServeError::ControlUrl(other.to_string())),
         };
         let tlog = config.tlog.as_deref().map(TlogSink::create).transpose()?;
-        let signing = match config.signing.take() {
-            Some(key) => Some(TwinSigning::start(
-                key,
-                config
-                    .endpoint
-                    .param_file
-                    .as_deref()
-                    .map(signing_file_beside),
-            )?),
-            None => None,
-        };
+        let signing = TwinSigning::start(
+            config.signing.take(),
+            config
+                .endpoint
+                .param_file
+                .as_deref()
+                .map(signing_file_beside),
+        )?;
         let (calls_tx, calls) = mpsc::channel(HARNESS_QUEUE);
         let harness = Harness::new(calls_tx);
         let (control, control_task) = match control_addr {
@@ -375,6 +317,7 @@ impl Twin {
         let (events, rx) = mpsc::channel(EVENT_QUEUE);
         let mut bound = Vec::new();
         let mut endpoints = Vec::new();
+        let mut local_links = HashSet::new();
         for url in &config.listen {
             let handle = vtol_link::spawn_endpoint(
                 url,
@@ -390,6 +333,10 @@ impl Twin {
                     return Err(e.into());
                 }
             };
+            // A serial device is a local link (the cable): SETUP_SIGNING is taken on it.
+            if let (LinkUrl::Serial { .. }, Some(id)) = (url, handle.link_id()) {
+                local_links.insert(id);
+            }
             bound.push(Bound {
                 url: url.clone(),
                 local_addr: handle.local_addr(),
@@ -404,6 +351,7 @@ impl Twin {
             radio: Radio::new(config.impairment),
             tlog,
             signing,
+            local_links,
             reserve: config.link_options.queue_len / 4,
             cancel: cancel.clone(),
         };
@@ -537,8 +485,10 @@ struct Shell {
     links: HashMap<LinkId, LinkEntry>,
     radio: Radio,
     tlog: Option<TlogSink>,
-    /// With a key: verifies what comes in, signs what goes out.
-    signing: Option<TwinSigning>,
+    /// Verifies what comes in and signs what goes out when keyed; handles SETUP_SIGNING.
+    signing: TwinSigning,
+    /// Links on serial devices, where SETUP_SIGNING is taken unsigned.
+    local_links: HashSet<LinkId>,
     /// Free queue places kept for replies: below this, telemetry is shed.
     reserve: usize,
     /// Stops the loop, also while it waits for a lockstep reader.
@@ -581,9 +531,7 @@ impl Shell {
                         entry.flush_backlog();
                     }
                     self.note_bad_frames();
-                    if let Some(s) = &mut self.signing {
-                        s.save_if_due();
-                    }
+                    self.signing.save_if_due();
                     self.tick().await;
                     if let Some(t) = &mut self.tlog {
                         t.hand_over();
@@ -603,12 +551,7 @@ impl Shell {
         if let Some(t) = self.tlog.take() {
             let _ = tokio::task::spawn_blocking(move || t.finish()).await;
         }
-        if let Some(s) = &mut self.signing {
-            tracing::info!(refused = s.refused, "signing: frames refused");
-            if let Err(e) = s.save() {
-                tracing::warn!("{e}");
-            }
-        }
+        self.signing.finish();
         self.endpoint
     }
 
@@ -649,13 +592,36 @@ impl Shell {
 
     async fn on_frame(&mut self, id: LinkId, frame: &Frame) {
         // A keyed twin takes only rightly signed, fresh frames (and unsigned RADIO_STATUS):
-        // anything else changes nothing and gets no answer.
-        if let Some(s) = &mut self.signing
-            && let Err(refusal) = s.signing.verify(frame, std::time::SystemTime::now())
+        // anything else changes nothing and gets no answer. SETUP_SIGNING stops here, whatever
+        // becomes of it: it carries a key, so neither the vehicle nor the tlog sees it.
+        let local = self.local_links.contains(&id);
+        let sysid = self.endpoint.sysid();
+        match self
+            .signing
+            .admit(frame, local, sysid, std::time::SystemTime::now())
         {
-            s.refused += 1;
-            tracing::debug!(%id, %refusal, "frame refused");
-            return;
+            Admit::Pass => {}
+            Admit::Refused(refusal) => {
+                tracing::debug!(%id, %refusal, "frame refused");
+                return;
+            }
+            Admit::SetupSigning(outcome) => {
+                match outcome {
+                    SetupOutcome::Keyed => {
+                        tracing::info!(%id, "signing: new key from SETUP_SIGNING")
+                    }
+                    SetupOutcome::Disabled => {
+                        tracing::info!(%id, "signing: switched off by SETUP_SIGNING")
+                    }
+                    SetupOutcome::Refused => tracing::warn!(
+                        %id,
+                        local,
+                        "SETUP_SIGNING refused: not signed with the current key and not on a local (serial) link"
+                    ),
+                    SetupOutcome::NotForUs => {}
+                }
+                return;
+            }
         }
         if self.tlog.is_some() {
             let stamp = self.stamp_us();
@@ -663,7 +629,7 @@ impl Shell {
                 t.record(stamp, false, frame.as_bytes());
             }
         }
-        let out = self.endpoint.handle(key(id), frame.as_bytes());
+        let out = self.endpoint.handle(key(id), frame);
         self.dispatch(out).await;
         self.settle().await;
     }
@@ -749,22 +715,12 @@ impl Shell {
         let stamp = self.stamp_us();
         for o in out {
             let id = LinkId(o.link.0 as u32);
-            let f = match Frame::from_bytes(bytes::Bytes::from(o.frame)) {
+            let f = match self.signing.outgoing(o.frame, std::time::SystemTime::now()) {
                 Ok(f) => f,
                 Err(e) => {
-                    tracing::error!("endpoint produced a bad frame: {e}");
+                    tracing::error!("cannot sign an outgoing frame: {e}");
                     continue;
                 }
-            };
-            let f = match &mut self.signing {
-                None => f,
-                Some(s) => match s.signing.sign(&f, std::time::SystemTime::now()) {
-                    Ok(signed) => signed,
-                    Err(e) => {
-                        tracing::error!("cannot sign an outgoing frame: {e}");
-                        continue;
-                    }
-                },
             };
             if let Some(t) = &mut self.tlog {
                 t.record(stamp, true, f.as_bytes());

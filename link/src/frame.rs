@@ -273,6 +273,28 @@ impl Frame {
         .unwrap_or_else(|e| unreachable!("dialect message does not frame: {e}"))
     }
 
+    /// Builds an unsigned MAVLink 2 frame from a hand-built payload of a message the dialect
+    /// knows (its CRC_EXTRA is the dialect's), trailing zero bytes stripped as the spec asks:
+    /// for payloads the typed encoder cannot express (enum values the dialect lacks).
+    pub fn encode_payload_v2(
+        system_id: u8,
+        component_id: u8,
+        seq: u8,
+        message_id: u32,
+        payload: &[u8],
+    ) -> Result<Frame, FrameError> {
+        let extra = crc_extra(message_id).ok_or(FrameError::UnknownMessage(message_id))?;
+        let len = mavlink::utils::remove_trailing_zeroes(payload);
+        Self::encode_raw_v2(
+            system_id,
+            component_id,
+            seq,
+            message_id,
+            &payload[..len],
+            extra,
+        )
+    }
+
     /// Builds a MAVLink 1 frame from a typed message (no extension fields, as v1 requires).
     pub fn encode_v1(
         system_id: u8,
@@ -417,6 +439,16 @@ impl Frame {
     pub fn payload(&self) -> &[u8] {
         let start = self.header_len();
         &self.bytes[start..start + self.payload_len()]
+    }
+
+    /// The payload zero-filled (or cut) to `N` bytes: MAVLink 2 senders strip trailing zeros,
+    /// so a reader of fixed offsets wants the full length back. Copies, never allocates.
+    pub fn payload_padded<const N: usize>(&self) -> [u8; N] {
+        let mut p = [0u8; N];
+        let src = self.payload();
+        let n = src.len().min(N);
+        p[..n].copy_from_slice(&src[..n]);
+        p
     }
 
     /// The checksum stored in the frame.
@@ -617,6 +649,19 @@ pub struct RawCommandAck {
 impl RawCommandAck {
     /// MAV_RESULT_UNSUPPORTED.
     pub const RESULT_UNSUPPORTED: u8 = 3;
+
+    /// An ack with `result` for `command`, addressed back to its sender (progress 255 "not
+    /// in progress", `result_param2` 0).
+    pub fn new(command: u16, result: u8, sender_system: u8, sender_component: u8) -> Self {
+        RawCommandAck {
+            command,
+            result,
+            progress: 0xFF,
+            result_param2: 0,
+            target_system: sender_system,
+            target_component: sender_component,
+        }
+    }
 
     /// An UNSUPPORTED ack for `cmd`, addressed back to its sender.
     pub fn unsupported(cmd: &RawCommand, sender_system: u8, sender_component: u8) -> Self {
@@ -822,6 +867,26 @@ mod tests {
                 .raw_command()
                 .is_none()
         );
+    }
+
+    #[test]
+    fn payload_built_by_hand_is_trimmed_and_read_back_zero_filled() {
+        // COMMAND_ACK (77): command 400, result 0, then zeros up to the targets (255, 190).
+        let mut p = [0u8; 10];
+        p[..2].copy_from_slice(&400u16.to_le_bytes());
+        p[3] = 0xFF;
+        let f = Frame::encode_payload_v2(1, 1, 4, MSG_ID_COMMAND_ACK, &p).unwrap();
+        assert!(f.is_verified());
+        assert_eq!(f.payload(), &p[..4], "trailing zeros stripped");
+        assert_eq!(f.payload_padded::<10>(), p);
+        assert_eq!(f.payload_padded::<2>(), [0x90, 0x01]);
+        // The same bytes as the dedicated builder's.
+        let ack = RawCommandAck::new(400, 0, 0, 0).to_frame(1, 1, 4);
+        assert_eq!(ack, f);
+        assert!(matches!(
+            Frame::encode_payload_v2(1, 1, 0, 60_000, &p),
+            Err(FrameError::UnknownMessage(60_000))
+        ));
     }
 
     #[test]

@@ -13,8 +13,9 @@
 
 use mavlink::dialects::ardupilotmega as apm;
 
-use super::wire::{RawCommand, command_ack_payload};
-use super::{Endpoint, InFrame, LinkKey, streams};
+use vtol_link::{Frame, RawCommand, RawCommandKind};
+
+use super::{Endpoint, LinkKey, streams};
 use crate::mode::FlightMode;
 use crate::vehicle::ArmError;
 
@@ -80,6 +81,67 @@ pub const FORCE_MAGIC: f32 = 21196.0;
 /// How long a remembered result answers retransmissions, µs.
 const RETRY_WINDOW_US: u64 = 5_000_000;
 
+/// A COMMAND_LONG or COMMAND_INT as the twin acts on it, from vtol-link's raw reading (so
+/// command ids the dialect's `MavCmd` lacks still get their ACK).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    /// Command number.
+    pub command: u16,
+    /// param1..param7 (COMMAND_INT: x, y as f32 of the integer, z).
+    pub params: [f32; 7],
+    /// Addressed system.
+    pub target_system: u8,
+    /// Addressed component.
+    pub target_component: u8,
+    /// Retransmission counter (COMMAND_LONG only; 0 for COMMAND_INT).
+    pub confirmation: u8,
+    /// Came as COMMAND_INT.
+    pub is_int: bool,
+    /// COMMAND_INT's x as sent (latitude in 1e-7 degree in global frames); 0 for COMMAND_LONG.
+    pub x: i32,
+    /// COMMAND_INT's y as sent (longitude in 1e-7 degree); 0 for COMMAND_LONG.
+    pub y: i32,
+    /// COMMAND_INT's `MAV_FRAME`; 0 for COMMAND_LONG.
+    pub frame: u8,
+}
+
+impl From<&RawCommand> for Command {
+    fn from(c: &RawCommand) -> Self {
+        let (params, confirmation, is_int, x, y, frame) = match c.kind {
+            RawCommandKind::Long {
+                params,
+                confirmation,
+            } => (params, confirmation, false, 0, 0, 0),
+            RawCommandKind::Int {
+                params: p,
+                x,
+                y,
+                z,
+                frame,
+                ..
+            } => (
+                [p[0], p[1], p[2], p[3], x as f32, y as f32, z],
+                0,
+                true,
+                x,
+                y,
+                frame,
+            ),
+        };
+        Command {
+            command: c.command,
+            params,
+            target_system: c.target_system,
+            target_component: c.target_component,
+            confirmation,
+            is_int,
+            x,
+            y,
+            frame,
+        }
+    }
+}
+
 /// The last command done per sender, to answer retries without acting twice.
 #[derive(Debug, Clone, Default)]
 pub struct CommandMemory {
@@ -88,8 +150,8 @@ pub struct CommandMemory {
 }
 
 impl Endpoint {
-    pub(super) fn handle_command(&mut self, link: LinkKey, frame: &InFrame, c: &RawCommand) {
-        let key = (frame.sysid, frame.compid, c.command);
+    pub(super) fn handle_command(&mut self, link: LinkKey, frame: &Frame, c: &Command) {
+        let key = (frame.system_id(), frame.component_id(), c.command);
         let remembered = self.commands.last.get(&key).copied();
         let result = match remembered {
             Some((r, at))
@@ -118,14 +180,14 @@ impl Endpoint {
         self.ack(link, frame, c.command, result);
     }
 
-    fn ack(&mut self, link: LinkKey, frame: &InFrame, command: u16, result: u8) {
-        let payload = command_ack_payload(command, result, (frame.sysid, frame.compid));
-        self.send_raw(link, 77, &payload);
+    fn ack(&mut self, link: LinkKey, frame: &Frame, command: u16, result: u8) {
+        let to = (frame.system_id(), frame.component_id());
+        self.send_ack(link, command, result, to);
     }
 
     /// Runs a command. Messages that must follow the ACK go to `after` (ArduPilot ACKs a
     /// REQUEST_MESSAGE first and sends the message after).
-    fn execute(&mut self, link: LinkKey, c: &RawCommand, after: &mut Vec<apm::MavMessage>) -> u8 {
+    fn execute(&mut self, link: LinkKey, c: &Command, after: &mut Vec<apm::MavMessage>) -> u8 {
         let p = c.params;
         match c.command {
             cmd::COMPONENT_ARM_DISARM => self.cmd_arm_disarm(link, p[0], p[1]),
@@ -276,7 +338,7 @@ impl Endpoint {
     #[allow(deprecated)]
     /// SET_MODE (11): like DO_SET_MODE, answered with COMMAND_ACK(`command` = 11) as ArduPilot
     /// does (built from raw bytes: the crate's `MavCmd` has no 11).
-    pub(super) fn on_set_mode(&mut self, link: LinkKey, frame: &InFrame, m: &apm::SET_MODE_DATA) {
+    pub(super) fn on_set_mode(&mut self, link: LinkKey, frame: &Frame, m: &apm::SET_MODE_DATA) {
         if m.target_system != self.sysid && m.target_system != 0 {
             return;
         }

@@ -4,7 +4,7 @@
 
 use mavlink::dialects::ardupilotmega as apm;
 
-use super::{Endpoint, InFrame, LinkKey};
+use super::{Endpoint, Frame, LinkKey};
 
 /// FTP opcode of a NAK.
 pub const OPCODE_NAK: u8 = 129;
@@ -30,7 +30,7 @@ impl Endpoint {
     pub(super) fn on_ftp(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         f: &apm::FILE_TRANSFER_PROTOCOL_DATA,
     ) {
         // A NAK of our own would come back to us through a loop; never answer one.
@@ -39,8 +39,8 @@ impl Endpoint {
         }
         let reply = apm::MavMessage::FILE_TRANSFER_PROTOCOL(apm::FILE_TRANSFER_PROTOCOL_DATA {
             target_network: 0,
-            target_system: frame.sysid,
-            target_component: frame.compid,
+            target_system: frame.system_id(),
+            target_component: frame.component_id(),
             payload: nak_payload(&f.payload),
         });
         self.send(link, &reply);

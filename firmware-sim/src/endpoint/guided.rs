@@ -20,8 +20,8 @@
 use mavlink::dialects::ardupilotmega as apm;
 use nalgebra::Vector3;
 
+use super::commands::Command;
 use super::commands::result;
-use super::wire::RawCommand;
 use super::{Endpoint, LinkKey, position};
 use crate::frames::paper_to_ned;
 use crate::globe::{deg_to_e7, valid_lat_lon};
@@ -169,7 +169,7 @@ impl Endpoint {
     }
 
     /// DO_REPOSITION (192).
-    pub(super) fn cmd_reposition(&mut self, link: LinkKey, c: &RawCommand) -> u8 {
+    pub(super) fn cmd_reposition(&mut self, link: LinkKey, c: &Command) -> u8 {
         let p = c.params;
         let t = *self.vehicle.telemetry();
         // Bit 0 of param2 (MAV_DO_REPOSITION_FLAGS_CHANGE_MODE): switch to GUIDED first.
@@ -309,7 +309,7 @@ impl Endpoint {
 
     /// DO_SET_HOME (179): here (`param1` = 1) or the given point (altitude AMSL), inside the
     /// flying area.
-    pub(super) fn cmd_set_home(&mut self, link: LinkKey, c: &RawCommand) -> u8 {
+    pub(super) fn cmd_set_home(&mut self, link: LinkKey, c: &Command) -> u8 {
         let p = c.params;
         if p[0] == 1.0 {
             let here = self.pos_ned();

@@ -6,7 +6,7 @@
 
 use mavlink::dialects::ardupilotmega as apm;
 
-use super::{Endpoint, InFrame};
+use super::{Endpoint, Frame};
 use crate::mode::FlightMode;
 use crate::vehicle::SystemState;
 
@@ -68,8 +68,8 @@ impl Endpoint {
         })
     }
 
-    pub(super) fn on_heartbeat(&mut self, frame: &InFrame, _hb: &apm::HEARTBEAT_DATA) {
-        if u32::from(frame.sysid) == self.params.value("SYSID_MYGCS") as u32 {
+    pub(super) fn on_heartbeat(&mut self, frame: &Frame, _hb: &apm::HEARTBEAT_DATA) {
+        if u32::from(frame.system_id()) == self.params.value("SYSID_MYGCS") as u32 {
             self.failsafe.last_gcs_heartbeat_us = Some(self.now_us);
             if self.failsafe.active {
                 self.failsafe.active = false;

@@ -9,7 +9,7 @@
 use mavlink::dialects::ardupilotmega as apm;
 use nalgebra::Vector3;
 
-use super::{Endpoint, InFrame};
+use super::{Endpoint, Frame};
 use crate::frames::ned_to_paper;
 use crate::vehicle::Vehicle;
 
@@ -41,11 +41,11 @@ impl ManualState {
 }
 
 impl Endpoint {
-    fn is_from_gcs(&self, frame: &InFrame) -> bool {
-        f64::from(frame.sysid) == self.params.value("SYSID_MYGCS")
+    fn is_from_gcs(&self, frame: &Frame) -> bool {
+        f64::from(frame.system_id()) == self.params.value("SYSID_MYGCS")
     }
 
-    pub(super) fn on_rc_override(&mut self, frame: &InFrame, o: &apm::RC_CHANNELS_OVERRIDE_DATA) {
+    pub(super) fn on_rc_override(&mut self, frame: &Frame, o: &apm::RC_CHANNELS_OVERRIDE_DATA) {
         if !self.is_from_gcs(frame) {
             return;
         }
@@ -72,7 +72,7 @@ impl Endpoint {
         self.manual.apply(&mut self.vehicle);
     }
 
-    pub(super) fn on_manual_control(&mut self, frame: &InFrame, m: &apm::MANUAL_CONTROL_DATA) {
+    pub(super) fn on_manual_control(&mut self, frame: &Frame, m: &apm::MANUAL_CONTROL_DATA) {
         if m.target != self.sysid || !self.is_from_gcs(frame) {
             return;
         }

@@ -24,7 +24,7 @@
 
 use mavlink::dialects::ardupilotmega as apm;
 
-use super::{Endpoint, InFrame, LinkKey};
+use super::{Endpoint, Frame, LinkKey};
 use crate::mission::{MAX_ITEMS, Mission, MissionItem, check_item, xy_from_float, xy_to_float};
 
 /// Silence after which the next item is requested again, µs of stream time.
@@ -87,15 +87,15 @@ fn i32_at(p: &[u8], i: usize) -> i32 {
 
 /// Reads a MISSION_ITEM_INT (73) or MISSION_ITEM (39) frame.
 #[must_use]
-pub fn raw_item(frame: &InFrame) -> Option<RawItem> {
-    if frame.msgid != MISSION_ITEM_INT_ID && frame.msgid != MISSION_ITEM_ID {
+pub fn raw_item(frame: &Frame) -> Option<RawItem> {
+    if frame.message_id() != MISSION_ITEM_INT_ID && frame.message_id() != MISSION_ITEM_ID {
         return None;
     }
     // param1..4, x, y, z (4 bytes each), seq, command (u16), target sys/comp, frame, current,
     // autocontinue, mission_type (extension).
-    let p = frame.padded(38);
+    let p: [u8; 38] = frame.payload_padded();
     let frame_no = p[34];
-    let (x, y) = if frame.msgid == MISSION_ITEM_INT_ID {
+    let (x, y) = if frame.message_id() == MISSION_ITEM_INT_ID {
         (i32_at(&p, 16), i32_at(&p, 20))
     } else {
         (
@@ -193,7 +193,7 @@ impl Endpoint {
 
     /// Handles the mission messages that must be read raw (MISSION_ITEM, MISSION_ITEM_INT).
     /// Returns whether the frame was one of them.
-    pub(super) fn mission_raw(&mut self, link: LinkKey, frame: &InFrame) -> bool {
+    pub(super) fn mission_raw(&mut self, link: LinkKey, frame: &Frame) -> bool {
         let Some(r) = raw_item(frame) else {
             return false;
         };
@@ -205,9 +205,9 @@ impl Endpoint {
         true
     }
 
-    fn on_mission_item(&mut self, link: LinkKey, frame: &InFrame, r: &RawItem) {
+    fn on_mission_item(&mut self, link: LinkKey, frame: &Frame, r: &RawItem) {
         use apm::MavMissionResult as R;
-        let from = (frame.sysid, frame.compid);
+        let from = (frame.system_id(), frame.component_id());
         if r.mission_type != TYPE_MISSION {
             self.mission_ack(link, from, r.mission_type, R::MAV_MISSION_UNSUPPORTED);
             return;
@@ -312,11 +312,11 @@ impl Endpoint {
     pub(super) fn on_mission_count(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         m: &apm::MISSION_COUNT_DATA,
     ) {
         use apm::MavMissionResult as R;
-        let from = (frame.sysid, frame.compid);
+        let from = (frame.system_id(), frame.component_id());
         let kind = m.mission_type as u8;
         if kind != TYPE_MISSION {
             let result = if m.count == 0 {
@@ -369,7 +369,7 @@ impl Endpoint {
     pub(super) fn on_mission_request_list(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         m: &apm::MISSION_REQUEST_LIST_DATA,
     ) {
         let kind = m.mission_type as u8;
@@ -380,8 +380,8 @@ impl Endpoint {
         };
         let msg = apm::MavMessage::MISSION_COUNT(apm::MISSION_COUNT_DATA {
             count,
-            target_system: frame.sysid,
-            target_component: frame.compid,
+            target_system: frame.system_id(),
+            target_component: frame.component_id(),
             mission_type: m.mission_type,
             opaque_id: 0,
         });
@@ -392,12 +392,12 @@ impl Endpoint {
     pub(super) fn on_mission_request(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         seq: u16,
         kind: u8,
         int: bool,
     ) {
-        let to = (frame.sysid, frame.compid);
+        let to = (frame.system_id(), frame.component_id());
         let item = (kind == TYPE_MISSION)
             .then(|| self.mission.get(seq).copied())
             .flatten();
@@ -423,7 +423,7 @@ impl Endpoint {
     pub(super) fn on_mission_clear_all(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         m: &apm::MISSION_CLEAR_ALL_DATA,
     ) {
         let kind = m.mission_type as u8;
@@ -433,17 +433,17 @@ impl Endpoint {
         }
         self.mission_ack(
             link,
-            (frame.sysid, frame.compid),
+            (frame.system_id(), frame.component_id()),
             kind,
             apm::MavMissionResult::MAV_MISSION_ACCEPTED,
         );
     }
 
     /// MISSION_WRITE_PARTIAL_LIST: partial updates are not offered.
-    pub(super) fn on_mission_partial(&mut self, link: LinkKey, frame: &InFrame, kind: u8) {
+    pub(super) fn on_mission_partial(&mut self, link: LinkKey, frame: &Frame, kind: u8) {
         self.mission_ack(
             link,
-            (frame.sysid, frame.compid),
+            (frame.system_id(), frame.component_id()),
             kind,
             apm::MavMissionResult::MAV_MISSION_UNSUPPORTED,
         );
@@ -509,7 +509,7 @@ impl Endpoint {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::endpoint::wire::{encode_v2_raw, parse_frame};
+    use vtol_link::Frame;
 
     #[test]
     fn item_payload_round_trips_raw() {
@@ -524,13 +524,13 @@ mod tests {
             autocontinue: 1,
         };
         let p = item_payload(4, &item, (1, 1), true);
-        let f = parse_frame(&encode_v2_raw(0, 255, 190, MISSION_ITEM_INT_ID, &p)).unwrap();
+        let f = Frame::encode_payload_v2(255, 190, 0, MISSION_ITEM_INT_ID, &p).unwrap();
         let r = raw_item(&f).unwrap();
         assert_eq!((r.seq, r.target_system, r.target_component), (4, 1, 1));
         assert_eq!(r.item, item);
         // MISSION_ITEM: degrees as floats, back to 1e-7 degree within float32 precision.
         let p = item_payload(4, &item, (1, 1), false);
-        let f = parse_frame(&encode_v2_raw(0, 255, 190, MISSION_ITEM_ID, &p)).unwrap();
+        let f = Frame::encode_payload_v2(255, 190, 0, MISSION_ITEM_ID, &p).unwrap();
         let r = raw_item(&f).unwrap();
         assert!((r.item.x - item.x).abs() < 40, "{} vs {}", r.item.x, item.x);
         assert_eq!(r.item.command, 65000);

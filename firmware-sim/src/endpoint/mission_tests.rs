@@ -4,7 +4,6 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
-use super::wire::{encode_v2, encode_v2_raw, parse_frame};
 use super::*;
 use crate::globe::GeoPoint;
 use crate::mission::{MissionItem, cmd as mcmd, frame};
@@ -29,26 +28,24 @@ fn endpoint() -> Endpoint {
     endpoint_with(None)
 }
 
-fn from(compid: u8, msg: &apm::MavMessage) -> Vec<u8> {
-    encode_v2(3, GCS_SYSID, compid, msg)
+fn from(compid: u8, msg: &apm::MavMessage) -> Frame {
+    Frame::encode_v2(GCS_SYSID, compid, 3, msg)
 }
 
-fn v2(msg: &apm::MavMessage) -> Vec<u8> {
+fn v2(msg: &apm::MavMessage) -> Frame {
     from(GCS_COMPID, msg)
 }
 
 fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
-    out.iter()
-        .filter_map(|o| parse_frame(&o.frame).ok()?.decode().ok())
-        .collect()
+    out.iter().filter_map(|o| o.frame.decode().ok()).collect()
 }
 
 fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
     out.iter()
-        .filter_map(|o| parse_frame(&o.frame).ok())
-        .filter(|f| f.msgid == 77)
+        .map(|o| &o.frame)
+        .filter(|f| f.message_id() == 77)
         .map(|f| {
-            let p = f.padded(10);
+            let p: [u8; 10] = f.payload_padded();
             (u16::from_le_bytes([p[0], p[1]]), p[2])
         })
         .collect()
@@ -105,17 +102,17 @@ fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
     out
 }
 
-fn command(command: u16, p: [f32; 7]) -> Vec<u8> {
+fn command(command: u16, p: [f32; 7]) -> Frame {
     let mut payload = [0u8; 33];
     for (k, v) in p.iter().enumerate() {
         payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
     }
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
-    encode_v2_raw(5, GCS_SYSID, GCS_COMPID, 76, &payload)
+    Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 5, 76, &payload).unwrap()
 }
 
-fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) -> Vec<u8> {
+fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) -> Frame {
     let mut payload = [0u8; 35];
     for (k, v) in p.iter().enumerate() {
         payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
@@ -126,7 +123,7 @@ fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) 
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
     payload[32] = frame_no;
-    encode_v2_raw(5, GCS_SYSID, GCS_COMPID, 75, &payload)
+    Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 5, 75, &payload).unwrap()
 }
 
 fn set_mode(ep: &mut Endpoint, mode: FlightMode) -> Vec<Outbound> {
@@ -149,14 +146,15 @@ fn count_msg(count: u16) -> apm::MavMessage {
     })
 }
 
-fn item_frame(seq: u16, it: &MissionItem) -> Vec<u8> {
-    encode_v2_raw(
-        9,
+fn item_frame(seq: u16, it: &MissionItem) -> Frame {
+    Frame::encode_payload_v2(
         GCS_SYSID,
         GCS_COMPID,
+        9,
         MISSION_ITEM_INT_ID,
         &item_payload(seq, it, (1, 1), true),
     )
+    .unwrap()
 }
 
 /// A point `north_m`, `east_m` from the origin at `alt` m above home.
@@ -225,9 +223,9 @@ fn download(ep: &mut Endpoint) -> Vec<Vec<u8>> {
                 mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
             });
             let out = ep.handle(GCS, &v2(&req));
-            let f = parse_frame(&out[0].frame).unwrap();
-            assert_eq!(f.msgid, MISSION_ITEM_INT_ID);
-            f.padded(38)
+            let f = &out[0].frame;
+            assert_eq!(f.message_id(), MISSION_ITEM_INT_ID);
+            f.payload_padded::<38>().to_vec()
         })
         .collect()
 }
@@ -259,8 +257,8 @@ fn upload_then_download_is_byte_identical() {
         target_component: 1,
         mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
     });
-    let f = parse_frame(&ep.handle(GCS, &v2(&req))[0].frame).unwrap();
-    assert_eq!(f.msgid, MISSION_ITEM_ID);
+    let f = ep.handle(GCS, &v2(&req))[0].frame.clone();
+    assert_eq!(f.message_id(), MISSION_ITEM_ID);
     let r = raw_item(&f).unwrap();
     assert!((r.item.x - items[2].x).abs() < 40);
     // Past the end: INVALID_SEQUENCE.
@@ -481,8 +479,7 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
     );
     for id in [24u32, 74, 147, 42] {
         assert!(
-            out.iter()
-                .any(|o| parse_frame(&o.frame).is_ok_and(|f| f.msgid == id)),
+            out.iter().any(|o| o.frame.message_id() == id),
             "message {id} streamed"
         );
     }

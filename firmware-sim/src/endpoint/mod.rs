@@ -12,8 +12,12 @@
 //! REQUEST_DATA_STREAM), [`manual`] (MANUAL_CONTROL, RC_CHANNELS_OVERRIDE, position targets),
 //! [`mission`] (the mission protocol), [`guided`] (GUIDED, AUTO and QRTL: the navigator, home,
 //! take-off and reposition), [`position`] (telemetry on the globe, battery), [`statustext`]
-//! (texts in chunks), [`ftp`] (the NAK that sends MAVProxy to the parameter protocol),
-//! [`wire`] (framing).
+//! (texts in chunks), [`ftp`] (the NAK that sends MAVProxy to the parameter protocol).
+//!
+//! Framing is `vtol_link`'s, the daemon's own: frames come in as [`Frame`]s the transport has
+//! already split and CRC-checked, and go out as [`Frame`]s, so signing is applied to them (by
+//! the serve loop, with `vtol_link::signing`) without parsing anything twice. Hand-read fields
+//! (commands, PARAM_SET, mission items) are read from the frame's zero-filled payload.
 
 pub mod commands;
 pub mod ftp;
@@ -25,20 +29,18 @@ pub mod params_protocol;
 pub mod position;
 pub mod statustext;
 pub mod streams;
-pub mod wire;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
 
 use mavlink::dialects::ardupilotmega as apm;
+use vtol_link::Frame;
 
 use crate::globe::Origin;
 use crate::mission::Mission;
 use crate::navigation::Navigator;
 use crate::params::Params;
 use crate::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
-
-pub use wire::InFrame;
 
 /// Our component id (MAV_COMP_ID_AUTOPILOT1): pymavlink reads params of `(sysid, 1)`.
 pub const COMPID: u8 = 1;
@@ -56,8 +58,8 @@ pub struct LinkKey(pub u64);
 pub struct Outbound {
     /// Destination link.
     pub link: LinkKey,
-    /// A complete MAVLink 2 frame.
-    pub frame: Vec<u8>,
+    /// A complete, unsigned MAVLink 2 frame (the serve loop signs it when the twin is keyed).
+    pub frame: Frame,
     /// A scheduled stream message (true) rather than a reply or an event (false). A link that
     /// is short of room sheds telemetry first, so replies are never lost behind it.
     pub telemetry: bool,
@@ -84,7 +86,7 @@ pub struct EndpointConfig {
 pub struct EndpointStats {
     /// Frames handled (valid, any target).
     pub frames_in: u64,
-    /// Frames that failed CRC or framing (reported by the transports plus our own parse).
+    /// Frames that failed CRC or framing (reported by the transports' decoders).
     pub bad_frames: u64,
     /// Valid frames addressed to another system or component.
     pub not_for_us: u64,
@@ -325,17 +327,16 @@ impl Endpoint {
         self.rebooting_until_us = Some(self.now_us + REBOOT_SILENCE_US);
     }
 
-    /// Handles one complete frame received on `link` and returns the replies.
-    pub fn handle(&mut self, link: LinkKey, bytes: &[u8]) -> Vec<Outbound> {
+    /// Handles one frame received on `link` (as a transport's decoder yields it) and returns
+    /// the replies. A frame of a message id the dialect does not know (unverified) is ignored.
+    pub fn handle(&mut self, link: LinkKey, frame: &Frame) -> Vec<Outbound> {
         if self.is_rebooting() {
             // Nobody is listening during a reboot.
             return Vec::new();
         }
         self.add_link(link);
-        match wire::parse_frame(bytes) {
-            Ok(frame) => self.handle_frame(link, &frame),
-            Err(wire::WireError::UnknownMessage(_)) => {}
-            Err(_) => self.stats.bad_frames += 1,
+        if frame.is_verified() {
+            self.handle_frame(link, frame);
         }
         std::mem::take(&mut self.out)
     }
@@ -420,10 +421,10 @@ impl Endpoint {
         }
     }
 
-    fn handle_frame(&mut self, link: LinkKey, frame: &InFrame) {
+    fn handle_frame(&mut self, link: LinkKey, frame: &Frame) {
         self.stats.frames_in += 1;
         // Commands first, raw: the typed decoder cannot represent unknown command ids.
-        if let Some(cmd) = wire::raw_command(frame) {
+        if let Some(cmd) = frame.raw_command().map(|c| commands::Command::from(&c)) {
             if self.for_us(Some(cmd.target_system), Some(cmd.target_component)) {
                 self.handle_command(link, frame, &cmd);
             } else {
@@ -439,7 +440,7 @@ impl Endpoint {
             Ok(m) => m,
             Err(_) => {
                 // PARAM_SET with a param_type outside the enum: the contract ignores the type.
-                if let Some((value, tsys, tcomp, name)) = wire::raw_param_set(frame)
+                if let Some((value, tsys, tcomp, name)) = params_protocol::raw_param_set(frame)
                     && self.for_us(Some(tsys), Some(tcomp))
                 {
                     self.param_set(link, frame, &name, value);
@@ -509,19 +510,30 @@ impl Endpoint {
     /// Queues a typed message on one link.
     fn send(&mut self, link: LinkKey, msg: &apm::MavMessage) {
         let seq = self.next_seq(link);
-        let frame = wire::encode_v2(seq, self.sysid, COMPID, msg);
-        self.stats.frames_out += 1;
-        self.out.push(Outbound {
-            link,
-            frame,
-            telemetry: false,
-        });
+        let frame = Frame::encode_v2(self.sysid, COMPID, seq, msg);
+        self.push_out(link, frame);
     }
 
-    /// Queues a hand-built payload on one link.
+    /// Queues a hand-built payload of a dialect message on one link (trailing zeros stripped).
     fn send_raw(&mut self, link: LinkKey, msgid: u32, payload: &[u8]) {
         let seq = self.next_seq(link);
-        let frame = wire::encode_v2_raw(seq, self.sysid, COMPID, msgid, payload);
+        match Frame::encode_payload_v2(self.sysid, COMPID, seq, msgid, payload) {
+            Ok(frame) => self.push_out(link, frame),
+            // Only dialect ids with payloads of at most 255 bytes are built here.
+            Err(e) => unreachable!("hand-built payload does not frame: {e}"),
+        }
+    }
+
+    /// Queues a COMMAND_ACK for any command number, including ones the dialect's `MavCmd`
+    /// lacks, addressed back to `to` (system, component).
+    fn send_ack(&mut self, link: LinkKey, command: u16, result: u8, to: (u8, u8)) {
+        let seq = self.next_seq(link);
+        let frame = vtol_link::RawCommandAck::new(command, result, to.0, to.1)
+            .to_frame(self.sysid, COMPID, seq);
+        self.push_out(link, frame);
+    }
+
+    fn push_out(&mut self, link: LinkKey, frame: Frame) {
         self.stats.frames_out += 1;
         self.out.push(Outbound {
             link,
@@ -545,7 +557,7 @@ impl Endpoint {
         })
     }
 
-    fn on_timesync(&mut self, link: LinkKey, frame: &InFrame, t: &apm::TIMESYNC_DATA) {
+    fn on_timesync(&mut self, link: LinkKey, frame: &Frame, t: &apm::TIMESYNC_DATA) {
         // tc1 == 0 is a request; anything else is someone's reply to their own request.
         if t.tc1 != 0 {
             return;
@@ -553,8 +565,8 @@ impl Endpoint {
         let reply = apm::MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
             tc1: (self.now_us * 1000) as i64,
             ts1: t.ts1,
-            target_system: frame.sysid,
-            target_component: frame.compid,
+            target_system: frame.system_id(),
+            target_component: frame.component_id(),
         });
         self.send(link, &reply);
     }

@@ -6,7 +6,7 @@ use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
-use super::{Endpoint, InFrame, LinkKey, streams};
+use super::{Endpoint, Frame, LinkKey, streams};
 use crate::frames::body_rates_to_frd;
 use crate::params::{Access, ParamError, ParamType, Params};
 
@@ -14,6 +14,30 @@ use crate::params::{Access, ParamError, ParamType, Params};
 /// so this is about 2000 per second: the whole table in a few ticks without flooding a
 /// 57600-baud radio for longer than ArduPilot would.
 pub const PARAMS_PER_TICK: usize = 10;
+
+/// PARAM_SET's message id.
+const PARAM_SET_ID: u32 = 23;
+
+/// PARAM_SET read from the raw payload: the typed decoder refuses `param_type` values outside
+/// the enum (pymavlink may send 0), and the contract says to ignore the type anyway. Returns
+/// (value, target system, target component, name).
+#[must_use]
+pub fn raw_param_set(frame: &Frame) -> Option<(f32, u8, u8, String)> {
+    if frame.message_id() != PARAM_SET_ID {
+        return None;
+    }
+    // param_value f32, target_system, target_component, param_id char[16], param_type.
+    let p: [u8; 23] = frame.payload_padded();
+    let value = f32::from_le_bytes([p[0], p[1], p[2], p[3]]);
+    Some((value, p[4], p[5], param_id_from(&p[6..22])))
+}
+
+/// A `char[16]` parameter id: up to the first NUL, all 16 bytes when full.
+#[must_use]
+pub fn param_id_from(bytes: &[u8]) -> String {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
 
 /// Sent before a parameter list, like ArduPilot's banner.
 pub const BANNER: &str = concat!(
@@ -54,11 +78,11 @@ impl Endpoint {
         }))
     }
 
-    fn param_error(&mut self, link: LinkKey, frame: &InFrame, name: &str, index: i16, code: u8) {
+    fn param_error(&mut self, link: LinkKey, frame: &Frame, name: &str, index: i16, code: u8) {
         let msg = apm::MavMessage::PARAM_ERROR(apm::PARAM_ERROR_DATA {
             param_index: index,
-            target_system: frame.sysid,
-            target_component: frame.compid,
+            target_system: frame.system_id(),
+            target_component: frame.component_id(),
             param_id: CharArray::from(name),
             error: mav_param_error(code),
         });
@@ -95,7 +119,7 @@ impl Endpoint {
     pub(super) fn param_request_read(
         &mut self,
         link: LinkKey,
-        frame: &InFrame,
+        frame: &Frame,
         r: &apm::PARAM_REQUEST_READ_DATA,
     ) {
         let name = r.param_id.to_str().unwrap_or("").to_owned();
@@ -115,7 +139,7 @@ impl Endpoint {
     /// PARAM_SET: the stored value is echoed on every link on success (so every GCS's cache
     /// follows), the unchanged value plus PARAM_ERROR and a STATUSTEXT to the requester on
     /// refusal, and only PARAM_ERROR (index −1) for an unknown name.
-    pub(super) fn param_set(&mut self, link: LinkKey, frame: &InFrame, name: &str, value: f32) {
+    pub(super) fn param_set(&mut self, link: LinkKey, frame: &Frame, name: &str, value: f32) {
         match self.set_param(name, f64::from(value)) {
             Ok(index) => {
                 if let Some(msg) = self.param_value(index) {

@@ -2,11 +2,10 @@
 
 use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
-use mavlink::{MAVLinkV1MessageRaw, MavHeader};
 
-use super::wire::{self, encode_v2, encode_v2_raw, parse_frame};
 use super::*;
 use crate::params::TABLE;
+use vtol_link::{FrameDecoder, MavlinkVersion};
 
 const GCS: LinkKey = LinkKey(1);
 const GCS_SYSID: u8 = 255;
@@ -20,28 +19,21 @@ fn endpoint() -> Endpoint {
     ep
 }
 
-fn v2(msg: &apm::MavMessage) -> Vec<u8> {
-    encode_v2(7, GCS_SYSID, GCS_COMPID, msg)
+fn v2(msg: &apm::MavMessage) -> Frame {
+    Frame::encode_v2(GCS_SYSID, GCS_COMPID, 7, msg)
 }
 
-fn v1(msg: &apm::MavMessage) -> Vec<u8> {
-    let mut raw = MAVLinkV1MessageRaw::new();
-    let header = MavHeader {
-        system_id: u32::from(GCS_SYSID),
-        component_id: GCS_COMPID,
-        sequence: 3,
-    };
-    raw.serialize_message(header, msg);
-    raw.raw_bytes().to_vec()
+fn v1(msg: &apm::MavMessage) -> Frame {
+    Frame::encode_v1(GCS_SYSID, GCS_COMPID, 3, msg).expect("a MAVLink 1 message")
 }
 
 /// Every outbound frame must be MAVLink 2 from (1, 1); returns the typed messages.
 fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
     out.iter()
         .filter_map(|o| {
-            assert_eq!(o.frame[0], 0xFD, "always MAVLink 2");
-            let f = parse_frame(&o.frame).expect("valid frame");
-            assert_eq!((f.sysid, f.compid), (1, COMPID));
+            assert_eq!(o.frame.version(), MavlinkVersion::V2, "always MAVLink 2");
+            let f = &o.frame;
+            assert_eq!((f.system_id(), f.component_id()), (1, COMPID));
             f.decode().ok()
         })
         .collect()
@@ -66,10 +58,10 @@ fn command_long(command: apm::MavCmd, p: [f32; 7], confirmation: u8) -> apm::Mav
 /// (command, result) of every COMMAND_ACK, read from raw bytes (unknown ids do not decode).
 fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
     out.iter()
-        .filter_map(|o| parse_frame(&o.frame).ok())
-        .filter(|f| f.msgid == 77)
+        .map(|o| &o.frame)
+        .filter(|f| f.message_id() == 77)
         .map(|f| {
-            let p = f.padded(10);
+            let p: [u8; 10] = f.payload_padded();
             assert_eq!(
                 (p[8], p[9]),
                 (GCS_SYSID, GCS_COMPID),
@@ -317,7 +309,7 @@ fn param_set_with_type_outside_the_enum_is_still_handled() {
     id[..9].copy_from_slice(b"HOVER_ALT");
     payload.extend_from_slice(&id);
     payload.push(0);
-    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, 23, &payload);
+    let frame = Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 0, 23, &payload).unwrap();
     let msgs = decode(&ep.handle(GCS, &frame));
     assert_eq!(param_values(&msgs)[0].param_value, 2.5);
 }
@@ -329,7 +321,14 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     let mut payload = vec![0u8; 33];
     payload[28..30].copy_from_slice(&65000u16.to_le_bytes());
     payload[30] = 1;
-    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, wire::COMMAND_LONG_ID, &payload);
+    let frame = Frame::encode_payload_v2(
+        GCS_SYSID,
+        GCS_COMPID,
+        0,
+        vtol_link::frame::MSG_ID_COMMAND_LONG,
+        &payload,
+    )
+    .unwrap();
     let out = ep.handle(GCS, &frame);
     assert_eq!(acks(&out), vec![(65000, commands::result::UNSUPPORTED)]);
     // A known but unimplemented command too.
@@ -344,7 +343,14 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     assert_eq!(acks(&out), vec![(183, commands::result::UNSUPPORTED)]);
     // Addressed to another system: no ACK at all.
     payload[30] = 42;
-    let frame = encode_v2_raw(0, GCS_SYSID, GCS_COMPID, wire::COMMAND_LONG_ID, &payload);
+    let frame = Frame::encode_payload_v2(
+        GCS_SYSID,
+        GCS_COMPID,
+        0,
+        vtol_link::frame::MSG_ID_COMMAND_LONG,
+        &payload,
+    )
+    .unwrap();
     assert!(acks(&ep.handle(GCS, &frame)).is_empty());
 }
 
@@ -551,7 +557,7 @@ fn rc_override_only_from_gcs_and_expires() {
         ..Default::default()
     });
     // From another system id: ignored.
-    let other = encode_v2(0, 200, 190, &ov);
+    let other = Frame::encode_v2(200, 190, 0, &ov);
     ep.handle(GCS, &other);
     assert_eq!(ep.vehicle().telemetry().rc_us[0], 0);
     ep.handle(GCS, &v2(&ov));
@@ -590,10 +596,18 @@ fn gcs_failsafe_switches_to_qland_when_enabled() {
 #[test]
 fn bad_crc_is_counted_and_ignored() {
     let mut ep = endpoint();
-    let mut frame = v2(&param_set("HOVER_ALT", 2.0));
-    let n = frame.len();
-    frame[n - 1] ^= 0xFF;
-    assert!(ep.handle(GCS, &frame).is_empty());
+    let mut bytes = v2(&param_set("HOVER_ALT", 2.0)).as_bytes().to_vec();
+    let n = bytes.len();
+    bytes[n - 1] ^= 0xFF;
+    // As the serve loop does: the link's decoder splits and checks, the endpoint is told.
+    let mut decoder = FrameDecoder::new();
+    decoder.push(&bytes);
+    let mut out = Vec::new();
+    for f in decoder.frames().collect::<Vec<_>>() {
+        out.extend(ep.handle(GCS, &f));
+    }
+    ep.note_bad_frames(decoder.stats().bad_crc);
+    assert!(out.is_empty());
     assert_eq!(ep.stats().bad_frames, 1);
     assert_eq!(ep.params().value("HOVER_ALT"), 1.0);
 }
