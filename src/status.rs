@@ -149,3 +149,62 @@ pub fn fleet_part(
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+    use vtol_link::{Frame, LinkId, SystemId};
+
+    use super::*;
+    use crate::router::SysidConflict;
+
+    fn heartbeat(armed: bool) -> MavMessage {
+        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+        if armed {
+            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+            custom_mode: 18,
+            mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            base_mode,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
+    #[test]
+    fn fleet_part_lists_vehicles_and_conflicts() {
+        let t0 = Instant::now();
+        let mut s = VehicleState::new(t0);
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 0, &heartbeat(false)),
+            t0,
+        );
+        assert_eq!(fleet_part(&s, &[], t0), "", "one vehicle: nothing to add");
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, 0, &heartbeat(true)),
+            t0 + Duration::from_secs(6),
+        );
+        let conflict = SysidConflict {
+            system: SystemId(2),
+            owner: LinkId(1),
+            claimant: LinkId(4),
+        };
+        let line = fleet_part(&s, &[conflict], t0 + Duration::from_secs(6));
+        assert!(
+            line.starts_with(" | fleet [1 LOST] [2 QHOVER ARMED"),
+            "{line}"
+        );
+        assert!(
+            line.ends_with(" | CONFLICT sys 2 on link#1 and link#4 (kept link#1)"),
+            "{line}"
+        );
+    }
+}
