@@ -468,11 +468,22 @@ impl Router {
             return;
         };
         let (system, component) = frame.sender();
-        if side == Side::Vehicle
-            && let Err(owner) = self.table.claim(ingress, system)
-        {
-            self.note_conflict(system, owner, ingress);
-            return;
+        if side == Side::Vehicle {
+            match self.table.claim(ingress, system, now) {
+                Ok(None) => {}
+                Ok(Some(previous)) => {
+                    tracing::info!(%system, %previous, link = %ingress, "system id taken over from a silent link");
+                    self.conflicts_tx.send_if_modified(|c| {
+                        let before = c.len();
+                        c.retain(|x| x.system != system);
+                        c.len() != before
+                    });
+                }
+                Err(owner) => {
+                    self.note_conflict(system, owner, ingress);
+                    return;
+                }
+            }
         }
         self.table.learn(ingress, system, component);
         let addressing = addressing(&frame);

@@ -10,8 +10,10 @@
 //! - never back to the ingress link.
 //!
 //! Vehicles are kept apart by system id: the first vehicle-side link a system id is heard on
-//! owns it while that link lives ([`RoutingTable::claim`]); the same id from another vehicle
-//! link is a conflict, and the router never merges it (its frames go nowhere and are counted).
+//! owns it while that link lives and keeps sending as it ([`RoutingTable::claim`]); the same id
+//! from another vehicle link is a conflict, and the router never merges it (its frames go
+//! nowhere and are counted). An owner silent for [`CLAIM_TIMEOUT`] under that id hands it to
+//! the next link that sends as it: a vehicle restarted on a new UDP port comes back.
 //!
 //! One refinement for shared ground stations: pymavlink scripts all speak as (255, 0), so a
 //! COMMAND_ACK for (255, 0) would reach every script. The table remembers which link last sent
@@ -19,8 +21,13 @@
 //! gets its own ACK and no other.
 
 use std::collections::HashMap;
+use std::time::{Duration, Instant};
 
 use vtol_link::{ComponentId, LinkId, SystemId};
+
+/// How long a vehicle link keeps a system id it stopped sending as (the tracker's link
+/// timeout): after that another vehicle link may take it.
+pub const CLAIM_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// Where a frame goes, as decided by [`RoutingTable::route`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,8 +60,8 @@ pub struct RoutingTable {
     systems: HashMap<SystemId, Vec<LinkId>>,
     /// (sender system, sender component, command) → the link that sent it last.
     pending_commands: HashMap<(SystemId, ComponentId, u16), LinkId>,
-    /// Vehicle system → the vehicle-side link that owns it.
-    claims: HashMap<SystemId, LinkId>,
+    /// Vehicle system → the vehicle-side link that owns it, and when it last sent as it.
+    claims: HashMap<SystemId, (LinkId, Instant)>,
 }
 
 fn add_unique(v: &mut Vec<LinkId>, link: LinkId) {
@@ -103,22 +110,38 @@ impl RoutingTable {
             !v.is_empty()
         });
         self.pending_commands.retain(|_, l| *l != link);
-        self.claims.retain(|_, l| *l != link);
+        self.claims.retain(|_, (l, _)| *l != link);
     }
 
-    /// A vehicle-side `link` sends as `system`: `Ok` when the link owns the id (claimed now if
-    /// nobody did), `Err(owner)` when another vehicle link owns it. The claim lasts until the
-    /// owner goes down ([`RoutingTable::forget_link`]).
+    /// A vehicle-side `link` sends as `system` at `now`: `Ok(None)` when the link owns the id
+    /// (claimed now if nobody did), `Ok(Some(previous))` when it takes the id from a link
+    /// silent under it for [`CLAIM_TIMEOUT`], `Err(owner)` when another vehicle link owns it.
+    /// A claim lasts until the owner goes down ([`RoutingTable::forget_link`]) or falls silent.
     ///
     /// # Errors
     /// The owning link, for a conflict.
-    pub fn claim(&mut self, link: LinkId, system: SystemId) -> Result<(), LinkId> {
-        match self.claims.entry(system) {
-            std::collections::hash_map::Entry::Occupied(o) if *o.get() != link => Err(*o.get()),
-            std::collections::hash_map::Entry::Occupied(_) => Ok(()),
-            std::collections::hash_map::Entry::Vacant(v) => {
-                v.insert(link);
-                Ok(())
+    pub fn claim(
+        &mut self,
+        link: LinkId,
+        system: SystemId,
+        now: Instant,
+    ) -> Result<Option<LinkId>, LinkId> {
+        match self.claims.get_mut(&system) {
+            Some((owner, last)) if *owner == link => {
+                *last = now;
+                Ok(None)
+            }
+            Some((owner, last)) if now.saturating_duration_since(*last) < CLAIM_TIMEOUT => {
+                Err(*owner)
+            }
+            Some(entry) => {
+                let previous = entry.0;
+                *entry = (link, now);
+                Ok(Some(previous))
+            }
+            None => {
+                self.claims.insert(system, (link, now));
+                Ok(None)
             }
         }
     }
@@ -126,7 +149,7 @@ impl RoutingTable {
     /// The vehicle link that owns `system`, if any.
     #[must_use]
     pub fn owner_of(&self, system: SystemId) -> Option<LinkId> {
-        self.claims.get(&system).copied()
+        self.claims.get(&system).map(|(l, _)| *l)
     }
 
     /// Links where `(system, component)` was seen.
@@ -287,17 +310,23 @@ mod tests {
     }
 
     #[test]
-    fn a_system_id_belongs_to_the_first_vehicle_link_until_it_goes() {
+    fn a_system_id_belongs_to_the_first_vehicle_link_until_it_goes_or_falls_silent() {
         let mut t = RoutingTable::new();
         let (a, b) = (LinkId(7), LinkId(8));
-        assert_eq!(t.claim(a, SystemId(1)), Ok(()));
-        assert_eq!(t.claim(b, SystemId(2)), Ok(()));
-        assert_eq!(t.claim(a, SystemId(1)), Ok(()));
-        assert_eq!(t.claim(b, SystemId(1)), Err(a));
+        let t0 = Instant::now();
+        let at = |ms| t0 + Duration::from_millis(ms);
+        assert_eq!(t.claim(a, SystemId(1), at(0)), Ok(None));
+        assert_eq!(t.claim(b, SystemId(2), at(0)), Ok(None));
+        assert_eq!(t.claim(a, SystemId(1), at(1000)), Ok(None));
+        assert_eq!(t.claim(b, SystemId(1), at(5999)), Err(a), "a spoke 5 s ago");
         assert_eq!(t.owner_of(SystemId(1)), Some(a));
         t.forget_link(a);
-        assert_eq!(t.claim(b, SystemId(1)), Ok(()));
+        assert_eq!(t.claim(b, SystemId(1), at(6000)), Ok(None), "a went down");
         assert_eq!(t.owner_of(SystemId(1)), Some(b));
+        // b falls silent as system 1 (still up as system 2): after 5 s a may take it.
+        assert_eq!(t.claim(a, SystemId(1), at(10_999)), Err(b));
+        assert_eq!(t.claim(a, SystemId(1), at(11_000)), Ok(Some(b)));
+        assert_eq!(t.owner_of(SystemId(1)), Some(a));
     }
 
     proptest! {

@@ -128,3 +128,56 @@ def test_three_twins_through_one_daemon(twin_factory, daemon_factory):  # noqa: 
         assert daemon.alive(), daemon.tail()
     finally:
         g.close()
+
+
+def free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_vehicles_on_their_own_links_lost_conflict_and_back(twin_factory, daemon_factory):  # noqa: F811
+    """Three twins, each its own process and UDP peer of the daemon's `--vehicle udpin:`: one
+    is killed and shows LOST within 5 s while the others go on; a fourth claiming system 1 is a
+    CONFLICT, never merged; the killed one restarted (a new UDP port) comes back by itself."""
+    port = free_udp_port()
+    daemon = daemon_factory(vehicle=f"udpin:127.0.0.1:{port}", serve=["tcpin:127.0.0.1:0"], log=False)
+    url = f"udpout:127.0.0.1:{port}"
+    twins = {n: twin_factory(listen=[url], speed=1, extra=["--sysid", str(n)]) for n in (1, 2, 3)}
+    g = script(daemon.tcp)
+    try:
+        heartbeats_by_sysid(g, {1, 2, 3}, timeout=20)
+        # Across links: the command for 2 reaches 2 only.
+        g.drain()
+        g.mav.command_long_send(2, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        ack = g.recv("COMMAND_ACK", sysid=2, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
+        assert ack.result == MAV_RESULT_ACCEPTED, ack
+        g.drain()
+        after = heartbeats_by_sysid(g, {1, 2, 3})
+        assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {2}, after
+
+        # Vehicle 3 dies: LOST within 5 s of its last heartbeat (status lines every second).
+        twin_factory.twins.remove(twins[3])
+        twins[3].proc.kill()
+        twins[3].proc.wait(timeout=10)
+        killed = time.monotonic()
+        daemon.wait_line(r"\[3 LOST\]", timeout=10)
+        assert time.monotonic() - killed < 6.5
+        g.drain()
+        heartbeats_by_sysid(g, {1, 2}, timeout=5)
+
+        # Another vehicle left at system 1: a conflict, its frames kept out.
+        impostor = twin_factory(listen=[url], speed=1, extra=["--sysid", "1"])
+        line = daemon.wait_line(r"CONFLICT sys 1 on link#\d+ and link#\d+", timeout=10)
+        assert "kept" in line, line
+        twin_factory.stop(impostor)
+
+        # Vehicle 3 again, from a new UDP port: back without restarting anything else.
+        twins[3] = twin_factory(listen=[url], speed=1, extra=["--sysid", "3"])
+        g.drain()
+        heartbeats_by_sysid(g, {1, 2, 3}, timeout=10)
+        assert daemon.alive(), daemon.tail()
+    finally:
+        g.close()
