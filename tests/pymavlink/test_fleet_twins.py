@@ -3,6 +3,7 @@
 A pymavlink script on the shared TCP listener hears three vehicles, arms one of them (only that
 one arms) and writes a parameter of another (only that one's file changes)."""
 
+import subprocess
 import time
 
 from daemon_support import daemon_factory, script  # noqa: F401 (fixture)
@@ -66,8 +67,6 @@ def test_three_twins_one_endpoint(twin_factory, gcs_factory, tmp_path):
 
 
 def test_count_with_control_is_refused(tmp_path):
-    import subprocess
-
     from conftest import TWIN_BIN
 
     r = subprocess.run(
@@ -81,8 +80,6 @@ def test_count_with_control_is_refused(tmp_path):
 
 
 def test_count_past_255_is_refused():
-    import subprocess
-
     from conftest import TWIN_BIN
 
     r = subprocess.run(
@@ -93,10 +90,16 @@ def test_count_past_255_is_refused():
     assert r.stderr.strip().splitlines() == ["error: --count 10 from system id 250 passes 255"], r.stderr
 
 
-def test_three_twins_through_one_daemon(twin_factory, daemon_factory):  # noqa: F811
+def gcs_cli(*args: str, link: str) -> subprocess.CompletedProcess:
+    from daemon_support import DAEMON_BIN
+
+    return subprocess.run([str(DAEMON_BIN), *args, "--link", link], capture_output=True, text=True, timeout=60)
+
+
+def test_three_twins_through_one_daemon(twin_factory, daemon_factory, tmp_path):  # noqa: F811
     """A fleet of three behind one `vtol-gcs run --vehicle tcp:...`: a script on the daemon's
     serve port sees the three vehicles with their own sequence numbers, arms one of them and
-    gets its ACK; only that one arms."""
+    gets its ACK; only that one arms. A parameter pull and a verified push reach one vehicle."""
     twin = twin_factory(listen=["tcpin:127.0.0.1:0"], speed=1, extra=["--count", str(COUNT)])
     host, port = twin.host_port("tcpin")
     daemon = daemon_factory(vehicle=f"tcp:{host}:{port}", serve=["tcpin:127.0.0.1:0"], log=False)
@@ -125,6 +128,19 @@ def test_three_twins_through_one_daemon(twin_factory, daemon_factory):  # noqa: 
         g.drain()
         after = heartbeats_by_sysid(g, ids)
         assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {3}, after
+
+        # A pull and a verified push through the daemon to vehicle 2 only.
+        pulled = tmp_path / "sys2.param"
+        r = gcs_cli("params", "pull", "-o", str(pulled), "--target", "2", link=daemon.tcp)
+        assert r.returncode == 0 and "HOVER_ALT" in pulled.read_text(), r.stdout + r.stderr
+        wanted = tmp_path / "hover.parm"
+        wanted.write_text("HOVER_ALT 2.75\n")
+        r = gcs_cli("params", "push", str(wanted), "--target", "2", link=daemon.tcp)
+        assert r.returncode == 0 and "1 changed" in r.stdout, r.stdout + r.stderr
+        base = twin.param_file
+        assert "2.75" in base.with_name(f"{base.stem}-sys2{base.suffix}").read_text()
+        for other in (1, 3):
+            assert not base.with_name(f"{base.stem}-sys{other}{base.suffix}").exists()
         assert daemon.alive(), daemon.tail()
     finally:
         g.close()
