@@ -168,20 +168,20 @@ fn render_cost(frames: usize) {
             // One chart of three fields from two messages.
             app.messages.charts = vec![vec![
                 vtol_gcs::tui::app::SeriesKey {
-                    system: 1,
-                    component: 1,
+                    system: vtol_link::SystemId(1),
+                    component: vtol_link::ComponentId(1),
                     message: 30,
                     path: "roll".into(),
                 },
                 vtol_gcs::tui::app::SeriesKey {
-                    system: 1,
-                    component: 1,
+                    system: vtol_link::SystemId(1),
+                    component: vtol_link::ComponentId(1),
                     message: 30,
                     path: "pitch".into(),
                 },
                 vtol_gcs::tui::app::SeriesKey {
-                    system: 1,
-                    component: 1,
+                    system: vtol_link::SystemId(1),
+                    component: vtol_link::ComponentId(1),
                     message: 36,
                     path: "servo1_raw".into(),
                 },

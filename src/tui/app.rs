@@ -216,9 +216,9 @@ impl ParamsState {
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct SeriesKey {
     /// Sender system id.
-    pub system: u8,
+    pub system: SystemId,
     /// Sender component id.
-    pub component: u8,
+    pub component: ComponentId,
     /// Message id.
     pub message: u32,
     /// Field path (`roll`, `q[2]`).
@@ -239,7 +239,7 @@ pub struct MessagesState {
     /// Charts of chosen fields: each a list of series, no fixed cap.
     pub charts: Vec<Vec<SeriesKey>>,
     /// The message keys as last listed (so a key press knows what is selected).
-    pub listed: Vec<(u8, u8, u32)>,
+    pub listed: Vec<(SystemId, ComponentId, u32)>,
     /// The selected message's numeric field paths as last listed.
     pub listed_fields: Vec<String>,
 }

@@ -16,6 +16,7 @@ use ratatui::widgets::{
     Wrap,
 };
 use vtol_link::dialect::MavState;
+use vtol_link::{ComponentId, SystemId};
 
 use super::app::{App, Confirm, Level, ParamStatus, SeriesKey, View};
 use super::fields;
@@ -498,7 +499,7 @@ fn draw_help(f: &mut Frame<'_>, area: Rect) {
 fn age_s(snap: &Snapshot<'_>, v: &VehicleView, msg: u32) -> Option<f64> {
     snap.state
         .messages
-        .get(&(v.system_id.0, v.component_id.0, msg))
+        .get(&(v.system_id, v.component_id, msg))
         .map(|m| snap.now.saturating_duration_since(m.last_at).as_secs_f64())
 }
 
@@ -1064,7 +1065,7 @@ fn draw_messages(
     let now = snap.now;
     let m = &mut app.messages;
     let filter = m.filter.to_ascii_uppercase();
-    let listed: Vec<(u8, u8, u32)> = snap
+    let listed: Vec<(SystemId, ComponentId, u32)> = snap
         .state
         .messages
         .iter()

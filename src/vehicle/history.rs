@@ -55,7 +55,7 @@ pub struct History {
     /// Typed series per vehicle (system, component).
     pub vehicles: BTreeMap<(vtol_link::SystemId, vtol_link::ComponentId), VehicleHistory>,
     /// Raw frames per (system, component, message id).
-    pub frames: HashMap<(u8, u8, u32), VecDeque<TimedFrame>>,
+    pub frames: HashMap<(vtol_link::SystemId, vtol_link::ComponentId, u32), VecDeque<TimedFrame>>,
     next_index: u64,
 }
 
@@ -92,7 +92,7 @@ impl History {
         let key = frame.sender();
         let ring = self
             .frames
-            .entry((key.0.0, key.1.0, frame.message_id()))
+            .entry((key.0, key.1, frame.message_id()))
             .or_default();
         let oldest = t_s - KEEP.as_secs_f64();
         while ring.len() >= MAX_FRAMES || ring.front().is_some_and(|f| f.t_s < oldest) {
@@ -174,7 +174,7 @@ mod tests {
         assert!(span <= KEEP.as_secs_f64() + 1e-9, "span {span}");
         assert!(span > 110.0, "span {span}");
         assert_eq!(att.back().unwrap().1[0], 9999.0);
-        let frames = &h.frames[&(1, 1, 30)];
+        let frames = &h.frames[&(vtol_link::SystemId(1), vtol_link::ComponentId(1), 30)];
         assert_eq!(frames.len(), MAX_FRAMES);
         assert_eq!(frames.back().unwrap().index, 9999);
     }

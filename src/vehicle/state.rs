@@ -195,7 +195,7 @@ pub struct VehicleState {
     /// Links by id.
     pub links: BTreeMap<LinkId, LinkHealth>,
     /// Every message seen, by (system, component, message id).
-    pub messages: BTreeMap<(u8, u8, u32), MessageStats>,
+    pub messages: BTreeMap<(SystemId, ComponentId, u32), MessageStats>,
     last_seq: HashMap<(LinkId, SystemId, ComponentId), u8>,
     /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
     text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
@@ -253,7 +253,7 @@ impl VehicleState {
             v.window.add(now, 1, lost);
         }
         self.messages
-            .entry((key.0.0, key.1.0, frame.message_id()))
+            .entry((key.0, key.1, frame.message_id()))
             .and_modify(|m| {
                 m.count += 1;
                 m.last = frame.clone();
