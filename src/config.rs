@@ -77,6 +77,9 @@ pub struct Config {
     pub link: LinkOptions,
     /// Seconds between status lines.
     pub status_interval: Duration,
+    /// Download the vehicle's parameters when it is first heard and after each reboot
+    /// ([`crate::reboot`]).
+    pub fetch_params: bool,
 }
 
 impl Default for Config {
@@ -93,6 +96,7 @@ impl Default for Config {
             component_id: 190,
             link: LinkOptions::default(),
             status_interval: Duration::from_secs(1),
+            fetch_params: false,
         }
     }
 }
@@ -121,6 +125,8 @@ pub struct FileConfig {
     pub status_interval_s: Option<f64>,
     /// Wait for a serial vehicle device that does not exist yet instead of failing at start.
     pub wait_for_device: Option<bool>,
+    /// Download the vehicle's parameters when it is first heard and after each reboot.
+    pub fetch_params: Option<bool>,
 }
 
 /// A configuration problem.
@@ -236,6 +242,9 @@ impl FileConfig {
         }
         if let Some(w) = self.wait_for_device {
             config.link.wait_for_device = w;
+        }
+        if let Some(f) = self.fetch_params {
+            config.fetch_params = f;
         }
         Ok(())
     }

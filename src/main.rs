@@ -79,6 +79,9 @@ struct RunArgs {
     /// A serial device that does not exist yet is waited for (default: an error at start).
     #[arg(long)]
     wait_for_device: bool,
+    /// Download the vehicle's parameters when it is first heard and again after each reboot.
+    #[arg(long)]
+    fetch_params: bool,
 }
 
 fn build_config(args: RunArgs) -> anyhow::Result<Config> {
@@ -103,6 +106,9 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     }
     if args.wait_for_device {
         config.link.wait_for_device = true;
+    }
+    if args.fetch_params {
+        config.fetch_params = true;
     }
     Ok(config)
 }
@@ -250,10 +256,6 @@ async fn print_status_lines(
             _ = tick.tick() => {
                 let state = running.state.borrow().clone();
                 let links = running.router.links.borrow().clone();
-                let records = running
-                    .tlog_stats
-                    .as_ref()
-                    .map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
                 let unroutable = running
                     .router
                     .stats
@@ -261,7 +263,14 @@ async fn print_status_lines(
                     .load(std::sync::atomic::Ordering::Relaxed);
                 println!(
                     "{}",
-                    vtol_gcs::status::line(&state, &links, records, unroutable, vtol_gcs::vehicle::now())
+                    vtol_gcs::status::line(
+                        &state,
+                        &links,
+                        running.tlog_stats.as_deref(),
+                        &running.param_fetches.status(),
+                        unroutable,
+                        vtol_gcs::vehicle::now(),
+                    )
                 );
             }
         }
