@@ -179,7 +179,20 @@ impl FileConfig {
     /// # Errors
     /// The parser's message.
     pub fn parse(text: &str) -> Result<Self, String> {
-        toml::from_str(text).map_err(|e| e.to_string())
+        // The parser's report spans several lines (it draws the line and a caret): keep its
+        // message and give the position in words, so the error is one line.
+        toml::from_str(text).map_err(|e| {
+            let message = e.message().trim_end().replace('\n', "; ");
+            match e.span() {
+                Some(span) => {
+                    let before = &text[..span.start.min(text.len())];
+                    let line = before.matches('\n').count() + 1;
+                    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                    format!("line {line}, column {column}: {message}")
+                }
+                None => message,
+            }
+        })
     }
 
     /// Applies the file's values over `config`.
@@ -251,8 +264,9 @@ impl FileConfig {
 }
 
 fn positive_secs(key: &'static str, v: f64) -> Result<Duration, ConfigError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(Duration::from_secs_f64(v))
+    // `try_`: a number of seconds too large for a Duration is an error, not a panic.
+    if let Some(d) = Duration::try_from_secs_f64(v).ok().filter(|_| v > 0.0) {
+        Ok(d)
     } else {
         Err(ConfigError::Value {
             key,
