@@ -265,7 +265,11 @@ impl FileConfig {
 
 fn positive_secs(key: &'static str, v: f64) -> Result<Duration, ConfigError> {
     // `try_`: a number of seconds too large for a Duration is an error, not a panic.
-    if let Some(d) = Duration::try_from_secs_f64(v).ok().filter(|_| v > 0.0) {
+    // Not zero either: 1e-12 s rounds to a zero Duration, which a timer cannot tick at.
+    if let Some(d) = Duration::try_from_secs_f64(v)
+        .ok()
+        .filter(|d| v > 0.0 && !d.is_zero())
+    {
         Ok(d)
     } else {
         Err(ConfigError::Value {

@@ -128,8 +128,11 @@ pub fn daemon_config(data: &[u8]) {
     use vtol_gcs::config::{Config, ConfigError, FileConfig};
     match FileConfig::parse(&text(data)) {
         Ok(file) => {
-            if let Err(e) = file.apply(&mut Config::default()) {
-                one_line(&e);
+            let mut config = Config::default();
+            match file.apply(&mut config) {
+                // The status line's timer cannot tick at a zero period.
+                Ok(()) => assert!(!config.status_interval.is_zero(), "a zero status interval"),
+                Err(e) => one_line(&e),
             }
         }
         Err(message) => one_line(&ConfigError::Parse {
