@@ -75,6 +75,7 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
             records: get(|s| &s.records),
             dropped: get(|s| &s.dropped_queue_full),
             errors: get(|s| &s.write_errors),
+            failing: st.and_then(crate::tlog::TlogStats::failing),
         }
     });
     (links, counters, tlog)
