@@ -53,6 +53,12 @@ write("frame_decoder", "v1", b"".join(v1))
 write("frame_decoder", "signed", b"".join(signed))
 write("frame_decoder", "garbage_between", b"\xfd\x05junk".join(v2 + v1))
 write("signing_verify", "signed", b"".join(signed))
+vehicle = mav(1, 1)
+write("router", "command_and_ack", b"".join(v2 + [
+    bytes(apm.MAVLink_heartbeat_message(20, 17, 0, 18, 4, 3).pack(vehicle)),
+    bytes(apm.MAVLink_command_ack_message(400, 0, 0, 0, 255, 190).pack(vehicle)),
+    bytes(apm.MAVLink_param_value_message(b"HOVER_ALT", 1.0, 9, 50, 3).pack(vehicle)),
+] + v2[1:3]))
 write("signing_verify", "unsigned", b"".join(v2))
 
 # tlog: records of 8-byte big-endian µs stamps, both directions, and a cut last record

@@ -100,6 +100,11 @@ pub const TARGETS: &[Target] = &[
         run: targets::tracker,
     },
     Target {
+        name: "router",
+        about: "frames from three links through the router's raw-byte addressing and its routing table",
+        run: targets::router,
+    },
+    Target {
         name: "signing_verify",
         about: "frames (signed or not) into signature verification",
         run: targets::signing_verify,

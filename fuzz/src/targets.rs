@@ -371,3 +371,46 @@ pub fn signing_verify(data: &[u8]) {
         }
     }
 }
+
+/// Frames from three links through the router's addressing (target offsets, the command of a
+/// COMMAND_LONG/INT, the command a COMMAND_ACK answers, all read from raw bytes) and its table:
+/// nothing ever goes back to the link it came from, and a targeted frame only goes where its
+/// target was seen.
+pub fn router(data: &[u8]) {
+    use vtol_gcs::router::table::{Route, RoutingTable};
+    let links = [LinkId(1), LinkId(2), LinkId(3)];
+    let mut table = RoutingTable::new();
+    let mut out = Vec::new();
+    let mut dec = FrameDecoder::new();
+    dec.push(data);
+    let mut frames: Vec<Frame> = dec.frames().collect();
+    frames.extend(dec.finish());
+    for (i, f) in frames.iter().enumerate() {
+        let ingress = links[i % links.len()];
+        table.learn(ingress, f.system_id(), f.component_id());
+        let a = vtol_gcs::router::addressing(f);
+        if let Some(cmd) = a.command {
+            table.note_command(ingress, f.system_id(), f.component_id(), cmd);
+        }
+        let route = table.route(ingress, &a, &links, &mut out);
+        assert!(
+            !out.contains(&ingress),
+            "{route:?} back to the ingress link"
+        );
+        if route == Route::Targeted {
+            let (system, _) = a.target.expect("a targeted frame has a target");
+            for l in &out {
+                assert!(
+                    table.system_seen_on(system, *l) || a.ack_of_command.is_some(),
+                    "to {l} where system {system} was never seen"
+                );
+            }
+        }
+        if route == Route::Unroutable {
+            assert!(out.is_empty());
+        }
+        if i % 7 == 6 {
+            table.forget_link(links[i % links.len()]);
+        }
+    }
+}
