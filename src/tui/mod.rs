@@ -83,6 +83,7 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
             records: get(|s| &s.records),
             dropped: get(|s| &s.dropped_queue_full),
             errors: get(|s| &s.write_errors),
+            failing: st.and_then(crate::tlog::TlogStats::failing),
         }
     });
     (links, counters, tlog)
@@ -187,7 +188,8 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
     let mut last_draw = Instant::now()
         .checked_sub(IDLE_REDRAW)
         .unwrap_or_else(Instant::now);
-    // The table names the outputs and holds HOVER_ALT: fetch it once at start.
+    let mut reboots_seen = 0;
+    // The table names the outputs and holds HOVER_ALT: fetch it at start (and after a reboot).
     {
         let c = control.clone();
         let out = out_tx.clone();
@@ -228,6 +230,20 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                     return Ok(());
                 }
                 dirty = true;
+                // A vehicle that rebooted may hold other values now: fetch the table again.
+                let reboots = state_rx
+                    .borrow_and_update()
+                    .vehicles
+                    .values()
+                    .next()
+                    .map_or(0, |v| v.reboots);
+                if reboots > reboots_seen {
+                    reboots_seen = reboots;
+                    let c = control.clone();
+                    let out = out_tx.clone();
+                    app.params.progress = Some(("download after reboot".into(), 0, 0));
+                    tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
+                }
             }
             _ = tick.tick() => {
                 if last_draw.elapsed() >= IDLE_REDRAW {
