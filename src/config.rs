@@ -78,6 +78,9 @@ pub struct Config {
     pub link: LinkOptions,
     /// Seconds between status lines.
     pub status_interval: Duration,
+    /// Download the vehicle's parameters when it is first heard and after each reboot
+    /// ([`crate::reboot`]).
+    pub fetch_params: bool,
     /// MAVLink 2 signing key: the daemon signs its own traffic and `sign` clients' frames and
     /// verifies the vehicle's.
     pub signing: Option<SigningKey>,
@@ -100,6 +103,7 @@ impl Default for Config {
             component_id: 190,
             link: LinkOptions::default(),
             status_interval: Duration::from_secs(1),
+            fetch_params: false,
             signing: None,
             signing_state: None,
         }
@@ -130,6 +134,8 @@ pub struct FileConfig {
     pub status_interval_s: Option<f64>,
     /// Wait for a serial vehicle device that does not exist yet instead of failing at start.
     pub wait_for_device: Option<bool>,
+    /// Download the vehicle's parameters when it is first heard and after each reboot.
+    pub fetch_params: Option<bool>,
     /// MAVLink 2 signing key as SHA-256 of this passphrase.
     pub signing_passphrase: Option<Passphrase>,
     /// MAVLink 2 signing key file (64 hex characters).
@@ -199,7 +205,20 @@ impl FileConfig {
     /// # Errors
     /// The parser's message.
     pub fn parse(text: &str) -> Result<Self, String> {
-        toml::from_str(text).map_err(|e| e.to_string())
+        // The parser's report spans several lines (it draws the line and a caret): keep its
+        // message and give the position in words, so the error is one line.
+        toml::from_str(text).map_err(|e| {
+            let message = e.message().trim_end().replace('\n', "; ");
+            match e.span() {
+                Some(span) => {
+                    let before = &text[..span.start.min(text.len())];
+                    let line = before.matches('\n').count() + 1;
+                    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                    format!("line {line}, column {column}: {message}")
+                }
+                None => message,
+            }
+        })
     }
 
     /// Applies the file's values over `config`.
@@ -263,6 +282,9 @@ impl FileConfig {
         if let Some(w) = self.wait_for_device {
             config.link.wait_for_device = w;
         }
+        if let Some(f) = self.fetch_params {
+            config.fetch_params = f;
+        }
         match (self.signing_passphrase, self.signing_key_file) {
             (Some(_), Some(_)) => {
                 return Err(ConfigError::Value {
@@ -290,8 +312,13 @@ impl FileConfig {
 }
 
 fn positive_secs(key: &'static str, v: f64) -> Result<Duration, ConfigError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(Duration::from_secs_f64(v))
+    // `try_`: a number of seconds too large for a Duration is an error, not a panic.
+    // Not zero either: 1e-12 s rounds to a zero Duration, which a timer cannot tick at.
+    if let Some(d) = Duration::try_from_secs_f64(v)
+        .ok()
+        .filter(|d| v > 0.0 && !d.is_zero())
+    {
+        Ok(d)
     } else {
         Err(ConfigError::Value {
             key,

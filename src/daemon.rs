@@ -96,6 +96,8 @@ pub struct Running {
     pub router: RouterHandle,
     /// The recent past, for charts.
     pub history: SharedHistory,
+    /// The daemon's parameter downloads (`fetch_params`: at first contact and after reboots).
+    pub param_fetches: std::sync::Arc<crate::reboot::ParamFetches>,
 }
 
 /// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
@@ -306,8 +308,18 @@ pub async fn start(
         }
     }
 
+    let param_fetches = std::sync::Arc::new(crate::reboot::ParamFetches::default());
+    tasks.spawn(crate::reboot::watch(
+        state_rx.clone(),
+        client.clone(),
+        config.fetch_params,
+        std::sync::Arc::clone(&param_fetches),
+        cancel.clone(),
+    ));
+
     Ok(Running {
         client,
+        param_fetches,
         tlog_stats,
         serving,
         signing_state,

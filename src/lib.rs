@@ -9,6 +9,7 @@ pub mod daemon;
 pub mod gcs;
 pub mod log;
 pub mod params;
+pub mod reboot;
 pub mod router;
 pub mod status;
 pub mod tlog;

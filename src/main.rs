@@ -81,6 +81,9 @@ struct RunArgs {
     /// A serial device that does not exist yet is waited for (default: an error at start).
     #[arg(long)]
     wait_for_device: bool,
+    /// Download the vehicle's parameters when it is first heard and again after each reboot.
+    #[arg(long)]
+    fetch_params: bool,
     #[command(flatten)]
     signing: client_cli::SigningArgs,
 }
@@ -107,6 +110,9 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     }
     if args.wait_for_device {
         config.link.wait_for_device = true;
+    }
+    if args.fetch_params {
+        config.fetch_params = true;
     }
     if let Some(key) = args.signing.key()? {
         config.signing = Some(key);
@@ -267,10 +273,6 @@ async fn print_status_lines(
             _ = tick.tick() => {
                 let state = running.state.borrow().clone();
                 let links = running.router.links.borrow().clone();
-                let records = running
-                    .tlog_stats
-                    .as_ref()
-                    .map(|s| s.records.load(std::sync::atomic::Ordering::Relaxed));
                 let unroutable = running
                     .router
                     .stats
@@ -278,7 +280,12 @@ async fn print_status_lines(
                     .load(std::sync::atomic::Ordering::Relaxed);
                 let signing = running.router.signing.as_ref().map(|s| s.snapshot());
                 let mut line = vtol_gcs::status::line(
-                    &state, &links, records, unroutable, vtol_gcs::vehicle::now(),
+                    &state,
+                    &links,
+                    running.tlog_stats.as_deref(),
+                    &running.param_fetches.status(),
+                    unroutable,
+                    vtol_gcs::vehicle::now(),
                 );
                 line.push_str(&vtol_gcs::status::policy_part(&links, signing.as_ref()));
                 line.push_str(&vtol_gcs::status::fleet_part(

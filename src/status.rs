@@ -1,7 +1,9 @@
 //! The one-line live status the daemon prints when it runs without the terminal UI:
-//! mode, armed state, attitude, altitude, PWM outputs, link health and log counters.
+//! mode, armed state, attitude, altitude, PWM outputs, link health, reboots seen, the daemon's
+//! parameter downloads and the log's counters, or its write error while it fails.
 
 use std::fmt::Write;
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use crate::router::policy::EndpointPolicy;
@@ -14,7 +16,8 @@ use crate::vehicle::VehicleState;
 pub fn line(
     state: &VehicleState,
     links: &[LinkInfo],
-    tlog_records: Option<u64>,
+    tlog: Option<&crate::tlog::TlogStats>,
+    params: &crate::reboot::FetchStatus,
     unroutable: u64,
     now: Instant,
 ) -> String {
@@ -51,6 +54,24 @@ pub fn line(
             );
         }
     }
+    if let Some(v) = state.vehicles.values().next()
+        && v.reboots > 0
+    {
+        let _ = write!(s, " | rebooted {}x", v.reboots);
+    }
+    if params.completed > 0 || params.error.is_some() {
+        let _ = write!(s, " | params {}", params.values);
+        if params.after_reboots > 0 {
+            let _ = write!(
+                s,
+                " (fetched again after {} reboot(s))",
+                params.after_reboots
+            );
+        }
+        if let Some(e) = &params.error {
+            let _ = write!(s, " (download failed: {e})");
+        }
+    }
     for (id, h) in state.links.iter().filter(|(_, h)| h.side == Side::Vehicle) {
         let health = if h.is_lost(now) { "LOST" } else { "ok" };
         let _ = write!(
@@ -73,8 +94,20 @@ pub fn line(
         s,
         " | links {clients} client(s), {dropped} dropped, {unroutable} unroutable"
     );
-    if let Some(n) = tlog_records {
-        let _ = write!(s, " | tlog {n} rec");
+    if let Some(t) = tlog {
+        let records = t.records.load(Ordering::Relaxed);
+        let lost = t.write_errors.load(Ordering::Relaxed);
+        match t.failing() {
+            Some(why) => {
+                let _ = write!(s, " | tlog ERROR {why}: {lost} rec lost, routing goes on");
+            }
+            None if lost > 0 => {
+                let _ = write!(s, " | tlog {records} rec ({lost} lost to write errors)");
+            }
+            None => {
+                let _ = write!(s, " | tlog {records} rec");
+            }
+        }
     }
     s
 }

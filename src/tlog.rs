@@ -13,7 +13,7 @@
 //! SETUP_SIGNING is never logged: it carries the signing key.
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, BufWriter, Read, Write};
+use std::io::{self, BufWriter, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
@@ -30,6 +30,8 @@ pub const FLUSH_INTERVAL: Duration = Duration::from_millis(100);
 /// How long the writer thread lets records gather before it writes them: half the bound, so
 /// the write itself has the other half.
 pub const WRITE_DELAY: Duration = Duration::from_millis(50);
+/// Good batch writes in a row (about a second of traffic) that end a failure streak.
+const RECOVERED_AFTER_WRITES: u32 = 20;
 /// Largest record: the timestamp and the largest frame.
 const MAX_RECORD_LEN: usize = 8 + vtol_link::frame::MAX_FRAME_LEN;
 
@@ -113,6 +115,27 @@ pub struct TlogStats {
     pub write_errors: AtomicU64,
     /// SETUP_SIGNING frames withheld.
     pub withheld_signing: AtomicU64,
+    /// The write error of the current failure streak (a full disk), `None` while writes
+    /// succeed: the status line shows it until logging resumes.
+    failing: Mutex<Option<String>>,
+}
+
+impl TlogStats {
+    /// Why the log is not being written right now (e.g. "No space left on device"), or `None`
+    /// while it is. Records that arrive meanwhile are lost and counted in
+    /// [`write_errors`](Self::write_errors); the writer tries again with every batch, so logging
+    /// resumes by itself once there is room.
+    #[must_use]
+    pub fn failing(&self) -> Option<String> {
+        self.failing
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    fn set_failing(&self, why: Option<String>) {
+        *self.failing.lock().unwrap_or_else(PoisonError::into_inner) = why;
+    }
 }
 
 /// Errors opening a log.
@@ -332,10 +355,19 @@ impl Drop for TlogHandle {
 
 /// The writer thread: sleeps until the oldest waiting record is [`WRITE_DELAY`] old (or the
 /// log closes), then writes everything waiting at once and flushes.
+///
+/// A batch that fails (a full disk) is cut off the file again, so the file keeps only whole
+/// records, and counted as lost; the error is logged once per failure streak and shown through
+/// [`TlogStats::failing`]. The next batch is tried as usual, so logging resumes as soon as the
+/// disk has room again. Routing never waits for any of this.
 fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
     let mut out = writer.into_file();
     let mut batch: Vec<u8> = Vec::new();
     let mut reported_error = false;
+    let mut lost_in_streak: u64 = 0;
+    let mut ok_in_row: u32 = 0;
+    // Bytes of whole records in the file: where a failed batch is cut back to.
+    let mut good_len = out.stream_position().unwrap_or(0);
     loop {
         let (records, closed) = {
             let mut p = shared.lock();
@@ -366,12 +398,35 @@ fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
             Ok(()) => {
                 stats.records.fetch_add(records, Ordering::Relaxed);
                 stats.bytes.fetch_add(batch.len() as u64, Ordering::Relaxed);
-                reported_error = false;
+                good_len += batch.len() as u64;
+                ok_in_row += 1;
+                // A nearly full disk takes a small batch and refuses the next big one: only a
+                // run of good writes ends the failure, so the error is not reported again and
+                // again while the disk stays full.
+                if reported_error && ok_in_row >= RECOVERED_AFTER_WRITES {
+                    tracing::warn!(
+                        "tlog writing again; {lost_in_streak} records were lost while it failed"
+                    );
+                    stats.set_failing(None);
+                    reported_error = false;
+                    lost_in_streak = 0;
+                }
             }
             Err(e) => {
                 stats.write_errors.fetch_add(records, Ordering::Relaxed);
+                lost_in_streak += records;
+                ok_in_row = 0;
+                // Part of the batch may have reached the file: cut it off, so the file holds
+                // whole records only and the next batch follows the last whole one. (A device
+                // such as /dev/full has no length to cut: nothing to do there.)
+                if out.set_len(good_len).is_ok() {
+                    let _ = out.seek(io::SeekFrom::Start(good_len));
+                }
                 if !reported_error {
-                    tracing::error!("tlog write failed (routing continues): {e}");
+                    tracing::error!(
+                        "tlog write failed, records are lost until it succeeds again (routing continues): {e}"
+                    );
+                    stats.set_failing(Some(e.to_string()));
                     reported_error = true;
                 }
             }
@@ -868,6 +923,8 @@ mod tests {
             assert!(Instant::now() < deadline, "write error never reported");
             std::thread::sleep(Duration::from_millis(5));
         }
+        let why = h.stats.failing().expect("the failure is shown");
+        assert!(why.contains("space"), "{why}");
         h.log(Record::now(Direction::FromVehicle, heartbeat(2)));
         h.close();
     }

@@ -200,13 +200,43 @@ fn two_daemons_sharing_a_log_dir_keep_two_whole_logs() {
         log_dir,
         "--headless",
     ];
-    // Started together, so they usually ask for the same name within the same second.
-    let mut daemons = [Daemon::start(&args), Daemon::start(&args)];
-    let paths: Vec<String> = daemons
-        .iter()
-        .map(|d| d.line_starting("logging "))
-        .collect();
+    // Started together, they ask for the same name within the same second: that is the case
+    // under test, so a pair that straddled a second boundary is started again (at most 5
+    // times; each try is a few milliseconds wide, so one almost always does).
+    let second_of = |p: &str| {
+        let name = std::path::Path::new(p)
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        name[..19].to_owned() // YYYY-MM-DD_HH-MM-SS, without a -N suffix
+    };
+    let mut tries = 0;
+    let (mut daemons, paths) = loop {
+        tries += 1;
+        let mut daemons = [Daemon::start(&args), Daemon::start(&args)];
+        let paths: Vec<String> = daemons
+            .iter()
+            .map(|d| d.line_starting("logging "))
+            .collect();
+        if second_of(&paths[0]) == second_of(&paths[1]) || tries == 5 {
+            break (daemons, paths);
+        }
+        for d in &mut daemons {
+            d.terminate();
+        }
+    };
+    assert_eq!(
+        second_of(&paths[0]),
+        second_of(&paths[1]),
+        "five pairs straddled a second"
+    );
     assert_ne!(paths[0], paths[1], "both daemons were given one file");
+    // The second name is the first one's with a suffix: the collision happened and was solved.
+    assert!(
+        paths.iter().any(|p| p.ends_with("-2.tlog")),
+        "no -2 suffix: {paths:?}"
+    );
     // Wait (at most 20 s) until each log holds a run of the vehicle's frames.
     let deadline = Instant::now() + Duration::from_secs(20);
     for p in &paths {

@@ -218,6 +218,7 @@ fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> Strin
             records: 2345,
             dropped: 0,
             errors: 0,
+            failing: None,
         }),
         serving: vec![
             "tcpin:127.0.0.1:5770".into(),

@@ -165,15 +165,22 @@ impl Default for ServeConfig {
 impl ServeConfig {
     /// Loads the parameter file if one is given (a missing file starts from defaults and is
     /// created on the first change; a corrupt one is an error, never silently replaced), and
-    /// the mission saved beside it.
+    /// the mission saved beside it. A place the file cannot be written to is an error here, at
+    /// start, rather than a "save failed" after a PARAM_SET was accepted.
     ///
     /// # Errors
-    /// [`ServeError::Params`].
+    /// [`ServeError::Params`], [`ServeError::Mission`], [`ServeError::ParamFileNotWritable`].
     pub fn load_param_file(&mut self) -> Result<(), ServeError> {
-        if let Some(path) = &self.endpoint.param_file
-            && path.exists()
-        {
-            self.endpoint.params = Params::load(path)?;
+        if let Some(path) = &self.endpoint.param_file {
+            if path.exists() && !path.is_dir() {
+                self.endpoint.params = Params::load(path)?;
+            }
+            crate::atomic_file::check_writable(path).map_err(|source| {
+                ServeError::ParamFileNotWritable {
+                    path: path.clone(),
+                    source,
+                }
+            })?;
         }
         // The mission lives beside the parameter file, with the same rules.
         if let Some(path) = self
@@ -201,6 +208,15 @@ pub enum ServeError {
     /// The mission file beside it is unusable.
     #[error(transparent)]
     Mission(#[from] mission::MissionFileError),
+    /// The parameter file's place does not take new files (a read-only mount, a path under a
+    /// regular file, a directory in its place).
+    #[error("--param-file {path} cannot be written: {source}")]
+    ParamFileNotWritable {
+        /// The file.
+        path: PathBuf,
+        /// Why not.
+        source: std::io::Error,
+    },
     /// The tokio runtime could not start.
     #[error("cannot start the runtime: {0}")]
     Runtime(std::io::Error),

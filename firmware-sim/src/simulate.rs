@@ -143,14 +143,17 @@ pub struct Summary {
 }
 
 fn parse_f64(key: &str, v: &str) -> Result<f64, String> {
-    let x: f64 = v
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{v}' is not a number (for {key})"))?;
+    let x: f64 = v.trim().parse().map_err(|_| {
+        format!(
+            "'{}' is not a number (for {})",
+            v.escape_debug(),
+            key.escape_debug()
+        )
+    })?;
     if x.is_finite() {
         Ok(x)
     } else {
-        Err(format!("{key} must be finite"))
+        Err(format!("{} must be finite", key.escape_debug()))
     }
 }
 
@@ -159,11 +162,12 @@ fn parse_pairs<'a>(s: &'a str, keys: &[&str]) -> Result<Vec<(&'a str, f64)>, Str
     for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
         let (k, v) = item
             .split_once('=')
-            .ok_or_else(|| format!("'{item}' is not key=value"))?;
+            .ok_or_else(|| format!("'{}' is not key=value", item.escape_debug()))?;
         let k = k.trim();
         if !keys.contains(&k) {
             return Err(format!(
-                "unknown key '{k}' (expected one of {})",
+                "unknown key '{}' (expected one of {})",
+                k.escape_debug(),
                 keys.join(", ")
             ));
         }
@@ -171,6 +175,9 @@ fn parse_pairs<'a>(s: &'a str, keys: &[&str]) -> Result<Vec<(&'a str, f64)>, Str
     }
     Ok(out)
 }
+
+// Errors quote what was typed with `escape_debug`, so a value with a line break in it still
+// makes a one-line error.
 
 /// Parses `phi=..,theta=..,psi=..,x=..,y=..,z=..` (rad, m).
 ///
@@ -222,7 +229,7 @@ pub fn parse_setpoint(s: &str) -> Result<Vector3<f64>, String> {
 pub fn parse_param(s: &str) -> Result<(String, f64), String> {
     let (name, v) = s
         .split_once('=')
-        .ok_or_else(|| format!("'{s}' is not NAME=VALUE"))?;
+        .ok_or_else(|| format!("'{}' is not NAME=VALUE", s.escape_debug()))?;
     let name = name.trim().to_ascii_uppercase();
     let value = parse_f64(&name, v)?;
     Ok((name, value))
@@ -240,7 +247,12 @@ pub fn parse_push(s: &str) -> Result<Push, String> {
         "roll" => 0,
         "pitch" => 1,
         "yaw" => 2,
-        other => return Err(format!("unknown axis '{other}' (roll, pitch or yaw)")),
+        other => {
+            return Err(format!(
+                "unknown axis '{}' (roll, pitch or yaw)",
+                other.escape_debug()
+            ));
+        }
     };
     let (torque, when) = rest.split_once('@').ok_or_else(|| form.to_owned())?;
     let (at, ms) = match when.split_once(':') {

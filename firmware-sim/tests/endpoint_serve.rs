@@ -557,3 +557,41 @@ fn cli_refuses_impossible_serve_flags() {
         assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
     }
 }
+
+/// A `--param-file` the twin could never save is refused at start, in one line, before any
+/// PARAM_SET can be accepted and then fail to persist. The places fail for root too: a path
+/// under a regular file, a directory in the file's place, and /proc.
+#[test]
+fn cli_refuses_a_param_file_that_cannot_be_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain-file");
+    std::fs::write(&plain, b"not a directory").unwrap();
+    let under_file = plain.join("params.parm");
+    let a_dir = dir.path().join("a-dir");
+    std::fs::create_dir(&a_dir).unwrap();
+    for path in [
+        under_file.as_path(),
+        a_dir.as_path(),
+        std::path::Path::new("/proc/vtol-twin.parm"),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_firmware-sim"))
+            .args(["serve", "--listen", "tcpin:127.0.0.1:0", "--param-file"])
+            .arg(path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{} accepted", path.display());
+        assert!(
+            out.stdout.is_empty(),
+            "{}: started: {:?}",
+            path.display(),
+            out.stdout
+        );
+        assert!(
+            err.contains("cannot be written") && err.contains(&*path.to_string_lossy()),
+            "{}: {err}",
+            path.display()
+        );
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}

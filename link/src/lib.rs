@@ -56,6 +56,20 @@ pub fn error_line(err: &(dyn std::error::Error + 'static)) -> String {
         }
         cause = c.source();
     }
+    // Errors quote what the user gave (a URL, a line of a file): a line break or another
+    // control character in it is shown escaped, so the error stays one line.
+    if line.contains(char::is_control) {
+        line = line
+            .chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_default().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+    }
     line
 }
 

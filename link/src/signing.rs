@@ -600,8 +600,16 @@ impl SigningState {
         let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
         // Only the parser's message and position: its full report quotes the line, which may
         // hold the key.
-        let table: toml::Table = toml::from_str(text)
-            .map_err(|e| format(e.span().map(|s| line_of(s.start)), e.message().to_owned()))?;
+        // Not even the message when it quotes a value (`invalid type: integer `…``): that value
+        // may be the key, written without its quotes.
+        let table: toml::Table = toml::from_str(text).map_err(|e| {
+            let message = if e.message().contains('`') {
+                "not valid TOML (expected key = \"64 hex characters\" and timestamp = N)".to_owned()
+            } else {
+                e.message().trim_end().replace('\n', "; ")
+            };
+            format(e.span().map(|s| line_of(s.start)), message)
+        })?;
         let line_of_key = |name: &str| {
             text.lines()
                 .position(|l| l.trim_start().starts_with(name))
@@ -611,9 +619,10 @@ impl SigningState {
             .keys()
             .find(|k| k.as_str() != "key" && k.as_str() != "timestamp")
         {
+            // The name is not quoted: a key glued to its name by a missing `=` would be.
             return Err(format(
                 line_of_key(unknown),
-                format!("unknown field `{unknown}` (expected `key` and `timestamp`)"),
+                "unknown field (expected `key` and `timestamp`)".to_owned(),
             ));
         }
         let key = match table.get("key") {
@@ -1043,7 +1052,7 @@ mod tests {
             ),
             (
                 format!("key = \"{hex}\"\ntimestamp = 1\nextra = 2\n"),
-                "unknown field `extra`",
+                "line 3: unknown field",
             ),
             (
                 format!("key = \"{}\"\ntimestamp = 1\n", &hex[..60]),

@@ -106,7 +106,9 @@ impl ParamFile {
             if !valid_name(name) {
                 return Err(err(
                     n,
-                    format!("'{name}' is not a parameter name (1-16 characters, no blanks)"),
+                    format!(
+                        "'{name}' is not a parameter name (1-16 characters, no blanks, commas or #)"
+                    ),
                 ));
             }
             let value: f32 = value_text

@@ -93,10 +93,14 @@ pub fn unknown_names(current: &ParamSet, wanted: &ParamSet) -> Vec<String> {
         .collect()
 }
 
-/// A parameter name the vehicle can carry: 1–16 printable ASCII characters, no spaces.
+/// A parameter name the vehicle can carry: 1–16 printable ASCII characters, no spaces, and
+/// neither `,` nor `#`, which would split or end the name's line in a parameter file.
 #[must_use]
 pub fn valid_name(name: &str) -> bool {
-    (1..=16).contains(&name.len()) && name.bytes().all(|b| b.is_ascii_graphic())
+    (1..=16).contains(&name.len())
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_graphic() && b != b',' && b != b'#')
 }
 
 #[cfg(test)]

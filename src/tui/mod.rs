@@ -115,6 +115,7 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
             records: get(|s| &s.records),
             dropped: get(|s| &s.dropped_queue_full),
             errors: get(|s| &s.write_errors),
+            failing: st.and_then(crate::tlog::TlogStats::failing),
         }
     });
     (links, counters, tlog)
@@ -220,7 +221,9 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
     let mut last_draw = Instant::now()
         .checked_sub(IDLE_REDRAW)
         .unwrap_or_else(Instant::now);
-    // The table names the outputs and holds HOVER_ALT: fetch it once at start.
+    // Reboots of each vehicle already answered with a fresh table.
+    let mut reboots_seen = std::collections::HashMap::new();
+    // The table names the outputs and holds HOVER_ALT: fetch it at start (and after a reboot).
     {
         let c = control.clone();
         let out = out_tx.clone();
@@ -263,17 +266,36 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                     return Ok(());
                 }
                 dirty = true;
-                let changed = {
+                let (changed, key, reboots) = {
                     let state = state_rx.borrow_and_update();
-                    sync_selection(&mut app, &state, &control, &mut selected)
+                    let changed = sync_selection(&mut app, &state, &control, &mut selected);
+                    let v = app.vehicle(&state);
+                    (
+                        changed,
+                        v.map(|v| (v.system_id, v.component_id)),
+                        v.map_or(0, |v| v.reboots),
+                    )
                 };
+                let seen = key.map(|k| reboots_seen.entry(k).or_insert(0));
                 if changed {
                     // The client was on another vehicle: its table is not this one's.
+                    if let Some(seen) = seen {
+                        *seen = reboots;
+                    }
                     for req in app.vehicle_changed() {
                         let c = control.clone();
                         let out = out_tx.clone();
                         tokio::spawn(async move { c.execute(req, out).await });
                     }
+                } else if let Some(seen) = seen
+                    && reboots > *seen
+                {
+                    // A vehicle that rebooted may hold other values now: fetch the table again.
+                    *seen = reboots;
+                    let c = control.clone();
+                    let out = out_tx.clone();
+                    app.params.progress = Some(("download after reboot".into(), 0, 0));
+                    tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
                 }
             }
             _ = tick.tick() => {

@@ -85,6 +85,8 @@ pub struct TlogInfo {
     pub dropped: u64,
     /// Write errors.
     pub errors: u64,
+    /// The write error while logging fails (a full disk); `None` while it writes.
+    pub failing: Option<String>,
 }
 
 /// Everything one frame shows.
@@ -1036,6 +1038,9 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
                 t.dropped,
                 t.errors
             );
+            if let Some(why) = &t.failing {
+                let _ = writeln!(text, "NOT WRITING: {why} (routing goes on)");
+            }
         }
         None => text.push_str("not logging\n"),
     }

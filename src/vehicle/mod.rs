@@ -18,7 +18,7 @@ use tokio_util::sync::CancellationToken;
 
 use crate::router::{LinkInfo, Tapped};
 pub use history::{History, SharedHistory};
-pub use state::{VehicleState, VehicleView};
+pub use state::{Reboot, VehicleState, VehicleView};
 
 /// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second;
 /// also how often the tap is read.

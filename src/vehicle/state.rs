@@ -77,6 +77,21 @@ pub struct VehicleView {
     pub last_heartbeat: Instant,
     /// When the vehicle was last seen to arm (None while disarmed): the flight time's start.
     pub armed_since: Option<Instant>,
+    /// Reboots seen: ATTITUDE's `time_boot_ms` went back (the vehicle's clock restarted).
+    pub reboots: u32,
+    /// The last reboot: `time_boot_ms` before and after it, and when it was seen.
+    pub last_reboot: Option<Reboot>,
+}
+
+/// A vehicle reboot, seen as its boot clock going back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reboot {
+    /// The last `time_boot_ms` before the reboot.
+    pub before_ms: u32,
+    /// The first `time_boot_ms` after it.
+    pub after_ms: u32,
+    /// When the tracker saw it.
+    pub at: Instant,
 }
 
 impl VehicleView {
@@ -309,6 +324,8 @@ impl VehicleState {
                 status_texts: VecDeque::new(),
                 last_heartbeat: now,
                 armed_since: None,
+                reboots: 0,
+                last_reboot: None,
             });
             v.mav_type = hb.mavtype;
             v.autopilot = hb.autopilot;
@@ -328,6 +345,18 @@ impl VehicleState {
         let v = self.vehicles.get_mut(&key)?;
         match &msg {
             MavMessage::ATTITUDE(a) => {
+                // The boot clock only moves forward while the vehicle runs; going back means
+                // it restarted (a reboot command, a power cycle, a new process on the port).
+                if let Some(prev) = v.attitude
+                    && a.time_boot_ms < prev.time_boot_ms
+                {
+                    v.reboots += 1;
+                    v.last_reboot = Some(Reboot {
+                        before_ms: prev.time_boot_ms,
+                        after_ms: a.time_boot_ms,
+                        at: now,
+                    });
+                }
                 v.attitude = Some(Attitude {
                     rpy_rad: [a.roll, a.pitch, a.yaw],
                     rates_rad_s: [a.rollspeed, a.pitchspeed, a.yawspeed],
@@ -446,6 +475,45 @@ mod tests {
             system_status: MavState::MAV_STATE_ACTIVE,
             mavlink_version: 3,
         })
+    }
+
+    #[test]
+    fn a_boot_clock_going_back_is_a_reboot() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let beat = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 0, &beat),
+            now,
+        );
+        let attitude = |ms: u32, seq: u8| {
+            let m = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+                time_boot_ms: ms,
+                ..Default::default()
+            });
+            Frame::encode_v2(1, 1, seq, &m)
+        };
+        for (seq, ms) in [10_000, 10_050, 10_050, 10_100].into_iter().enumerate() {
+            s.apply(LinkId(1), Side::Vehicle, &attitude(ms, seq as u8), now);
+        }
+        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+        assert_eq!(
+            (v.reboots, v.last_reboot),
+            (0, None),
+            "equal or rising times"
+        );
+        s.apply(LinkId(1), Side::Vehicle, &attitude(1_520, 9), now);
+        s.apply(LinkId(1), Side::Vehicle, &attitude(1_570, 10), now);
+        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+        assert_eq!(v.reboots, 1);
+        let r = v.last_reboot.unwrap();
+        assert_eq!((r.before_ms, r.after_ms), (10_100, 1_520));
     }
 
     #[test]

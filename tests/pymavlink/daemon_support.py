@@ -68,13 +68,14 @@ def start_daemon(
     log: bool = True,
     extra: Iterable[str] = (),
     startup_timeout: float = 30.0,
+    log_dir: Path | None = None,
 ) -> Daemon:
     assert DAEMON_BIN.exists(), f"{DAEMON_BIN} missing: build it with `cargo build --workspace`"
     serve = list(serve)
     args = [str(DAEMON_BIN), "run", "--vehicle", vehicle, "--headless"]
     for url in serve:
         args += ["--serve", url]
-    args += ["--log-dir", str(workdir / "logs")] if log else ["--no-log"]
+    args += ["--log-dir", str(log_dir or workdir / "logs")] if log else ["--no-log"]
     args += list(extra)
     return Daemon.spawn(args, workdir, len(serve), startup_timeout, log=log)
 

@@ -2,11 +2,14 @@
 the twin on one end, the daemon on the other, a pymavlink script on the daemon's tcpin. When the
 pty pair vanishes (socat killed) and comes back under the same names, both the twin and the
 daemon reopen their devices by themselves: the script sees vehicle heartbeats again, with the
-same daemon and twin processes."""
+same daemon and twin processes, the first frame less than a second after the devices return.
+"""
 
 from __future__ import annotations
 
-from conftest import MAV_TYPE_VTOL_DUOROTOR
+import time
+
+from conftest import MAV_TYPE_VTOL_DUOROTOR, VEHICLE_SYSID
 from daemon_support import Socat, daemon_factory, script, wait_vehicle_silence  # noqa: F401 (fixture)
 
 
@@ -28,6 +31,16 @@ def test_serial_vehicle_link_survives_pty_restart(twin_factory, daemon_factory, 
             wait_vehicle_silence(g, quiet_s=1.0, timeout=10)
 
             socat.start()  # same link names, new /dev/pts devices
+            back = time.monotonic()  # the devices exist again from here
+            first = None
+            while first is None:
+                assert time.monotonic() - back < 10, "no vehicle frame within 10 s of the replug"
+                m = g.m.recv_match(blocking=True, timeout=0.05)
+                if m is not None and m.get_srcSystem() == VEHICLE_SYSID:
+                    first = time.monotonic() - back
+            # both ends reopen their device within SERIAL_REOPEN_MAX (250 ms) of its return
+            assert first < 1.0, f"the link resumed {first * 1000:.0f} ms after the device returned"
+            print(f"link resumed {first * 1000:.0f} ms after the device returned")
             hb = g.wait_vehicle_heartbeat(timeout=30)
             assert hb.type == MAV_TYPE_VTOL_DUOROTOR, hb
             after = g.recv("ATTITUDE", timeout=10)

@@ -4,14 +4,17 @@ that still reads cleanly and misses at most the last 100 ms."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import subprocess
 import time
 
 from pymavlink import mavutil
 
 from conftest import VEHICLE_COMPID, VEHICLE_SYSID
 from daemon_support import (  # noqa: F401 (fixture)
+    DAEMON_BIN,
     SCRIPT_COMPID,
     SCRIPT_SYSID,
     daemon_factory,
@@ -119,6 +122,7 @@ def test_tlog_after_kill9(daemon_factory):  # noqa: F811
             if msg is not None and (msg.get_srcSystem(), msg.get_srcComponent()) == (VEHICLE_SYSID, VEHICLE_COMPID):
                 received.append((now, bytes(msg.get_msgbuf())))
         t_kill = time.monotonic()
+        t_kill_wall = time.time()
         os.kill(daemon.proc.pid, signal.SIGKILL)
         daemon_factory.forget(daemon)
         daemon.kill9()
@@ -148,3 +152,15 @@ def test_tlog_after_kill9(daemon_factory):  # noqa: F811
     # and the last frame received before the kill in particular
     t_last, last = received[-1]
     assert last in logged or t_kill - t_last < 0.1, frame_ids(last)
+    # what was lost, in time: from the log's last record to the kill
+    print(f"kill -9: the log ends {(t_kill_wall - records[-1][0] / 1e6) * 1000:.0f} ms before the kill, "
+          f"the client's last frame came {(t_kill - t_last) * 1000:.0f} ms before it")
+    # `vtol-gcs log stats` reads it to the end too: exit 0, every whole record, at most one cut
+    # record reported as such
+    out = subprocess.run([str(DAEMON_BIN), "log", "stats", "--json", str(daemon.tlog)],
+                         capture_output=True, text=True, timeout=30)
+    assert out.returncode == 0, out.stderr
+    stats = json.loads(out.stdout)
+    assert stats["skipped_bytes"] == 0, stats
+    assert stats["truncated_tail_bytes"] == cut, (stats["truncated_tail_bytes"], cut)
+    assert stats["frames"] == len(records), (stats["frames"], len(records))

@@ -1,6 +1,8 @@
 //! Serial link (8N1, no flow control) through tokio-serial, reopened with capped back-off
 //! when the device errors or vanishes (USB radio unplugged, pty closed). The [`LinkId`] stays
-//! the same across reopenings.
+//! the same across reopenings. The back-off is capped at [`SERIAL_REOPEN_MAX`], well below the
+//! other links' cap: trying to open a missing device costs one failed `open`, and a radio
+//! plugged back in is then read again within a quarter of a second.
 
 use tokio::task::JoinHandle;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, SerialStream, StopBits};
@@ -8,6 +10,9 @@ use tokio_util::sync::CancellationToken;
 
 use super::stream::run_reconnecting;
 use super::{Events, LinkId, LinkOptions};
+
+/// Longest wait between two attempts to open a serial device.
+pub(crate) const SERIAL_REOPEN_MAX: std::time::Duration = std::time::Duration::from_millis(250);
 
 /// Spawns a serial link that keeps reopening the device.
 pub(super) fn spawn_serial(
@@ -18,6 +23,10 @@ pub(super) fn spawn_serial(
     cancel: CancellationToken,
 ) -> (LinkId, JoinHandle<()>) {
     let id = LinkId::next();
+    let opts = LinkOptions {
+        reconnect_max: opts.reconnect_max.min(SERIAL_REOPEN_MAX),
+        ..opts
+    };
     let task = tokio::spawn(serial_task(id, device, baud, events, opts, cancel));
     (id, task)
 }

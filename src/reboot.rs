@@ -1,0 +1,132 @@
+//! What the daemon does when the vehicle restarts. The tracker sees a reboot as ATTITUDE's
+//! `time_boot_ms` going back ([`crate::vehicle::VehicleView::reboots`]); a reboot command, a
+//! power cycle and a new twin process on the same port all look alike. After one, parameters
+//! the daemon knew may no longer hold (a vehicle re-reads its table at boot, and some values
+//! only take effect then), so with `fetch_params` on the daemon's own client downloads the
+//! whole table again, as it did when it first heard the vehicle.
+//!
+//! Every reboot is logged (`warn`) with the boot times either side; every download is logged
+//! (`info`) with its size, and its outcome is kept in [`ParamFetches`] for the status line. The
+//! download is off by default when headless: its PARAM_VALUEs are broadcasts, so every client
+//! of the daemon would receive a second copy of the table in the middle of its own download.
+
+use std::sync::{Arc, Mutex, PoisonError};
+
+use tokio::sync::watch;
+use tokio_util::sync::CancellationToken;
+use vtol_link::{ComponentId, SystemId};
+
+use crate::client::ClientHandle;
+use crate::vehicle::VehicleState;
+
+/// The daemon's parameter downloads, as the status line shows them.
+#[derive(Debug, Default)]
+pub struct ParamFetches {
+    inner: Mutex<FetchStatus>,
+}
+
+/// A snapshot of [`ParamFetches`].
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct FetchStatus {
+    /// Downloads completed (the first one, then one per reboot).
+    pub completed: u32,
+    /// Values in the last completed download.
+    pub values: usize,
+    /// Reboots that caused a download.
+    pub after_reboots: u32,
+    /// The last failed download's error, cleared by the next success.
+    pub error: Option<String>,
+}
+
+impl ParamFetches {
+    /// The current figures.
+    #[must_use]
+    pub fn status(&self) -> FetchStatus {
+        self.inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    fn update(&self, f: impl FnOnce(&mut FetchStatus)) {
+        f(&mut self.inner.lock().unwrap_or_else(PoisonError::into_inner));
+    }
+}
+
+/// Watches the tracker for the client's vehicle. With `fetch_params`, downloads the table when
+/// the vehicle is first heard and again after every reboot; without it, only logs reboots.
+/// Runs until `cancel` fires or the tracker stops.
+pub async fn watch(
+    mut state: watch::Receiver<VehicleState>,
+    client: ClientHandle,
+    fetch_params: bool,
+    fetches: Arc<ParamFetches>,
+    cancel: CancellationToken,
+) {
+    // Reboots already acted on, per vehicle; `None` until the vehicle is first heard.
+    let mut seen: Option<((SystemId, ComponentId), u32)> = None;
+    loop {
+        tokio::select! {
+            () = cancel.cancelled() => return,
+            r = state.changed() => if r.is_err() { return },
+        }
+        let found = {
+            let s = state.borrow_and_update();
+            let key = client
+                .target()
+                .map(|(sys, comp)| (SystemId(sys), ComponentId(comp)))
+                .or_else(|| s.vehicles.keys().next().copied());
+            key.and_then(|k| s.vehicles.get(&k).map(|v| (k, v.reboots, v.last_reboot)))
+        };
+        let Some((key, reboots, last)) = found else {
+            continue;
+        };
+        let rebooted = match seen {
+            None => false,
+            Some((k, n)) => k == key && reboots > n,
+        };
+        let first = seen.is_none_or(|(k, _)| k != key);
+        seen = Some((key, reboots));
+        if rebooted && let Some(r) = last {
+            tracing::warn!(
+                "vehicle {}:{} rebooted (time_boot_ms {} -> {})",
+                key.0,
+                key.1,
+                r.before_ms,
+                r.after_ms
+            );
+        }
+        if !fetch_params || !(first || rebooted) {
+            continue;
+        }
+        let why = if rebooted {
+            "again after the reboot"
+        } else {
+            "from the vehicle"
+        };
+        let result = tokio::select! {
+            () = cancel.cancelled() => return,
+            r = client.params_pull(None) => r,
+        };
+        match result {
+            Ok(set) => {
+                tracing::info!(
+                    "parameters fetched {why}: {} values from {}:{}",
+                    set.len(),
+                    key.0,
+                    key.1
+                );
+                fetches.update(|f| {
+                    f.completed += 1;
+                    f.values = set.len();
+                    f.after_reboots += u32::from(rebooted);
+                    f.error = None;
+                });
+            }
+            Err(e) => {
+                tracing::error!("parameter download {why} failed: {e}");
+                fetches.update(|f| f.error = Some(e.to_string()));
+            }
+        }
+    }
+}
