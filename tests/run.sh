@@ -47,11 +47,11 @@ FUZZ_PIDS=()
 trap 'kill "${FUZZ_PIDS[@]}" 2>/dev/null || true' EXIT
 fuzz_stream() {
     local name="$1"; shift
-    if command -v chrt >/dev/null 2>&1; then
-        chrt --idle 0 "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run --seconds "${FUZZ_SECONDS:-60}" "$@"
-    else
-        nice -n 19 "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run --seconds "${FUZZ_SECONDS:-60}" "$@"
-    fi > "$FUZZ_LOGS/$name.log" 2>&1
+    local sched=(nice -n 19)
+    if command -v chrt >/dev/null 2>&1; then sched=(chrt --idle 0); fi
+    # exec: the stream's process is the fuzzer itself, so the trap above can stop it.
+    exec "${sched[@]}" "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run \
+        --seconds "${FUZZ_SECONDS:-60}" "$@" > "$FUZZ_LOGS/$name.log" 2>&1
 }
 fuzz_stream a tlog link_url param_file statustext & FUZZ_PIDS+=($!)
 fuzz_stream b twin_endpoint vehicle_source twin_param_file signing_state & FUZZ_PIDS+=($!)
