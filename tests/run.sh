@@ -38,6 +38,26 @@ cargo clippy --workspace --all-targets -- -D warnings
 cargo test --workspace
 cargo build --workspace --bins
 
+# --- fuzzing, in the background while the pymavlink suite runs --------------------------------
+# Every fuzz target runs for 60 s of wall time, in four streams of at most four targets, at the
+# idle scheduling class: they take only the CPU the tests leave, so they add no time to a run
+# and no delay to a test. A crash fails the run and leaves its input in fuzz/regressions/.
+FUZZ_LOGS="$(mktemp -d)"
+FUZZ_PIDS=()
+trap 'kill "${FUZZ_PIDS[@]}" 2>/dev/null || true' EXIT
+fuzz_stream() {
+    local name="$1"; shift
+    local sched=(nice -n 19)
+    if command -v chrt >/dev/null 2>&1; then sched=(chrt --idle 0); fi
+    # exec: the stream's process is the fuzzer itself, so the trap above can stop it.
+    exec "${sched[@]}" "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run \
+        --seconds "${FUZZ_SECONDS:-60}" "$@" > "$FUZZ_LOGS/$name.log" 2>&1
+}
+fuzz_stream a tlog link_url param_file statustext & FUZZ_PIDS+=($!)
+fuzz_stream b twin_endpoint vehicle_source twin_param_file signing_state & FUZZ_PIDS+=($!)
+fuzz_stream c frame_decoder daemon_config mission_file sim_cli_values & FUZZ_PIDS+=($!)
+fuzz_stream d router tracker signing_verify & FUZZ_PIDS+=($!)
+
 # --- pymavlink / MAVProxy against the real binaries ------------------------------------------
 BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
@@ -55,3 +75,15 @@ if [ "$PLUGIN_SUM" != "$(cat "$VENV/.vtol_twin.installed" 2>/dev/null)" ]; then
 fi
 # Sixteen workers: the parallel test runs sixteen twins at once.
 "$VENV/bin/python" -m pytest -n 16 "$PLUGIN/tests"
+
+# --- the fuzz streams' results ---------------------------------------------------------------
+FUZZ_RC=0
+for pid in "${FUZZ_PIDS[@]}"; do
+    wait "$pid" || FUZZ_RC=1
+done
+cat "$FUZZ_LOGS"/*.log
+rm -rf "$FUZZ_LOGS"
+if [ "$FUZZ_RC" -ne 0 ]; then
+    echo "fuzzing found a crash: its input is in fuzz/regressions/ (see above)" >&2
+    exit 1
+fi
