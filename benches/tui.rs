@@ -254,7 +254,7 @@ fn live(seconds: f64, keypresses: usize) {
     let cancel = CancellationToken::new();
     let mut tasks = tokio::task::JoinSet::new();
     let config = Config {
-        serve: vec!["tcpin:127.0.0.1:0".parse::<LinkUrl>().expect("url")],
+        serve: vec!["tcpin:127.0.0.1:0".parse::<LinkUrl>().expect("url").into()],
         log_dir: None,
         ..Config::default()
     };

@@ -16,7 +16,8 @@ use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::params::file::{self, ParamFile};
 use vtol_gcs::params::plan::{ParamOutcome, PushReport, PushResult};
 use vtol_gcs::params::{self as params, Format, Param, ParamSet, Rules as _};
-use vtol_link::LinkUrl;
+use vtol_gcs::router::signing::{DaemonSigning, default_state_file, system_clock};
+use vtol_link::{LinkUrl, SigningKey};
 
 /// Done.
 pub const EXIT_OK: u8 = 0;
@@ -39,6 +40,81 @@ pub struct LinkArgs {
     /// The vehicle as SYS[:COMP] (default: the first vehicle heard; COMP defaults to 1).
     #[arg(long, value_parser = parse_target, global = true)]
     target: Option<(u8, u8)>,
+    #[command(flatten)]
+    signing: SigningArgs,
+}
+
+/// MAVLink 2 signing options, shared by the daemon and the client commands.
+#[derive(Clone, Args, Default)]
+pub struct SigningArgs {
+    /// MAVLink 2 signing with the key SHA-256(TEXT), as MAVProxy's `signing setup TEXT`: sign
+    /// what we send, read only rightly signed, fresh frames (RADIO_STATUS excepted).
+    #[arg(
+        long,
+        value_name = "TEXT",
+        conflicts_with = "signing_key_file",
+        global = true
+    )]
+    pub signing_passphrase: Option<String>,
+    /// MAVLink 2 signing with the key in FILE (64 hex characters); as --signing-passphrase.
+    #[arg(long, value_name = "FILE", global = true)]
+    pub signing_key_file: Option<PathBuf>,
+    /// Where the signing timestamp is kept (default $XDG_STATE_HOME/vtol-gcs/signing.toml,
+    /// else ~/.local/state/vtol-gcs/signing.toml).
+    #[arg(long, value_name = "FILE", global = true)]
+    pub signing_state: Option<PathBuf>,
+}
+
+// The passphrase is a secret: never printed, not even by `{:?}`.
+impl std::fmt::Debug for SigningArgs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SigningArgs")
+            .field(
+                "signing_passphrase",
+                &self.signing_passphrase.as_ref().map(|_| "<secret>"),
+            )
+            .field("signing_key_file", &self.signing_key_file)
+            .field("signing_state", &self.signing_state)
+            .finish()
+    }
+}
+
+impl SigningArgs {
+    /// The key the options give, if any.
+    ///
+    /// # Errors
+    /// A key file that cannot be read or holds no key (the message never quotes it).
+    pub fn key(&self) -> Result<Option<SigningKey>, vtol_link::SigningFileError> {
+        Ok(match (&self.signing_passphrase, &self.signing_key_file) {
+            (Some(text), _) => Some(SigningKey::from_passphrase(text)),
+            (None, Some(file)) => Some(SigningKey::from_key_file(file)?),
+            (None, None) => None,
+        })
+    }
+
+    /// The client's signing, when a key is given: state in --signing-state or the default
+    /// state file.
+    fn client_signing(&self) -> Result<Option<DaemonSigning>, Failure> {
+        let Some(key) = self.key().map_err(|e| usage(e.to_string()))? else {
+            return Ok(None);
+        };
+        let file = match &self.signing_state {
+            Some(f) => f.clone(),
+            None => {
+                let f = default_state_file().ok_or_else(|| {
+                    usage("no place for the signing state: give --signing-state FILE")
+                })?;
+                if let Some(dir) = f.parent() {
+                    std::fs::create_dir_all(dir)
+                        .map_err(|e| usage(format!("cannot create {}: {e}", dir.display())))?;
+                }
+                f
+            }
+        };
+        DaemonSigning::start(key, Some(file), true, system_clock())
+            .map(Some)
+            .map_err(|e| usage(e.to_string()))
+    }
 }
 
 fn parse_target(s: &str) -> Result<(u8, u8), String> {
@@ -175,7 +251,9 @@ where
                 target: link.target,
                 ..ClientConfig::default()
             };
-            let client = ClientHandle::connect(&link.link, config, cancel.clone()).await?;
+            let signing = link.signing.client_signing()?;
+            let client =
+                ClientHandle::connect_signed(&link.link, config, signing, cancel.clone()).await?;
             client.wait_target(vtol_gcs::client::FIND_VEHICLE_TIMEOUT).await.map_err(|e| match e {
             ClientError::NoVehicle => usage(format!(
                 "no vehicle heard on {} within {} s (is the daemon or vehicle running there?)",
@@ -186,8 +264,10 @@ where
         })?;
             // Best effort: without an answer the timeouts start generous and adapt.
             let _ = client.probe_rtt().await;
-            let r = f(client).await;
+            let r = f(client.clone()).await;
             cancel.cancel();
+            // The signing state is saved as the session ends.
+            let _ = tokio::time::timeout(std::time::Duration::from_secs(2), client.stopped()).await;
             r
         });
     match result {

@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
-use vtol_link::{LinkOptions, LinkUrl};
+use vtol_link::{LinkOptions, SigningKey};
 
 use crate::log::replay::{ReplaySource, ReplayUrlError};
+use crate::router::policy::ServeSpec;
 
 /// Default client endpoints: a TCP server for scripts and MAVProxy (clear of the twin's 5760 and
 /// SITL's 5760/5762/5763), and a UDP stream to a ground station listening on 14550 (QGC).
@@ -19,7 +20,7 @@ pub enum VehicleSource {
     /// The twin, running inside the daemon on an in-memory byte link.
     Embedded,
     /// A real vehicle or a standalone twin at this URL.
-    Url(LinkUrl),
+    Url(vtol_link::LinkUrl),
     /// A tlog played back as the vehicle (`replay:FILE[?speed=N]`).
     Replay(ReplaySource),
 }
@@ -63,8 +64,8 @@ impl std::fmt::Display for VehicleSource {
 pub struct Config {
     /// The vehicle link.
     pub vehicle: VehicleSource,
-    /// Client endpoints.
-    pub serve: Vec<LinkUrl>,
+    /// Client endpoints, each with its policy (trust, rate limit).
+    pub serve: Vec<ServeSpec>,
     /// Where tlogs go; `None` disables logging.
     pub log_dir: Option<PathBuf>,
     /// Status lines instead of the terminal UI.
@@ -77,6 +78,12 @@ pub struct Config {
     pub link: LinkOptions,
     /// Seconds between status lines.
     pub status_interval: Duration,
+    /// MAVLink 2 signing key: the daemon signs its own traffic and `sign` clients' frames and
+    /// verifies the vehicle's.
+    pub signing: Option<SigningKey>,
+    /// Where the signing timestamp is kept; `None`: the default state file
+    /// ([`crate::router::signing::default_state_file`]).
+    pub signing_state: Option<PathBuf>,
 }
 
 impl Default for Config {
@@ -93,6 +100,8 @@ impl Default for Config {
             component_id: 190,
             link: LinkOptions::default(),
             status_interval: Duration::from_secs(1),
+            signing: None,
+            signing_state: None,
         }
     }
 }
@@ -121,6 +130,23 @@ pub struct FileConfig {
     pub status_interval_s: Option<f64>,
     /// Wait for a serial vehicle device that does not exist yet instead of failing at start.
     pub wait_for_device: Option<bool>,
+    /// MAVLink 2 signing key as SHA-256 of this passphrase.
+    pub signing_passphrase: Option<Passphrase>,
+    /// MAVLink 2 signing key file (64 hex characters).
+    pub signing_key_file: Option<String>,
+    /// Where the daemon keeps its signing timestamp.
+    pub signing_state: Option<String>,
+}
+
+/// A signing passphrase from the file: its `Debug` shows no text.
+#[derive(Clone, Deserialize)]
+#[serde(transparent)]
+pub struct Passphrase(pub String);
+
+impl std::fmt::Debug for Passphrase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Passphrase(<secret>)")
+    }
 }
 
 /// A configuration problem.
@@ -237,6 +263,28 @@ impl FileConfig {
         if let Some(w) = self.wait_for_device {
             config.link.wait_for_device = w;
         }
+        match (self.signing_passphrase, self.signing_key_file) {
+            (Some(_), Some(_)) => {
+                return Err(ConfigError::Value {
+                    key: "signing_passphrase",
+                    message: "give signing_passphrase or signing_key_file, not both".into(),
+                });
+            }
+            (Some(text), None) => config.signing = Some(SigningKey::from_passphrase(&text.0)),
+            (None, Some(file)) => {
+                let key = SigningKey::from_key_file(Path::new(&file)).map_err(|e| {
+                    ConfigError::Value {
+                        key: "signing_key_file",
+                        message: e.to_string(),
+                    }
+                })?;
+                config.signing = Some(key);
+            }
+            (None, None) => {}
+        }
+        if let Some(f) = self.signing_state {
+            config.signing_state = Some(PathBuf::from(f));
+        }
         Ok(())
     }
 }
@@ -284,5 +332,58 @@ mod tests {
             .apply(&mut c)
             .unwrap_err();
         assert!(e.to_string().contains("udp_peer_timeout_s"), "{e}");
+        let e = FileConfig::parse("serve = [\"tcpin:127.0.0.1:0?trust=root\"]")
+            .unwrap()
+            .apply(&mut c)
+            .unwrap_err();
+        assert!(e.to_string().contains("unknown trust 'root'"), "{e}");
+    }
+
+    #[test]
+    fn signing_and_policies_from_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let key_file = dir.path().join("k");
+        let hex = "ab".repeat(32);
+        std::fs::write(&key_file, &hex).unwrap();
+        let text = format!(
+            "serve = [\"tcpin:127.0.0.1:0?trust=read-only&rate=20\"]\n\
+             signing_key_file = \"{}\"\nsigning_state = \"/tmp/s.toml\"\n",
+            key_file.display()
+        );
+        let mut c = Config::default();
+        let file = FileConfig::parse(&text).unwrap();
+        file.apply(&mut c).unwrap();
+        assert_eq!(
+            c.serve[0].policy.trust,
+            crate::router::policy::Trust::ReadOnly
+        );
+        assert_eq!(
+            c.signing.as_ref().map(SigningKey::to_hex),
+            Some(hex.clone())
+        );
+        assert_eq!(c.signing_state, Some(PathBuf::from("/tmp/s.toml")));
+        assert!(!format!("{c:?}").contains(&hex));
+
+        let both = format!(
+            "signing_passphrase = \"p\"\nsigning_key_file = \"{}\"\n",
+            key_file.display()
+        );
+        let e = FileConfig::parse(&both)
+            .unwrap()
+            .apply(&mut Config::default())
+            .unwrap_err();
+        assert!(e.to_string().contains("not both"), "{e}");
+        let secret = FileConfig::parse("signing_passphrase = \"hunter2\"").unwrap();
+        assert!(!format!("{secret:?}").contains("hunter2"));
+        std::fs::write(&key_file, "nothex").unwrap();
+        let e = FileConfig::parse(&format!("signing_key_file = \"{}\"", key_file.display()))
+            .unwrap()
+            .apply(&mut Config::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("signing_key_file") && !e.contains("nothex"),
+            "{e}"
+        );
     }
 }

@@ -14,6 +14,8 @@ use vtol_link::{LinkOptions, LinkUrl, spawn_endpoint, spawn_stream_link};
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
+use crate::router::policy::{EndpointPolicy, Trust};
+use crate::router::signing::{DaemonSigning, SAVE_EVERY, default_state_file, system_clock};
 use crate::router::{Router, RouterHandle, Side};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
@@ -42,6 +44,29 @@ pub enum DaemonError {
     /// The log could not be created.
     #[error(transparent)]
     Tlog(#[from] crate::tlog::TlogError),
+    /// A `trust=sign` endpoint without a signing key.
+    #[error(
+        "serve URL '{url}' asks for trust=sign but the daemon has no signing key (give --signing-passphrase or --signing-key-file)"
+    )]
+    SignWithoutKey {
+        /// The endpoint.
+        url: String,
+    },
+    /// The signing state file cannot be used (unreadable, broken, or not writable).
+    #[error(transparent)]
+    SigningState(#[from] vtol_link::SigningFileError),
+    /// Signing is on, no `--signing-state` was given and neither `XDG_STATE_HOME` nor `HOME`
+    /// is set.
+    #[error("no place for the signing state file: give --signing-state FILE")]
+    NoSigningState,
+    /// The default state directory cannot be created.
+    #[error("cannot create {}: {source}", path.display())]
+    StateDir {
+        /// The directory.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
     /// The log to replay could not be opened.
     #[error("cannot open {path} for replay: {source}")]
     Replay {
@@ -59,8 +84,10 @@ pub struct Running {
     pub client: ClientHandle,
     /// Live tlog counters, if logging.
     pub tlog_stats: Option<std::sync::Arc<TlogStats>>,
-    /// Where each serve URL ended up (the real port when 0 was asked for).
-    pub serving: Vec<(LinkUrl, Option<SocketAddr>)>,
+    /// Where each serve URL ended up (the real port when 0 was asked for), with its policy.
+    pub serving: Vec<(LinkUrl, Option<SocketAddr>, EndpointPolicy)>,
+    /// The signing state file, when signing.
+    pub signing_state: Option<PathBuf>,
     /// The tlog file, if logging.
     pub tlog_path: Option<PathBuf>,
     /// Latest vehicle and link state.
@@ -95,6 +122,42 @@ pub async fn start(
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> Result<Running, DaemonError> {
+    for spec in &config.serve {
+        if spec.policy.trust == Trust::Sign && config.signing.is_none() {
+            return Err(DaemonError::SignWithoutKey {
+                url: spec.to_string(),
+            });
+        }
+    }
+    let signing = match &config.signing {
+        Some(key) => {
+            let file = match &config.signing_state {
+                Some(f) => f.clone(),
+                None => {
+                    let f = default_state_file().ok_or(DaemonError::NoSigningState)?;
+                    if let Some(dir) = f.parent() {
+                        std::fs::create_dir_all(dir).map_err(|source| DaemonError::StateDir {
+                            path: dir.to_owned(),
+                            source,
+                        })?;
+                    }
+                    f
+                }
+            };
+            // A replayed log is old by nature: its signatures are not checked.
+            let verify = !matches!(config.vehicle, VehicleSource::Replay(_));
+            Some(DaemonSigning::start(
+                key.clone(),
+                Some(file),
+                verify,
+                system_clock(),
+            )?)
+        }
+        None => None,
+    };
+    let signing_state = signing
+        .as_ref()
+        .and_then(|s| s.file().map(std::path::Path::to_owned));
     let tlog = match &config.log_dir {
         Some(dir) => Some(TlogHandle::start(dir, TLOG_QUEUE)?),
         None => None,
@@ -107,16 +170,31 @@ pub async fn start(
 
     // The hot path: each link task routes what it receives itself (no router task, no queue
     // between a link and the router).
-    let (router, router_handle) = Router::new(tlog, Some(tap_tx));
+    let (mut router, mut router_handle) = Router::new(tlog, Some(tap_tx));
+    if let Some(s) = signing {
+        router_handle.signing = Some(router.set_signing(s));
+    }
     let router = router.inline();
     let vehicle_tx = router.events(Side::Vehicle);
-    let client_tx = router.events(Side::Client);
     {
         let (router, cancel) = (router.clone(), cancel.clone());
         tasks.spawn(async move {
             cancel.cancelled().await;
             // Later frames are refused; the tlog is flushed and closed.
             router.close();
+        });
+    }
+    if router_handle.signing.is_some() {
+        let (router, cancel) = (router.clone(), cancel.clone());
+        tasks.spawn(async move {
+            let mut every = tokio::time::interval(SAVE_EVERY);
+            every.tick().await;
+            loop {
+                tokio::select! {
+                    () = cancel.cancelled() => return,
+                    _ = every.tick() => router.save_signing(),
+                }
+            }
         });
     }
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
@@ -132,14 +210,15 @@ pub async fn start(
 
     // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
     let mut serving = Vec::new();
-    for url in &config.serve {
-        let h = spawn_endpoint(url, client_tx.clone(), config.link.clone(), cancel.clone())
+    for spec in &config.serve {
+        let events = router.events_with(Side::Client, spec.policy);
+        let h = spawn_endpoint(&spec.url, events, config.link.clone(), cancel.clone())
             .await
             .map_err(|source| DaemonError::Link {
-                url: url.clone(),
+                url: spec.url.clone(),
                 source,
             })?;
-        serving.push((url.clone(), h.local_addr()));
+        serving.push((spec.url.clone(), h.local_addr(), spec.policy));
         tasks.spawn(h.join());
     }
 
@@ -152,11 +231,20 @@ pub async fn start(
     );
     // The own-traffic link carries only what the client reads: the vehicle's telemetry at
     // thousands of frames a second would otherwise cross two tasks and be parsed twice to be
-    // thrown away.
+    // thrown away. With a key the router signs the client's frames (the link's trust is
+    // `sign`), with the same timestamp source as every other frame the daemon signs.
+    let own_policy = EndpointPolicy {
+        trust: if config.signing.is_some() {
+            Trust::Sign
+        } else {
+            Trust::Trusted
+        },
+        rate: None,
+    };
     let (_, link_task) = spawn_stream_link(
         router_end,
         OWN_TRAFFIC_PEER,
-        client_tx,
+        router.events_with(Side::Client, own_policy),
         LinkOptions {
             accept: Some(client.read_filter()),
             ..config.link.clone()
@@ -180,7 +268,11 @@ pub async fn start(
             tasks.spawn(async move {
                 let _ = link_task.await;
             });
-            tasks.spawn(embedded_twin(twin_end, cancel.clone()));
+            tasks.spawn(embedded_twin(
+                twin_end,
+                config.signing.clone(),
+                cancel.clone(),
+            ));
         }
         VehicleSource::Replay(replay) => {
             let reader = replay.open().map_err(|source| DaemonError::Replay {
@@ -218,6 +310,7 @@ pub async fn start(
         client,
         tlog_stats,
         serving,
+        signing_state,
         tlog_path,
         state: state_rx,
         router: router_handle,
@@ -226,9 +319,16 @@ pub async fn start(
 }
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.
-async fn embedded_twin(stream: tokio::io::DuplexStream, cancel: CancellationToken) {
+/// With a key the twin is keyed too (no parameter file, so nothing is persisted: its
+/// timestamps follow the wall clock).
+async fn embedded_twin(
+    stream: tokio::io::DuplexStream,
+    signing: Option<vtol_link::SigningKey>,
+    cancel: CancellationToken,
+) {
     let config = ServeConfig {
         listen: Vec::new(),
+        signing,
         ..ServeConfig::default()
     };
     match Twin::start(config, cancel).await {

@@ -11,6 +11,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, FileConfig, VehicleSource};
+use vtol_gcs::router::policy::ServeSpec;
 use vtol_link::LinkUrl;
 
 mod log_cli;
@@ -60,10 +61,11 @@ struct RunArgs {
     /// serial:DEV[:BAUD]) or a tlog played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
     vehicle: Option<VehicleSource>,
-    /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD].
+    /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD],
+    /// with options in a query: ?trust=trusted|sign|read-only&rate=MSGS_PER_S&burst=N.
     /// Replaces the defaults (tcpin:127.0.0.1:5770 and udpout:127.0.0.1:14550).
     #[arg(long = "serve")]
-    serve: Vec<LinkUrl>,
+    serve: Vec<ServeSpec>,
     /// Directory for .tlog files (one per run).
     #[arg(long)]
     log_dir: Option<PathBuf>,
@@ -79,6 +81,8 @@ struct RunArgs {
     /// A serial device that does not exist yet is waited for (default: an error at start).
     #[arg(long)]
     wait_for_device: bool,
+    #[command(flatten)]
+    signing: client_cli::SigningArgs,
 }
 
 fn build_config(args: RunArgs) -> anyhow::Result<Config> {
@@ -103,6 +107,12 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     }
     if args.wait_for_device {
         config.link.wait_for_device = true;
+    }
+    if let Some(key) = args.signing.key()? {
+        config.signing = Some(key);
+    }
+    if let Some(f) = args.signing.signing_state {
+        config.signing_state = Some(f);
     }
     Ok(config)
 }
@@ -225,8 +235,15 @@ async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result
     let mut tasks = tokio::task::JoinSet::new();
     let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
     println!("vehicle {}", config.vehicle);
-    for (url, addr) in &running.serving {
-        println!("serving {}", vtol_gcs::daemon::describe(url, *addr));
+    for (url, addr, policy) in &running.serving {
+        println!(
+            "serving {}{}",
+            vtol_gcs::daemon::describe(url, *addr),
+            policy.query()
+        );
+    }
+    if let Some(p) = &running.signing_state {
+        println!("signing state {}", p.display());
     }
     if let Some(p) = &running.tlog_path {
         println!("logging {}", p.display());
@@ -259,10 +276,12 @@ async fn print_status_lines(
                     .stats
                     .unroutable
                     .load(std::sync::atomic::Ordering::Relaxed);
-                println!(
-                    "{}",
-                    vtol_gcs::status::line(&state, &links, records, unroutable, vtol_gcs::vehicle::now())
+                let signing = running.router.signing.as_ref().map(|s| s.snapshot());
+                let mut line = vtol_gcs::status::line(
+                    &state, &links, records, unroutable, vtol_gcs::vehicle::now(),
                 );
+                line.push_str(&vtol_gcs::status::policy_part(&links, signing.as_ref()));
+                println!("{line}");
             }
         }
     }

@@ -4,6 +4,8 @@
 use std::fmt::Write;
 use std::time::Instant;
 
+use crate::router::policy::EndpointPolicy;
+use crate::router::signing::SigningSnapshot;
 use crate::router::{LinkInfo, Side};
 use crate::vehicle::VehicleState;
 
@@ -73,6 +75,39 @@ pub fn line(
     );
     if let Some(n) = tlog_records {
         let _ = write!(s, " | tlog {n} rec");
+    }
+    s
+}
+
+/// The status line's signing and policy part: with a key, what the daemon signed and what it
+/// refused from the vehicle; per client link with a policy, its trust, its rate-limit drops and
+/// refused frames. Empty when there is nothing to say.
+#[must_use]
+pub fn policy_part(links: &[LinkInfo], signing: Option<&SigningSnapshot>) -> String {
+    let mut s = String::new();
+    if let Some(c) = signing {
+        let _ = write!(
+            s,
+            " | signing {} signed, {} verified, refused {} unsigned {} bad {} replayed",
+            c.signed, c.verified, c.refused_unsigned, c.refused_bad_signature, c.refused_replayed
+        );
+    }
+    for l in links
+        .iter()
+        .filter(|l| l.side == Side::Client && l.peer != crate::daemon::OWN_TRAFFIC_PEER)
+        .filter(|l| l.policy != EndpointPolicy::default())
+    {
+        let c = l.policy_counters.snapshot();
+        let _ = write!(s, " | {} {}", l.id, l.policy.trust);
+        if l.policy.rate.is_some() {
+            let _ = write!(s, " rate-dropped {}", c.dropped_rate);
+        }
+        if c.refused_read_only > 0 {
+            let _ = write!(s, " refused {}", c.refused_read_only);
+        }
+        if c.signed > 0 || c.unsignable > 0 {
+            let _ = write!(s, " signed {} unsignable {}", c.signed, c.unsignable);
+        }
     }
     s
 }

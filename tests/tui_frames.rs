@@ -157,6 +157,7 @@ fn links(rec: &Recording) -> Vec<LinkRow> {
             side: Side::Vehicle,
             peer: "embedded twin".into(),
             own: false,
+            policy: None,
             stats: LinkStatsSnapshot {
                 rx_frames: vehicle.frames,
                 tx_frames: own.frames,
@@ -168,6 +169,7 @@ fn links(rec: &Recording) -> Vec<LinkRow> {
             side: Side::Client,
             peer: vtol_gcs::daemon::OWN_TRAFFIC_PEER.into(),
             own: true,
+            policy: None,
             stats: LinkStatsSnapshot {
                 rx_frames: own.frames,
                 tx_frames: vehicle.frames,

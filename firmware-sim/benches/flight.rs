@@ -2,6 +2,11 @@
 //! estimator and controller every tenth step) and a whole 60 s physical flight from the paper's
 //! initial conditions. Prints the real-time factor (simulated seconds per wall-clock second).
 //!
+//! The last line is the load-robust figure: the fastest of many 1 000-step chunks flown from
+//! clones of the same vehicle at 0, 10, …, 50 s of the flight, summed to a 60 s flight. A chunk
+//! takes ~0.2 ms, so some run undisturbed even while other processes share the cores; it
+//! tracks the quiet-machine figure within a few per cent and compares code versions reliably.
+//!
 //! Run: `cargo bench -p firmware-sim --bench flight`
 
 use std::hint::black_box;
@@ -124,4 +129,36 @@ fn main() {
         FLIGHT_S / best,
         best / STEPS as f64 * 1e9
     );
+    let floor = chunk_floor_s();
+    println!(
+        "60 s physical flight, fastest 1 000-step chunks: {:.2} ms, real-time factor {:.0}x",
+        floor * 1e3,
+        FLIGHT_S / floor
+    );
+}
+
+/// A 60 s flight summed from the fastest of many 1 000-step chunks at 0, 10, …, 50 s, s.
+fn chunk_floor_s() -> f64 {
+    const CHUNK: usize = 1000;
+    const SEGMENT: usize = 10_000;
+    let mut v = vehicle();
+    let mut total = 0.0;
+    for _ in 0..STEPS / SEGMENT {
+        let fastest = (0..300)
+            .map(|_| {
+                let mut c = v.clone();
+                let t0 = Instant::now();
+                for _ in 0..CHUNK {
+                    c.step();
+                }
+                black_box(&c);
+                t0.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min);
+        total += fastest * (SEGMENT / CHUNK) as f64;
+        for _ in 0..SEGMENT {
+            v.step();
+        }
+    }
+    total
 }

@@ -436,7 +436,7 @@ impl Vehicle {
                             euler: s.euler,
                             omega_body_rad_s: s.omega_body_rad_s,
                             pos_m: s.pos_m,
-                            vel_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
+                            vel_m_s: trig.rotate_body_to_inertial(&s.vel_body_m_s),
                             ..template
                         };
                         // A copy: the stages are trial points, only the tick updates the state.
@@ -625,7 +625,9 @@ impl Vehicle {
     fn refresh_truth(&mut self) {
         let t = &mut self.telemetry;
         t.pos_m = self.plant.pos_m;
-        t.vel_m_s = self.plant_trig.rotation_body_to_inertial() * self.plant.vel_body_m_s;
+        t.vel_m_s = self
+            .plant_trig
+            .rotate_body_to_inertial(&self.plant.vel_body_m_s);
         t.euler = self.plant.euler;
         t.omega_body_rad_s = self.plant.omega_body_rad_s;
         t.rotor_speed_rad_s = self.actuators.state.rotor_speed_rad_s;

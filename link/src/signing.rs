@@ -443,12 +443,24 @@ impl Signing {
 
     /// Signs `frame` with the next timestamp.
     pub fn sign(&mut self, frame: &Frame, now: SystemTime) -> Result<Frame, SignError> {
+        self.sign_as(frame, self.link_id, now)
+    }
+
+    /// Signs `frame` with the next timestamp as link `link_id` instead of our own: one party
+    /// that signs for several links (a router signing each client's frames) keeps one
+    /// timestamp source, so no two of its frames share a timestamp, and each link its stream.
+    pub fn sign_as(
+        &mut self,
+        frame: &Frame,
+        link_id: u8,
+        now: SystemTime,
+    ) -> Result<Frame, SignError> {
         if !frame.is_v2() {
             return Err(SignError::NotV2);
         }
         let mut clock = self.clock;
         let timestamp = clock.next(now)?;
-        let signed = sign_frame(&self.key, frame, self.link_id, timestamp)?;
+        let signed = sign_frame(&self.key, frame, link_id, timestamp)?;
         self.clock = clock;
         Ok(signed)
     }

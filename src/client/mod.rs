@@ -144,6 +144,7 @@ impl ClientHandle {
     fn spawn(
         config: ClientConfig,
         links_rx: mpsc::Receiver<vtol_link::LinkEvent>,
+        signing: Option<crate::router::signing::DaemonSigning>,
         cancel: CancellationToken,
     ) -> Self {
         let me = (config.system_id, config.component_id);
@@ -163,6 +164,7 @@ impl ClientHandle {
             target: target_tx,
             fixed_target: config.target.is_some(),
             shared: Arc::clone(&shared),
+            signing,
         };
         tokio::spawn(session.run(links_rx, out_rx, cancel));
         Self {
@@ -187,12 +189,27 @@ impl ClientHandle {
         config: ClientConfig,
         cancel: CancellationToken,
     ) -> Result<Self, ClientError> {
+        Self::connect_signed(url, config, None, cancel).await
+    }
+
+    /// [`ClientHandle::connect`] with MAVLink 2 signing: every frame sent is signed, and only
+    /// frames that pass the signing rules are read. The signing state is saved when the client
+    /// stops.
+    ///
+    /// # Errors
+    /// [`ClientError::Link`] when the endpoint cannot be opened.
+    pub async fn connect_signed(
+        url: &LinkUrl,
+        config: ClientConfig,
+        signing: Option<crate::router::signing::DaemonSigning>,
+        cancel: CancellationToken,
+    ) -> Result<Self, ClientError> {
         let (tx, rx) = mpsc::channel(INBOUND_QUEUE);
         let endpoint = vtol_link::spawn_endpoint(url, tx, LinkOptions::default(), cancel.clone())
             .await
             .map_err(|e| ClientError::Link(format!("cannot open {url}: {e}")))?;
         tokio::spawn(endpoint.join());
-        Ok(Self::spawn(config, rx, cancel))
+        Ok(Self::spawn(config, rx, signing, cancel))
     }
 
     /// A client over a byte stream carrying MAVLink frames (the daemon's own-traffic link).
@@ -209,7 +226,14 @@ impl ClientHandle {
             cancel.clone(),
         );
         drop(task);
-        Self::spawn(config, rx, cancel)
+        Self::spawn(config, rx, None, cancel)
+    }
+
+    /// Waits until the session task has ended (after its cancellation): what it saves on the
+    /// way out (the signing state) is then on disk.
+    pub async fn stopped(&self) {
+        let mut rx = self.links_up.clone();
+        while rx.changed().await.is_ok() {}
     }
 
     /// Our (system, component).

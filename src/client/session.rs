@@ -4,6 +4,11 @@
 //!
 //! It runs over any vtol-link transport: the links of an endpoint opened from a URL (a vehicle,
 //! or a daemon's serve port), or, inside the daemon, the in-memory own-traffic link.
+//!
+//! With a key (a client on its own link) it signs every frame it sends and reads only frames
+//! that pass the signing rules (the same `DaemonSigning` the daemon's router uses; the signing
+//! state is saved when the session ends). Inside the daemon it has no key: the router signs
+//! and verifies for it.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -16,6 +21,7 @@ use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
 use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
 
 use super::machine::Inbound;
+use crate::router::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
 const WANTED: [u32; 6] = [
@@ -64,6 +70,8 @@ pub(crate) struct Session {
     pub shared: Arc<Shared>,
     /// Links up now (a request waits for one before its first send).
     pub links_up: watch::Sender<usize>,
+    /// Signing, for a client on its own link with a key.
+    pub signing: Option<DaemonSigning>,
 }
 
 impl Session {
@@ -81,14 +89,27 @@ impl Session {
             fixed_target,
             shared,
             links_up,
+            mut signing,
         } = self;
         let mut links: HashMap<LinkId, LinkSender> = HashMap::new();
         let mut seq: u8 = 0;
         let mut beat = tokio::time::interval(Duration::from_secs(1));
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        let mut send = |links: &HashMap<LinkId, LinkSender>, msg: &MavMessage| {
-            let frame = Frame::encode_v2(me.0, me.1, seq, msg);
+        let mut send = |links: &HashMap<LinkId, LinkSender>,
+                        msg: &MavMessage,
+                        signing: &mut Option<DaemonSigning>| {
+            let mut frame = Frame::encode_v2(me.0, me.1, seq, msg);
             seq = seq.wrapping_add(1);
+            if let Some(s) = signing {
+                match s.sign_own(&frame) {
+                    Ok(f) => frame = f,
+                    Err(e) => {
+                        tracing::warn!("not sent: {e}");
+                        shared.dropped.fetch_add(1, Ordering::Relaxed);
+                        return;
+                    }
+                }
+            }
             let mut ok = false;
             for tx in links.values() {
                 ok |= tx.try_send(frame.clone()).is_ok();
@@ -98,9 +119,9 @@ impl Session {
         };
         loop {
             tokio::select! {
-                () = cancel.cancelled() => return,
+                () = cancel.cancelled() => break,
                 ev = links_rx.recv() => match ev {
-                    None => return,
+                    None => break,
                     Some(LinkEvent::Up { id, tx, .. }) => {
                         links.insert(id, tx);
                         links_up.send_replace(links.len());
@@ -110,6 +131,18 @@ impl Session {
                         links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
+                        let finds = !fixed_target
+                            && frame.component_id() == AUTOPILOT1
+                            && TELEMETRY.contains(&frame.message_id());
+                        if !finds && !WANTED.contains(&frame.message_id()) {
+                            continue;
+                        }
+                        if let Some(s) = &mut signing
+                            && let Err(refusal) = s.verify_vehicle(&frame)
+                        {
+                            tracing::debug!(%refusal, "frame refused");
+                            continue;
+                        }
                         // The autopilot's own telemetry finds the vehicle as surely as its
                         // heartbeat, and arrives many times a second: on a lossy link that
                         // saves waiting for the next 1 Hz heartbeat.
@@ -137,15 +170,20 @@ impl Session {
                     }
                 },
                 msg = out_rx.recv() => match msg {
-                    Some(m) => send(&links, &m),
-                    None => return,
+                    Some(m) => send(&links, &m, &mut signing),
+                    None => break,
                 },
                 _ = beat.tick() => {
                     if shared.operators.load(Ordering::Relaxed) > 0 {
-                        send(&links, &vtol_link::gcs_heartbeat());
+                        send(&links, &vtol_link::gcs_heartbeat(), &mut signing);
                     }
                 }
             }
+        }
+        if let Some(s) = &signing
+            && let Err(e) = s.save()
+        {
+            tracing::warn!("{e}");
         }
     }
 }

@@ -7,6 +7,14 @@
 //! health the tracker reports. Every egress is a bounded queue filled without waiting, so a
 //! slow client never blocks the vehicle link; each drop is counted per link and per reason.
 //!
+//! Each client link carries its endpoint's [`policy::EndpointPolicy`] (trust and rate limit),
+//! given when the endpoint is spawned ([`InlineRouter::events_with`]): `read-only` links are not
+//! routed from, `sign` links' unsigned frames are signed with the daemon's key, and a rate
+//! limit drops what a link cannot take (counted for that link). With a key
+//! ([`Router::set_signing`]) frames from the vehicle are verified first and refused ones go
+//! nowhere: not to clients, not to the tlog, not to the tracker. SETUP_SIGNING (it carries a
+//! key) is never forwarded, logged or tapped, from any side.
+//!
 //! Two ways to drive it, with the same rules:
 //! - [`Router::inline`]: the daemon's hot path. The router state sits behind a lock and each
 //!   link task routes the frames it received itself, before it reads its socket again: no queue
@@ -17,11 +25,14 @@
 //! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
 //!   queues.
 
+pub mod policy;
+pub mod signing;
 pub mod table;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::time::Instant;
 
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
@@ -30,6 +41,8 @@ use vtol_link::{
 };
 
 use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
+use policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
+use signing::{DaemonSigning, SigningCounters};
 use table::{Addressing, Route, RoutingTable};
 
 const MSG_ID_COMMAND_ACK: u32 = 77;
@@ -58,6 +71,10 @@ pub struct LinkInfo {
     pub peer: String,
     /// Its counters (rx/tx frames and bytes, queue-full drops, decode errors).
     pub stats: Arc<LinkStats>,
+    /// Its endpoint's policy.
+    pub policy: EndpointPolicy,
+    /// What the policy did to its traffic (rate-limit drops, read-only refusals, signed).
+    pub policy_counters: Arc<PolicyCounters>,
 }
 
 /// Router-wide counters (per-link ones live in each link's [`LinkStats`]).
@@ -75,6 +92,12 @@ pub struct RouterStats {
     pub dropped_link_closed: AtomicU64,
     /// Frames the tracker tap could not take (it was behind).
     pub dropped_tap: AtomicU64,
+    /// Frames from read-only links, not routed (all links).
+    pub refused_read_only: AtomicU64,
+    /// Copies not sent because of a link's rate limit (all links).
+    pub dropped_rate: AtomicU64,
+    /// Frames from `sign` links that could not be signed (MAVLink 1), not routed.
+    pub unsignable: AtomicU64,
 }
 
 /// A frame as the taps see it.
@@ -95,6 +118,8 @@ pub struct RouterHandle {
     pub stats: Arc<RouterStats>,
     /// The live links.
     pub links: watch::Receiver<Vec<LinkInfo>>,
+    /// Signing counters, when the daemon has a key.
+    pub signing: Option<Arc<SigningCounters>>,
 }
 
 struct Egress {
@@ -103,6 +128,9 @@ struct Egress {
     tx: LinkSender,
     /// Frames of the run being routed that go out on this link, in order.
     run: Vec<Frame>,
+    policy: EndpointPolicy,
+    bucket: Option<TokenBucket>,
+    counters: Arc<PolicyCounters>,
 }
 
 /// The router's state, driven by [`Router::run`] or, shared, by [`Router::inline`].
@@ -117,6 +145,7 @@ pub struct Router {
     /// Records of the current run, handed to the tlog writer after the run is forwarded.
     pending_log: Vec<Record>,
     tap: Option<mpsc::Sender<Tapped>>,
+    signing: Option<DaemonSigning>,
 }
 
 impl std::fmt::Debug for Router {
@@ -148,8 +177,24 @@ impl Router {
             tlog,
             pending_log: Vec::with_capacity(BATCH),
             tap,
+            signing: None,
         };
-        (router, RouterHandle { stats, links })
+        (
+            router,
+            RouterHandle {
+                stats,
+                links,
+                signing: None,
+            },
+        )
+    }
+
+    /// Gives the router the daemon's key: it verifies the vehicle's frames and signs for
+    /// `sign` links. Returns the counters to put in the [`RouterHandle`].
+    pub fn set_signing(&mut self, signing: DaemonSigning) -> Arc<SigningCounters> {
+        let counters = Arc::clone(signing.counters());
+        self.signing = Some(signing);
+        counters
     }
 
     /// Routes until `cancel` fires or both queues close; then closes the tlog (flushing it).
@@ -187,17 +232,24 @@ impl Router {
         InlineRouter(Arc::new(Mutex::new(Some(self))))
     }
 
-    /// Applies one link event at once (its frame forwarded, its record handed to the tlog).
+    /// Applies one link event at once (its frame forwarded, its record handed to the tlog);
+    /// a new link gets the default policy.
     pub fn handle(&mut self, side: Side, event: LinkEvent) {
-        self.apply(side, event, unix_time_us());
+        self.handle_with(side, EndpointPolicy::default(), event);
+    }
+
+    /// [`Router::handle`], a new link getting `policy`.
+    pub fn handle_with(&mut self, side: Side, policy: EndpointPolicy, event: LinkEvent) {
+        self.apply(side, policy, event, unix_time_us(), Instant::now());
         self.end_run();
     }
 
     /// Applies a run of events taken from a queue, in order, and empties `events`.
     fn apply_run(&mut self, side: Side, events: &mut Vec<LinkEvent>) {
         let t_us = unix_time_us();
+        let now = Instant::now();
         for ev in events.drain(..) {
-            self.apply(side, ev, t_us);
+            self.apply(side, EndpointPolicy::default(), ev, t_us, now);
         }
         self.end_run();
     }
@@ -206,10 +258,20 @@ impl Router {
     fn route_run(&mut self, side: Side, frames: &mut Vec<(LinkId, Frame)>) {
         // One clock read per run: its frames arrived together.
         let t_us = unix_time_us();
+        let now = Instant::now();
         for (id, frame) in frames.drain(..) {
-            self.route(id, side, frame, t_us);
+            self.route(id, side, frame, t_us, now);
         }
         self.end_run();
+    }
+
+    /// Saves the signing state (if signing); errors are logged, routing goes on.
+    fn save_signing(&self) {
+        if let Some(s) = &self.signing
+            && let Err(e) = s.save()
+        {
+            tracing::warn!("{e}");
+        }
     }
 
     /// Hands the run's records to the tlog, then sends what the run routed to each egress
@@ -244,6 +306,7 @@ impl Router {
 
     fn close(&mut self) {
         self.send_runs();
+        self.save_signing();
         if let Some(tlog) = self.tlog.take() {
             tlog.log_many(self.pending_log.drain(..));
             tlog.close();
@@ -251,10 +314,17 @@ impl Router {
     }
 
     /// Applies one link event; its copies and record wait for [`Router::end_run`].
-    fn apply(&mut self, side: Side, event: LinkEvent, t_us: u64) {
+    fn apply(
+        &mut self,
+        side: Side,
+        policy: EndpointPolicy,
+        event: LinkEvent,
+        t_us: u64,
+        now: Instant,
+    ) {
         match event {
             LinkEvent::Up { id, peer, tx } => {
-                tracing::info!(%id, %peer, ?side, "link up");
+                tracing::info!(%id, %peer, ?side, %policy, "link up");
                 self.send_runs();
                 self.egress.insert(
                     id,
@@ -263,6 +333,9 @@ impl Router {
                         peer,
                         tx,
                         run: Vec::new(),
+                        policy,
+                        bucket: policy.rate.map(|r| TokenBucket::new(r, now)),
+                        counters: Arc::default(),
                     },
                 );
                 self.publish_links();
@@ -274,7 +347,7 @@ impl Router {
                 self.table.forget_link(id);
                 self.publish_links();
             }
-            LinkEvent::Frame { id, frame } => self.route(id, side, frame, t_us),
+            LinkEvent::Frame { id, frame } => self.route(id, side, frame, t_us, now),
         }
     }
 
@@ -288,15 +361,67 @@ impl Router {
                 side: e.side,
                 peer: e.peer.clone(),
                 stats: Arc::clone(e.tx.stats()),
+                policy: e.policy,
+                policy_counters: Arc::clone(&e.counters),
             })
             .collect();
         self.links_tx.send_replace(infos);
     }
 
-    /// Routes one frame: learns its sender, feeds the taps, and adds it to the run of each
-    /// egress link it goes to.
-    fn route(&mut self, ingress: LinkId, side: Side, frame: Frame, t_us: u64) {
+    /// Applies the ingress side's rules before routing: the vehicle's signatures, a client
+    /// link's trust. `None` when the frame goes nowhere (counted).
+    fn admit(&mut self, ingress: LinkId, side: Side, frame: Frame) -> Option<Frame> {
+        if frame.message_id() == MSG_ID_SETUP_SIGNING {
+            // It carries a key: never forwarded, logged or shown, from any side.
+            self.stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
+            return None;
+        }
+        if side == Side::Vehicle {
+            if let Some(s) = &mut self.signing
+                && let Err(refusal) = s.verify_vehicle(&frame)
+            {
+                tracing::debug!(%ingress, %refusal, "vehicle frame refused");
+                return None;
+            }
+            return Some(frame);
+        }
+        let Some(e) = self.egress.get(&ingress) else {
+            return Some(frame);
+        };
+        match e.policy.trust {
+            Trust::Trusted => Some(frame),
+            Trust::ReadOnly => {
+                e.counters.refused_read_only.fetch_add(1, Ordering::Relaxed);
+                self.stats.refused_read_only.fetch_add(1, Ordering::Relaxed);
+                None
+            }
+            Trust::Sign => {
+                let Some(s) = self.signing.as_mut().filter(|_| !frame.is_signed()) else {
+                    return Some(frame);
+                };
+                match s.sign(&frame, ingress) {
+                    Ok(signed) => {
+                        e.counters.signed.fetch_add(1, Ordering::Relaxed);
+                        Some(signed)
+                    }
+                    Err(err) => {
+                        tracing::debug!(%ingress, %err, "client frame not signed, not routed");
+                        e.counters.unsignable.fetch_add(1, Ordering::Relaxed);
+                        self.stats.unsignable.fetch_add(1, Ordering::Relaxed);
+                        None
+                    }
+                }
+            }
+        }
+    }
+
+    /// Routes one frame: applies the ingress link's policy, learns its sender, feeds the taps,
+    /// and adds it to the run of each egress link it goes to (within the link's rate limit).
+    fn route(&mut self, ingress: LinkId, side: Side, frame: Frame, t_us: u64, now: Instant) {
         self.stats.frames_in.fetch_add(1, Ordering::Relaxed);
+        let Some(frame) = self.admit(ingress, side, frame) else {
+            return;
+        };
         self.table
             .learn(ingress, frame.system_id(), frame.component_id());
         let addressing = addressing(&frame);
@@ -314,10 +439,6 @@ impl Router {
                 .is_err()
         {
             self.stats.dropped_tap.fetch_add(1, Ordering::Relaxed);
-        }
-        if frame.message_id() == MSG_ID_SETUP_SIGNING {
-            self.stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
-            return;
         }
         if self.tlog.is_some() {
             let direction = match side {
@@ -338,6 +459,13 @@ impl Router {
         }
         for link in &self.out {
             if let Some(e) = self.egress.get_mut(link) {
+                if let Some(bucket) = &mut e.bucket
+                    && !bucket.take(now)
+                {
+                    e.counters.dropped_rate.fetch_add(1, Ordering::Relaxed);
+                    self.stats.dropped_rate.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
                 e.run.push(frame.clone());
             }
         }
@@ -352,11 +480,33 @@ impl InlineRouter {
     /// Where the links of `side` report: each calls the router from its own task.
     #[must_use]
     pub fn events(&self, side: Side) -> Events {
+        self.events_with(side, EndpointPolicy::default())
+    }
+
+    /// Where the links of one endpoint report: each link it opens carries `policy`.
+    #[must_use]
+    pub fn events_with(&self, side: Side, policy: EndpointPolicy) -> Events {
         let handler: Arc<dyn LinkEventHandler> = Arc::new(SideHandler {
             router: self.clone(),
             side,
+            policy,
         });
         Events::Inline(handler)
+    }
+
+    /// Saves the signing state now (the daemon calls it every [`signing::SAVE_EVERY`]).
+    pub fn save_signing(&self) {
+        // The state is taken under the lock; the file is written outside it.
+        let job = self
+            .lock()
+            .as_ref()
+            .and_then(|r| r.signing.as_ref())
+            .and_then(|s| s.file().map(|f| (s.state(), f.to_owned())));
+        if let Some((state, file)) = job
+            && let Err(e) = state.save(&file)
+        {
+            tracing::warn!("{e}");
+        }
     }
 
     /// Stops routing: later events are refused (their links stop), what the last run routed is
@@ -378,6 +528,7 @@ impl InlineRouter {
 struct SideHandler {
     router: InlineRouter,
     side: Side,
+    policy: EndpointPolicy,
 }
 
 impl LinkEventHandler for SideHandler {
@@ -386,7 +537,7 @@ impl LinkEventHandler for SideHandler {
         let Some(router) = guard.as_mut() else {
             return false;
         };
-        router.handle(self.side, event);
+        router.handle_with(self.side, self.policy, event);
         true
     }
 

@@ -21,6 +21,7 @@ use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
 use crate::daemon::{OWN_TRAFFIC_PEER, Running, describe};
+use crate::router::policy::EndpointPolicy;
 use app::{App, Outcome, Request};
 use view::{LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
 
@@ -53,6 +54,8 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
             peer: l.peer.clone(),
             own: l.peer == OWN_TRAFFIC_PEER,
             stats: l.stats.snapshot(),
+            policy: (l.policy != EndpointPolicy::default() && l.peer != OWN_TRAFFIC_PEER)
+                .then(|| (l.policy, l.policy_counters.snapshot())),
         })
         .collect();
     let s = &running.router.stats;
@@ -63,6 +66,11 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
         withheld_signing: s.withheld_signing.load(Ordering::Relaxed),
         dropped_link_closed: s.dropped_link_closed.load(Ordering::Relaxed),
         dropped_tap: s.dropped_tap.load(Ordering::Relaxed),
+        signing_refused: running
+            .router
+            .signing
+            .as_ref()
+            .map_or(0, |c| c.snapshot().refused()),
     };
     let tlog = running.tlog_path.as_ref().map(|p| {
         let st = running.tlog_stats.as_deref();
@@ -96,7 +104,7 @@ pub fn draw_running<B: ratatui::backend::Backend>(
     let serving = running
         .serving
         .iter()
-        .map(|(u, a)| describe(u, *a))
+        .map(|(u, a, p)| format!("{}{}", describe(u, *a), p.query()))
         .collect();
     let history = running
         .history

@@ -41,6 +41,11 @@ pub struct LinkRow {
     pub own: bool,
     /// Counters.
     pub stats: vtol_link::LinkStatsSnapshot,
+    /// A client endpoint's policy when it is not the default, and what it did.
+    pub policy: Option<(
+        crate::router::policy::EndpointPolicy,
+        crate::router::policy::PolicyCountersSnapshot,
+    )>,
 }
 
 /// Router-wide counters.
@@ -58,6 +63,8 @@ pub struct RouterCounters {
     pub dropped_link_closed: u64,
     /// Tracker behind.
     pub dropped_tap: u64,
+    /// Vehicle frames refused by the signing check (0 without a key).
+    pub signing_refused: u64,
 }
 
 /// The tlog as shown.
@@ -870,16 +877,21 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             } else {
                 Style::new()
             };
+            // A policy shows beside the peer; rate-limit drops count with queue-full drops.
+            let (peer, rate_dropped) = match &l.policy {
+                Some((p, c)) => (format!("{} [{}]", l.peer, p.trust), c.dropped_rate),
+                None => (l.peer.clone(), 0),
+            };
             Row::new(vec![
                 l.id.to_string(),
                 side.to_owned(),
-                l.peer.clone(),
+                peer,
                 rate,
                 loss,
                 if lost { format!("LOST {heard}") } else { heard },
                 l.stats.rx_frames.to_string(),
                 l.stats.tx_frames.to_string(),
-                l.stats.tx_dropped_queue_full.to_string(),
+                (l.stats.tx_dropped_queue_full + rate_dropped).to_string(),
                 l.stats.bad_crc.to_string(),
             ])
             .style(style)
@@ -912,8 +924,14 @@ fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
         .iter()
         .filter(|l| l.side == Side::Client && !l.own)
         .count();
+    // Refused vehicle frames share the signing line, shown only when there are some.
+    let refused = if r.signing_refused > 0 {
+        format!("  refused {}", r.signing_refused)
+    } else {
+        String::new()
+    };
     let text = format!(
-        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}\nlink closed    {}\ntracker behind {}",
+        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}{refused}\nlink closed    {}\ntracker behind {}",
         r.frames_in,
         r.frames_out,
         r.unroutable,

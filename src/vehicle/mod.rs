@@ -125,6 +125,8 @@ mod tests {
             side: Side::Vehicle,
             peer: "test".into(),
             stats: Arc::new(LinkStats::default()),
+            policy: crate::router::policy::EndpointPolicy::default(),
+            policy_counters: Arc::default(),
         }
     }
 

@@ -24,7 +24,8 @@ from procs import ManagedProcess, ProcessFactory, factory_fixtures
 
 DAEMON_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs"))
 
-SERVING_RE = re.compile(r"^serving\s+(?P<scheme>[a-z]+):(?P<addr>\S+)\s*$")
+# An endpoint with a policy is printed with its query (`serving tcpin:127.0.0.1:5770?trust=sign`).
+SERVING_RE = re.compile(r"^serving\s+(?P<scheme>[a-z]+):(?P<addr>[^\s?]+)(?P<query>\?\S*)?\s*$")
 LOGGING_RE = re.compile(r"^logging\s+(?P<path>.+\.tlog)\s*$")
 VEHICLE_RE = re.compile(r"^vehicle\s+(?P<what>.+)$")
 

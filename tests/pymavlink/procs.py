@@ -48,6 +48,7 @@ class ManagedProcess:
         self.endpoints: list[tuple[str, str]] = []  # (scheme, address) as printed
         self.stdout_lines: list[str] = []
         self._drain: threading.Thread | None = None
+        self._new_lines = threading.Condition()
 
     # -- start ------------------------------------------------------------------------------
 
@@ -125,10 +126,29 @@ class ManagedProcess:
                 break
             rest += chunk
             *lines, rest = rest.split(b"\n")
-            self.stdout_lines.extend(x.decode(errors="replace") for x in lines)
-            del self.stdout_lines[:-STDOUT_TAIL]  # only the tail matters
-        if rest:
-            self.stdout_lines.append(rest.decode(errors="replace"))
+            with self._new_lines:
+                self.stdout_lines.extend(x.decode(errors="replace") for x in lines)
+                del self.stdout_lines[:-STDOUT_TAIL]  # only the tail matters
+                self._new_lines.notify_all()
+        with self._new_lines:
+            if rest:
+                self.stdout_lines.append(rest.decode(errors="replace"))
+            self._new_lines.notify_all()
+
+    def wait_line(self, pattern: str, timeout: float = 10.0) -> str:
+        """The first stdout line (start lines and the drained tail) matching the regex `pattern`,
+        waiting for new lines with `timeout` as the upper bound."""
+        rx = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        with self._new_lines:
+            while True:
+                for line in self.stdout_lines:
+                    if rx.search(line):
+                        return line
+                left = deadline - time.monotonic()
+                if left <= 0 or not self.alive():
+                    raise AssertionError(f"no {self.KIND} line matching {pattern!r} in {timeout} s\n{self.tail()}")
+                self._new_lines.wait(left)
 
     # -- addresses --------------------------------------------------------------------------
 

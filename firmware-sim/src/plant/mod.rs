@@ -87,6 +87,27 @@ impl OdeState for PlantState {
             omega_body_rad_s: self.omega_body_rad_s + d.omega_dot_rad_s2 * h,
         }
     }
+
+    /// The weighted sum first, k1 + k4 + 2 (k2 + k3), then one step along it: 12 operations
+    /// per component where the term-by-term default takes 16.
+    #[inline]
+    fn rk4_update(&self, k: [&PlantStateDot; 4], h: f64) -> Self {
+        let [k1, k2, k3, k4] = k;
+        let sum = |f: fn(&PlantStateDot) -> &Vector3<f64>| f(k1) + f(k4) + (f(k2) + f(k3)) * 2.0;
+        let e = self.euler;
+        let euler_sum = sum(|d| &d.euler_dot_rad_s);
+        let h6 = h / 6.0;
+        Self {
+            pos_m: self.pos_m + sum(|d| &d.pos_dot_m_s) * h6,
+            vel_body_m_s: self.vel_body_m_s + sum(|d| &d.vel_body_dot_m_s2) * h6,
+            euler: Euler::new(
+                e.psi + euler_sum[0] * h6,
+                e.theta + euler_sum[1] * h6,
+                e.phi + euler_sum[2] * h6,
+            ),
+            omega_body_rad_s: self.omega_body_rad_s + sum(|d| &d.omega_dot_rad_s2) * h6,
+        }
+    }
 }
 
 /// Everything that drives the plant during one integration step (held constant over it).
@@ -232,7 +253,7 @@ pub fn derivative_held(
 ) -> PlantStateDot {
     let l = held.at(af, trig, s);
     PlantStateDot {
-        pos_dot_m_s: trig.rotation_body_to_inertial() * s.vel_body_m_s,
+        pos_dot_m_s: trig.rotate_body_to_inertial(&s.vel_body_m_s),
         vel_body_dot_m_s2: body.body_acceleration_m_s2(
             trig,
             &s.vel_body_m_s,

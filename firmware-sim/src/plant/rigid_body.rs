@@ -46,7 +46,9 @@ impl EulerTrig {
     #[must_use]
     pub fn shifted(&self, from: &Euler, to: &Euler) -> Self {
         let d = [to.psi - from.psi, to.theta - from.theta, to.phi - from.phi];
-        let largest = d[0].abs().max(d[1].abs()).max(d[2].abs());
+        // Plain comparisons rather than `f64::max`, whose NaN rule costs instructions here: a
+        // NaN angle makes the trig NaN either way.
+        let largest = larger(larger(d[0].abs(), d[1].abs()), d[2].abs());
         if largest > SHIFT_MAX_RAD {
             return Self::exact(to);
         }
@@ -83,6 +85,29 @@ impl EulerTrig {
         )
     }
 
+    /// R_B→I v without forming R: the three elementary rotations Rz(ψ)(Ry(θ)(Rx(φ) v)), 12
+    /// products instead of the 23 of building R and multiplying. Equal to
+    /// `self.rotation_body_to_inertial() * v` up to rounding.
+    #[inline]
+    #[must_use]
+    pub fn rotate_body_to_inertial(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        let Self {
+            sps,
+            cps,
+            sth,
+            cth,
+            sph,
+            cph,
+        } = *self;
+        let (x, y, z) = (v[0], v[1], v[2]);
+        // Rx(φ): roll about x_B.
+        let (y1, z1) = (cph * y - sph * z, sph * y + cph * z);
+        // Ry(θ): pitch about y.
+        let (x2, z2) = (cth * x + sth * z1, cth * z1 - sth * x);
+        // Rz(ψ): heading about z_I.
+        Vector3::new(cps * x2 - sps * y1, sps * x2 + cps * y1, z2)
+    }
+
     /// η̇ = W_n⁻¹ Ω, identical to [`Euler::rates_from_body`].
     #[inline]
     #[must_use]
@@ -115,6 +140,12 @@ impl EulerTrig {
             -g_m_s2 * self.cph * self.cth,
         )
     }
+}
+
+/// The larger of `a` and `b` (either when one is NaN).
+#[inline]
+fn larger(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
 }
 
 /// Largest angle increment [`EulerTrig::shifted`] handles by series, rad (the first series
@@ -249,6 +280,9 @@ mod tests {
         assert!((t.euler_rates(&w) - e.rates_from_body(&w)).norm() < 1e-14);
         let g = t.rotation_body_to_inertial().transpose() * Vector3::new(0.0, 0.0, -9.8);
         assert!((t.gravity_body_m_s2(9.8) - g).norm() < 1e-14);
+        let v = Vector3::new(1.5, -0.4, 2.25);
+        let rv = t.rotation_body_to_inertial() * v;
+        assert!((t.rotate_body_to_inertial(&v) - rv).amax() < 4.0 * f64::EPSILON * rv.amax());
     }
 
     #[test]
