@@ -116,6 +116,12 @@ fn parse_host_port(url: &str, rest: &str) -> Result<(String, u16), UrlError> {
             "expected HOST:PORT, the host is empty (use 127.0.0.1 or 0.0.0.0)".into(),
         ));
     }
+    if host.contains(['[', ']']) {
+        return Err(bad(format!(
+            "host '{host}' has a stray bracket: only an IPv6 address is written in brackets, \
+             e.g. [::1]:{port}"
+        )));
+    }
     let port = port
         .parse::<u16>()
         .map_err(|_| bad(format!("port '{port}' is not a number from 0 to 65535")))?;
@@ -350,6 +356,8 @@ mod tests {
         assert!(e("tcp:host:99999").contains("port '99999'"));
         assert!(e("tcp:::1:5760").contains("brackets"));
         assert!(e("tcp:[::1:5760").contains("unclosed"));
+        assert!(e("tcpin:[[1.1]:0").contains("stray bracket"));
+        assert!(e("udpin:a]b:1").contains("stray bracket"));
         assert!(e("serial:").contains("device is missing"));
         assert!(e("serial:/dev/x:0").contains("positive"));
         assert!(e("/dev/ttyS0,fast").contains("not a number"));
