@@ -207,7 +207,8 @@ pub fn signing_state(data: &[u8]) {
         }
         Err(e) => {
             one_line(&e);
-            let line = vtol_link::error_line(&e);
+            // The fixed description of the format may share text with any input.
+            let line = vtol_link::error_line(&e).replace(vtol_link::signing::STATE_FILE_FORMAT, "");
             for l in input.lines().filter(|l| l.trim_start().starts_with("key")) {
                 let value = l
                     .split_once('=')

@@ -39,6 +39,9 @@ use crate::frame::{
     CRC_LEN, Frame, HEADER_LEN_V2, INCOMPAT_SIGNED, SIGNATURE_LEN, crc_extra, frame_crc,
 };
 
+/// How a signing state file is written, as its errors say it (never with a value of the file).
+pub const STATE_FILE_FORMAT: &str = "expected key = \"64 hex characters\" and timestamp = N";
+
 /// Seconds from the Unix epoch to the signing epoch, 2015-01-01 00:00:00 UTC.
 pub const SIGNING_EPOCH_UNIX_S: u64 = 1_420_070_400;
 /// Timestamp units per second (one unit is 10 µs).
@@ -604,7 +607,7 @@ impl SigningState {
         // may be the key, written without its quotes.
         let table: toml::Table = toml::from_str(text).map_err(|e| {
             let message = if e.message().contains('`') {
-                "not valid TOML (expected key = \"64 hex characters\" and timestamp = N)".to_owned()
+                format!("not valid TOML ({STATE_FILE_FORMAT})")
             } else {
                 e.message().trim_end().replace('\n', "; ")
             };
