@@ -5,6 +5,7 @@
 
 mod client_cli;
 
+use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -240,23 +241,52 @@ fn run_config(config: Config) -> anyhow::Result<()> {
 async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
     let mut tasks = tokio::task::JoinSet::new();
     let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
-    println!("vehicle {}", config.vehicle);
+    let mut out = StatusOut::default();
+    out.line(&format!("vehicle {}", config.vehicle));
     for (url, addr, policy) in &running.serving {
-        println!(
+        out.line(&format!(
             "serving {}{}",
             vtol_gcs::daemon::describe(url, *addr),
             policy.query()
-        );
+        ));
     }
     if let Some(p) = &running.signing_state {
-        println!("signing state {}", p.display());
+        out.line(&format!("signing state {}", p.display()));
     }
     if let Some(p) = &running.tlog_path {
-        println!("logging {}", p.display());
+        out.line(&format!("logging {}", p.display()));
     }
-    print_status_lines(&running, config.status_interval, &cancel).await;
+    if out.open {
+        print_status_lines(&running, config.status_interval, &cancel, &mut out).await;
+    }
     while tasks.join_next().await.is_some() {}
     Ok(())
+}
+
+/// Standard output of the headless daemon. A reader that goes away (`vtol-gcs run | head`, a
+/// closed log pipe) ends the status lines, with one line on standard error, and nothing else:
+/// the daemon goes on routing and logging.
+struct StatusOut {
+    open: bool,
+}
+
+impl Default for StatusOut {
+    fn default() -> Self {
+        Self { open: true }
+    }
+}
+
+impl StatusOut {
+    fn line(&mut self, line: &str) {
+        if !self.open {
+            return;
+        }
+        let mut stdout = std::io::stdout().lock();
+        if let Err(e) = writeln!(stdout, "{line}").and_then(|()| stdout.flush()) {
+            self.open = false;
+            eprintln!("status lines stopped: standard output failed ({e}); the daemon goes on");
+        }
+    }
 }
 
 /// One status line per `interval` until `cancel` fires.
@@ -264,6 +294,7 @@ async fn print_status_lines(
     running: &vtol_gcs::daemon::Running,
     interval: std::time::Duration,
     cancel: &CancellationToken,
+    out: &mut StatusOut,
 ) {
     let mut tick = tokio::time::interval(interval);
     tick.tick().await;
@@ -293,7 +324,10 @@ async fn print_status_lines(
                     &running.router.conflicts.borrow(),
                     vtol_gcs::vehicle::now(),
                 ));
-                println!("{line}");
+                out.line(&line);
+                if !out.open {
+                    return;
+                }
             }
         }
     }

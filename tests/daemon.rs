@@ -287,3 +287,64 @@ fn a_serial_vehicle_that_does_not_exist_is_one_clear_line() {
         "{line}"
     );
 }
+
+#[test]
+fn a_closed_standard_output_ends_the_status_lines_not_the_daemon() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"))
+        .args(["run", "--serve", "tcpin:127.0.0.1:0", "--headless"])
+        .args(["--log-dir", dir.path().to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start vtol-gcs");
+    let (tx, stderr_lines) = mpsc::channel();
+    let err = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    // Read the start-up lines, then go away as `vtol-gcs run | head` does.
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let serving = loop {
+        let mut line = String::new();
+        assert!(out.read_line(&mut line).unwrap() > 0, "stdout ended early");
+        if let Some(rest) = line.strip_prefix("serving tcpin:") {
+            break rest.trim().to_owned();
+        }
+    };
+    drop(out);
+    // The next status line finds the pipe closed: one line on stderr says so.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = stderr_lines
+            .recv_timeout(left)
+            .expect("no line on stderr about the closed standard output");
+        assert!(!line.contains("panicked"), "{line}");
+        if line.contains("status lines stopped") {
+            break;
+        }
+    }
+    // The daemon still serves the vehicle.
+    let mut sock = TcpStream::connect(serving.as_str()).expect("connect to the serve port");
+    sock.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut dec = FrameDecoder::new();
+    let mut buf = [0u8; 4096];
+    let mut vehicle_frames = 0;
+    while Instant::now() < deadline && vehicle_frames < 20 {
+        let n = sock.read(&mut buf).expect("read from the daemon");
+        assert!(n > 0, "daemon closed the connection");
+        dec.push(&buf[..n]);
+        vehicle_frames += dec.frames().filter(|f| f.system_id() == 1).count();
+    }
+    assert!(vehicle_frames >= 20, "only {vehicle_frames} vehicle frames");
+    assert!(child.try_wait().unwrap().is_none(), "the daemon exited");
+    let mut d = Daemon {
+        child,
+        lines: mpsc::channel().1,
+    };
+    d.terminate();
+}
