@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs every test: formatting, lints, the Rust tests, then the pymavlink suite.
+# Runs every test: formatting, lints, the Rust tests, then the pymavlink suite with every fuzz
+# target running beside it.
 # On a fresh machine it installs what it needs itself (socat, tmux, a venv with the pinned Python
 # packages in .venv, the vtol_twin pytest plugin into that venv).
 set -euo pipefail
