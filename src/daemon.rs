@@ -84,6 +84,8 @@ pub struct Running {
     pub client: ClientHandle,
     /// Live tlog counters, if logging.
     pub tlog_stats: Option<std::sync::Arc<TlogStats>>,
+    /// Where a `--vehicle` URL that listens ended up (the real port when 0 was asked for).
+    pub vehicle_addr: Option<SocketAddr>,
     /// Where each serve URL ended up (the real port when 0 was asked for), with its policy.
     pub serving: Vec<(LinkUrl, Option<SocketAddr>, EndpointPolicy)>,
     /// The signing state file, when signing.
@@ -108,8 +110,8 @@ pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 #[must_use]
 pub fn describe(url: &LinkUrl, addr: Option<SocketAddr>) -> String {
     match (url, addr) {
-        (LinkUrl::TcpIn { .. }, Some(a)) => format!("tcpin:{}:{}", a.ip(), a.port()),
-        (LinkUrl::UdpIn { .. }, Some(a)) => format!("udpin:{}:{}", a.ip(), a.port()),
+        (LinkUrl::TcpIn { .. }, Some(a)) => format!("tcpin:{a}"),
+        (LinkUrl::UdpIn { .. }, Some(a)) => format!("udpin:{a}"),
         _ => url.to_string(),
     }
 }
@@ -257,6 +259,7 @@ pub async fn start(
         let _ = link_task.await;
     });
 
+    let mut vehicle_addr = None;
     match &config.vehicle {
         VehicleSource::Embedded => {
             let (twin_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
@@ -304,6 +307,7 @@ pub async fn start(
                     url: url.clone(),
                     source,
                 })?;
+            vehicle_addr = h.local_addr();
             tasks.spawn(h.join());
         }
     }
@@ -321,6 +325,7 @@ pub async fn start(
         client,
         param_fetches,
         tlog_stats,
+        vehicle_addr,
         serving,
         signing_state,
         tlog_path,

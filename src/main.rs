@@ -242,7 +242,11 @@ async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result
     let mut tasks = tokio::task::JoinSet::new();
     let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
     let mut out = StatusOut::default();
-    out.line(&format!("vehicle {}", config.vehicle));
+    let vehicle = match (&config.vehicle, running.vehicle_addr) {
+        (VehicleSource::Url(url), Some(addr)) => vtol_gcs::daemon::describe(url, Some(addr)),
+        (source, _) => source.to_string(),
+    };
+    out.line(&format!("vehicle {vehicle}"));
     for (url, addr, policy) in &running.serving {
         out.line(&format!(
             "serving {}{}",

@@ -348,3 +348,40 @@ fn a_closed_standard_output_ends_the_status_lines_not_the_daemon() {
     };
     d.terminate();
 }
+
+#[test]
+fn a_listening_vehicle_url_is_printed_with_its_real_port() {
+    let mut d = Daemon::start(&[
+        "run",
+        "--vehicle",
+        "udpin:127.0.0.1:0",
+        "--serve",
+        "tcpin:127.0.0.1:0",
+        "--no-log",
+    ]);
+    let vehicle = d.line_starting("vehicle udpin:");
+    let serving = d.line_starting("serving tcpin:");
+    let addr: std::net::SocketAddr = vehicle.parse().expect("a real address");
+    assert_ne!(addr.port(), 0, "port 0 printed");
+    // The printed port is the vehicle link: a vehicle's heartbeat sent there reaches a client.
+    let mut client = TcpStream::connect(serving.as_str()).unwrap();
+    client
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let vehicle_sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let beat = vtol_link::Frame::encode_v2(7, 1, 0, &vtol_link::gcs_heartbeat());
+    let mut dec = FrameDecoder::new();
+    let mut buf = [0u8; 4096];
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut heard = false;
+    while !heard && Instant::now() < deadline {
+        vehicle_sock.send_to(beat.as_bytes(), addr).unwrap();
+        if let Ok(n) = client.read(&mut buf) {
+            assert!(n > 0, "daemon closed the connection");
+            dec.push(&buf[..n]);
+            heard = dec.frames().any(|f| f.system_id() == 7);
+        }
+    }
+    assert!(heard, "the vehicle's heartbeat never reached the client");
+    d.terminate();
+}
