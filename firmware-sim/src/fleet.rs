@@ -29,7 +29,7 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{EndpointHandle, LinkEvent};
 
-use crate::serve::{Bound, ServeConfig, ServeError, Twin};
+use crate::serve::{Bound, Listeners, ServeConfig, ServeError, Twin, open_listeners};
 
 /// Capacity of the transports → fan-out queue.
 const FAN_OUT_QUEUE: usize = 4096;
@@ -127,6 +127,15 @@ impl Fleet {
         count: u16,
         cancel: CancellationToken,
     ) -> Result<Self, FleetError> {
+        // The shared endpoints first, so each twin knows which of their links are local.
+        let (events, rx) = mpsc::channel(FAN_OUT_QUEUE);
+        let Listeners {
+            bound,
+            endpoints,
+            local_links,
+        } = open_listeners(&config.listen, &events, &config.link_options, &cancel)
+            .await
+            .map_err(ServeError::from)?;
         let mut twins = Vec::with_capacity(usize::from(count));
         let mut queues = Vec::with_capacity(usize::from(count));
         for i in 0..count {
@@ -144,27 +153,9 @@ impl Fleet {
                 .map(|p| member_file(p, sysid));
             c.tlog = config.tlog.as_deref().map(|p| member_file(p, sysid));
             c.load_param_file()?;
-            let twin = Twin::start(c, cancel.clone()).await?;
+            let twin = Twin::start_member(c, cancel.clone(), local_links.clone()).await?;
             queues.push((sysid, twin.events()));
             twins.push(twin);
-        }
-        let (events, rx) = mpsc::channel(FAN_OUT_QUEUE);
-        let mut bound = Vec::new();
-        let mut endpoints = Vec::new();
-        for url in &config.listen {
-            let handle = vtol_link::spawn_endpoint(
-                url,
-                events.clone(),
-                config.link_options.clone(),
-                cancel.child_token(),
-            )
-            .await
-            .map_err(ServeError::from)?;
-            bound.push(Bound {
-                url: url.clone(),
-                local_addr: handle.local_addr(),
-            });
-            endpoints.push(handle);
         }
         drop(events);
         let fan_out = tokio::spawn(fan_out(rx, queues, cancel));

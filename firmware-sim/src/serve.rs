@@ -242,6 +242,45 @@ pub enum ServeError {
     LockstepLatency,
 }
 
+/// The opened `listen` endpoints of a twin, or the shared ones of a fleet.
+pub(crate) struct Listeners {
+    /// Where each ended up, in `listen` order.
+    pub bound: Vec<Bound>,
+    /// Their handles.
+    pub endpoints: Vec<vtol_link::EndpointHandle>,
+    /// The links that are local: a serial device is the cable, and SETUP_SIGNING is taken on it.
+    pub local_links: HashSet<LinkId>,
+}
+
+/// Opens every URL in order, sending its link events to `events`; fails at the first that
+/// cannot open (the ones already open stop with `cancel`).
+pub(crate) async fn open_listeners(
+    urls: &[LinkUrl],
+    events: &mpsc::Sender<LinkEvent>,
+    options: &LinkOptions,
+    cancel: &CancellationToken,
+) -> Result<Listeners, LinkError> {
+    let mut l = Listeners {
+        bound: Vec::new(),
+        endpoints: Vec::new(),
+        local_links: HashSet::new(),
+    };
+    for url in urls {
+        let handle =
+            vtol_link::spawn_endpoint(url, events.clone(), options.clone(), cancel.child_token())
+                .await?;
+        if let (LinkUrl::Serial { .. }, Some(id)) = (url, handle.link_id()) {
+            l.local_links.insert(id);
+        }
+        l.bound.push(Bound {
+            url: url.clone(),
+            local_addr: handle.local_addr(),
+        });
+        l.endpoints.push(handle);
+    }
+    Ok(l)
+}
+
 /// One opened endpoint and where it ended up.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Bound {
@@ -293,9 +332,16 @@ impl Twin {
     /// # Errors
     /// [`ServeError::Link`] for the first endpoint that cannot open; the control listener's
     /// and the tlog's errors; [`ServeError::LockstepLatency`].
-    pub async fn start(
+    pub async fn start(config: ServeConfig, cancel: CancellationToken) -> Result<Self, ServeError> {
+        Self::start_member(config, cancel, HashSet::new()).await
+    }
+
+    /// [`Twin::start`] for a member of a fleet, which also hears the fleet's shared endpoints:
+    /// `shared_local` are the links among them that are local (serial).
+    pub(crate) async fn start_member(
         mut config: ServeConfig,
         cancel: CancellationToken,
+        shared_local: HashSet<LinkId>,
     ) -> Result<Self, ServeError> {
         let lockstep = config.clock == ClockMode::Lockstep;
         if lockstep {
@@ -331,34 +377,18 @@ impl Twin {
             }
         };
         let (events, rx) = mpsc::channel(EVENT_QUEUE);
-        let mut bound = Vec::new();
-        let mut endpoints = Vec::new();
-        let mut local_links = HashSet::new();
-        for url in &config.listen {
-            let handle = vtol_link::spawn_endpoint(
-                url,
-                events.clone(),
-                config.link_options.clone(),
-                cancel.child_token(),
-            )
-            .await;
-            let handle = match handle {
-                Ok(h) => h,
-                Err(e) => {
-                    cancel.cancel();
-                    return Err(e.into());
-                }
-            };
-            // A serial device is a local link (the cable): SETUP_SIGNING is taken on it.
-            if let (LinkUrl::Serial { .. }, Some(id)) = (url, handle.link_id()) {
-                local_links.insert(id);
+        let Listeners {
+            bound,
+            endpoints,
+            mut local_links,
+        } = match open_listeners(&config.listen, &events, &config.link_options, &cancel).await {
+            Ok(l) => l,
+            Err(e) => {
+                cancel.cancel();
+                return Err(e.into());
             }
-            bound.push(Bound {
-                url: url.clone(),
-                local_addr: handle.local_addr(),
-            });
-            endpoints.push(handle);
-        }
+        };
+        local_links.extend(shared_local);
         let shell = Shell {
             endpoint: Endpoint::new(config.endpoint),
             clock: SimClock::new(config.clock, Instant::now()),

@@ -131,3 +131,38 @@ def test_setup_signing_on_a_serial_link_is_taken_unsigned(twin_factory, tmp_path
         assert_no_key_in_logs(twin)
     finally:
         socat.stop()
+
+
+def test_a_fleet_member_takes_setup_signing_on_the_shared_serial_link(twin_factory, tmp_path):
+    """`serve --count 2`: the serial endpoint is shared by the fleet and still counts as local."""
+    vehicle_end, gcs_end = tmp_path / "vehicle", tmp_path / "gcs"
+    socat = Socat(vehicle_end, gcs_end)
+    socat.start()
+    try:
+        twin = twin_factory(listen=[f"serial:{vehicle_end}:115200"], speed=4, extra=["--count", "2"])
+        g = Gcs(str(gcs_end), baud=115200)
+        try:
+
+            def heartbeat_of(sysid: int, signed: bool):
+                deadline = time.monotonic() + 20
+                while time.monotonic() < deadline:
+                    g.beat()
+                    m = g.m.recv_match(type="HEARTBEAT", blocking=True, timeout=0.25)
+                    if m is not None and m.get_srcSystem() == sysid and m.get_signed() == signed:
+                        return m
+                raise AssertionError(f"no {'signed' if signed else 'unsigned'} heartbeat of system {sysid}")
+
+            heartbeat_of(2, signed=False)
+            g.mav.setup_signing_send(2, VEHICLE_COMPID, list(NEW_KEY), timestamp_now())  # unsigned, on the cable
+            g.m.setup_signing(NEW_KEY, sign_outgoing=True)
+            heartbeat_of(2, signed=True)
+        finally:
+            g.close()
+        twin.stop()
+        twin.assert_clean_exit()
+        member = twin.param_file.with_name(f"{twin.param_file.stem}-sys2.signing")
+        assert member.read_text().split('key = "')[1].split('"')[0] == NEW_KEY.hex()
+        # It was addressed to system 2 only: system 1 stays unkeyed.
+        assert not twin.param_file.with_name(f"{twin.param_file.stem}-sys1.signing").exists()
+    finally:
+        socat.stop()
