@@ -142,6 +142,12 @@ pub struct FileConfig {
     pub signing_key_file: Option<String>,
     /// Where the daemon keeps its signing timestamp.
     pub signing_state: Option<String>,
+    /// Zenoh session mode for `zenoh:` links: `"peer"` (default), `"client"` or `"router"`.
+    pub zenoh_mode: Option<String>,
+    /// Zenoh endpoints to connect to, e.g. `["tcp/192.168.1.10:7447"]`.
+    pub zenoh_connect: Option<Vec<String>>,
+    /// Zenoh endpoints to listen on, e.g. `["tcp/0.0.0.0:7447"]`.
+    pub zenoh_listen: Option<Vec<String>>,
 }
 
 /// A signing passphrase from the file: its `Debug` shows no text.
@@ -307,7 +313,46 @@ impl FileConfig {
         if let Some(f) = self.signing_state {
             config.signing_state = Some(PathBuf::from(f));
         }
+        if let Some(m) = self.zenoh_mode {
+            config.link.zenoh.mode = m.parse().map_err(|message| ConfigError::Value {
+                key: "zenoh_mode",
+                message,
+            })?;
+        }
+        if let Some(c) = self.zenoh_connect {
+            config.link.zenoh.connect = zenoh_endpoints("zenoh_connect", c)?;
+        }
+        if let Some(l) = self.zenoh_listen {
+            config.link.zenoh.listen = zenoh_endpoints("zenoh_listen", l)?;
+        }
         Ok(())
+    }
+}
+
+/// Checks Zenoh endpoints: `PROTOCOL/ADDRESS`, e.g. `tcp/127.0.0.1:7447`.
+///
+/// # Errors
+/// [`ConfigError::Value`] naming the first one that is not.
+pub fn zenoh_endpoints(key: &'static str, v: Vec<String>) -> Result<Vec<String>, ConfigError> {
+    for e in &v {
+        check_zenoh_endpoint(e).map_err(|message| ConfigError::Value { key, message })?;
+    }
+    Ok(v)
+}
+
+/// Checks one Zenoh endpoint, `PROTOCOL/ADDRESS` (this build speaks `tcp`).
+///
+/// # Errors
+/// Why it is not one.
+pub fn check_zenoh_endpoint(e: &str) -> Result<(), String> {
+    match e.split_once('/') {
+        Some(("tcp", addr)) if !addr.is_empty() => Ok(()),
+        Some((proto, _)) if proto != "tcp" => Err(format!(
+            "Zenoh endpoint '{e}': this build speaks tcp only (e.g. tcp/127.0.0.1:7447)"
+        )),
+        _ => Err(format!(
+            "Zenoh endpoint '{e}' is not PROTOCOL/ADDRESS (e.g. tcp/127.0.0.1:7447)"
+        )),
     }
 }
 
@@ -364,6 +409,33 @@ mod tests {
             .apply(&mut c)
             .unwrap_err();
         assert!(e.to_string().contains("unknown trust 'root'"), "{e}");
+    }
+
+    #[test]
+    fn zenoh_settings_from_the_file() {
+        let mut c = Config::default();
+        FileConfig::parse(
+            "zenoh_mode = \"client\"\nzenoh_connect = [\"tcp/10.0.0.1:7447\"]\n\
+             zenoh_listen = [\"tcp/0.0.0.0:7448\"]\n",
+        )
+        .unwrap()
+        .apply(&mut c)
+        .unwrap();
+        assert_eq!(c.link.zenoh.mode, vtol_link::ZenohMode::Client);
+        assert_eq!(c.link.zenoh.connect, vec!["tcp/10.0.0.1:7447".to_string()]);
+        assert_eq!(c.link.zenoh.listen, vec!["tcp/0.0.0.0:7448".to_string()]);
+        for (text, key) in [
+            ("zenoh_mode = \"mesh\"", "zenoh_mode"),
+            ("zenoh_connect = [\"127.0.0.1:7447\"]", "zenoh_connect"),
+            ("zenoh_listen = [\"udp/0.0.0.0:7447\"]", "zenoh_listen"),
+        ] {
+            let e = FileConfig::parse(text)
+                .unwrap()
+                .apply(&mut Config::default())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key), "{e}");
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@ use firmware_sim::serve::{ServeConfig, Twin};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{LinkOptions, LinkUrl, spawn_endpoint, spawn_stream_link};
+use vtol_link::{LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_link};
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
@@ -216,7 +216,10 @@ pub async fn start(
     let mut serving = Vec::new();
     for spec in &config.serve {
         let events = router.events_with(Side::Client, spec.policy);
-        let h = spawn_endpoint(&spec.url, events, config.link.clone(), cancel.clone())
+        // A zenoh: serve URL is this vehicle's end of a fleet.
+        let mut opts = config.link.clone();
+        opts.zenoh.role = ZenohRole::Vehicle;
+        let h = spawn_endpoint(&spec.url, events, opts, cancel.clone())
             .await
             .map_err(|source| DaemonError::Link {
                 url: spec.url.clone(),
@@ -301,7 +304,10 @@ pub async fn start(
             });
         }
         VehicleSource::Url(url) => {
-            let h = spawn_endpoint(url, vehicle_tx, config.link.clone(), cancel.clone())
+            // A zenoh: vehicle URL is the ground end of a fleet: each vehicle its own link.
+            let mut opts = config.link.clone();
+            opts.zenoh.role = ZenohRole::Ground;
+            let h = spawn_endpoint(url, vehicle_tx, opts, cancel.clone())
                 .await
                 .map_err(|source| DaemonError::Link {
                     url: url.clone(),

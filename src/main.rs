@@ -59,11 +59,12 @@ struct TuiArgs {
 #[derive(Debug, Args, Default)]
 struct RunArgs {
     /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
-    /// serial:DEV[:BAUD]) or a tlog played back as the vehicle: replay:FILE[?speed=N].
+    /// serial:DEV[:BAUD]), a fleet over Zenoh (zenoh:FLEET/* or zenoh:FLEET/VEHICLE) or a tlog
+    /// played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
     vehicle: Option<VehicleSource>,
     /// Client endpoint (repeatable): tcpin:H:P, udpin:H:P, udpout:H:P, tcp:H:P, serial:DEV[:BAUD],
-    /// with options in a query: ?trust=trusted|sign|read-only&rate=MSGS_PER_S&burst=N.
+    /// or zenoh:FLEET/VEHICLE (this vehicle's end of a fleet), with options in a query: ?trust=trusted|sign|read-only&rate=MSGS_PER_S&burst=N.
     /// Replaces the defaults (tcpin:127.0.0.1:5770 and udpout:127.0.0.1:14550).
     #[arg(long = "serve")]
     serve: Vec<ServeSpec>,
@@ -87,6 +88,19 @@ struct RunArgs {
     fetch_params: bool,
     #[command(flatten)]
     signing: client_cli::SigningArgs,
+    /// Zenoh endpoint to connect to for zenoh: links (repeatable), e.g. tcp/127.0.0.1:7447.
+    #[arg(long, value_name = "ENDPOINT", value_parser = zenoh_endpoint)]
+    zenoh_connect: Vec<String>,
+    /// Zenoh endpoint to listen on for zenoh: links (repeatable), e.g. tcp/0.0.0.0:7447.
+    #[arg(long, value_name = "ENDPOINT", value_parser = zenoh_endpoint)]
+    zenoh_listen: Vec<String>,
+    /// Zenoh session mode: peer (default), client (through a router) or router.
+    #[arg(long, value_name = "MODE")]
+    zenoh_mode: Option<vtol_link::ZenohMode>,
+}
+
+fn zenoh_endpoint(s: &str) -> Result<String, String> {
+    vtol_gcs::config::check_zenoh_endpoint(s).map(|()| s.to_string())
 }
 
 fn build_config(args: RunArgs) -> anyhow::Result<Config> {
@@ -120,6 +134,15 @@ fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     }
     if let Some(f) = args.signing.signing_state {
         config.signing_state = Some(f);
+    }
+    if let Some(m) = args.zenoh_mode {
+        config.link.zenoh.mode = m;
+    }
+    if !args.zenoh_connect.is_empty() {
+        config.link.zenoh.connect = args.zenoh_connect;
+    }
+    if !args.zenoh_listen.is_empty() {
+        config.link.zenoh.listen = args.zenoh_listen;
     }
     Ok(config)
 }

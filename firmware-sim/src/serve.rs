@@ -266,6 +266,13 @@ pub(crate) async fn open_listeners(
         local_links: HashSet::new(),
     };
     for url in urls {
+        if let LinkUrl::Zenoh { fleet, vehicle } = url {
+            return Err(LinkError::Zenoh(format!(
+                "{url}: the twin joins a fleet through a daemon: serve it on a local URL and \
+                 run `vtol-gcs run --vehicle THAT_URL --serve zenoh:{fleet}/{}`",
+                vehicle.as_deref().unwrap_or("VEHICLE")
+            )));
+        }
         let handle =
             vtol_link::spawn_endpoint(url, events.clone(), options.clone(), cancel.child_token())
                 .await?;

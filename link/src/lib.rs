@@ -36,8 +36,8 @@ pub use signing::{
 };
 pub use transport::{
     EgressFilter, EndpointHandle, Events, LinkError, LinkEvent, LinkEventHandler, LinkId,
-    LinkOptions, LinkSender, LinkStats, LinkStatsSnapshot, SendError, SendSummary, run_stream_link,
-    spawn_endpoint, spawn_stream_link,
+    LinkOptions, LinkSender, LinkStats, LinkStatsSnapshot, SendError, SendSummary, ZenohMode,
+    ZenohOptions, ZenohRole, run_stream_link, spawn_endpoint, spawn_stream_link,
 };
 pub use url::{LinkUrl, UrlError};
 

@@ -49,6 +49,16 @@ pub enum LinkUrl {
         /// Line speed in baud.
         baud: u32,
     },
+    /// A fleet over Zenoh: `zenoh:FLEET/VEHICLE` is one vehicle, `zenoh:FLEET/*` every vehicle
+    /// of the fleet (each its own link). Frames travel on `vtol/FLEET/VEHICLE/from_vehicle` and
+    /// `vtol/FLEET/VEHICLE/to_vehicle`; a liveliness token on `vtol/FLEET/VEHICLE` says the
+    /// vehicle's daemon is up.
+    Zenoh {
+        /// The fleet's name (one key chunk).
+        fleet: String,
+        /// One vehicle's name, or `None` for every vehicle (`*`).
+        vehicle: Option<String>,
+    },
 }
 
 /// Why a link URL did not parse.
@@ -56,12 +66,12 @@ pub enum LinkUrl {
 pub enum UrlError {
     /// No `scheme:` prefix and not a device path.
     #[error(
-        "link URL '{0}' has no scheme; expected udpin:HOST:PORT, udpout:HOST:PORT, tcpin:HOST:PORT, tcp:HOST:PORT or serial:DEVICE[:BAUD]"
+        "link URL '{0}' has no scheme; expected udpin:HOST:PORT, udpout:HOST:PORT, tcpin:HOST:PORT, tcp:HOST:PORT, serial:DEVICE[:BAUD] or zenoh:FLEET/VEHICLE"
     )]
     MissingScheme(String),
     /// A scheme this crate does not know.
     #[error(
-        "unknown link scheme '{scheme}' in '{url}'; expected udpin, udp, udpout, tcpin, tcp, tcpout or serial"
+        "unknown link scheme '{scheme}' in '{url}'; expected udpin, udp, udpout, tcpin, tcp, tcpout, serial or zenoh"
     )]
     UnknownScheme {
         /// The scheme given.
@@ -85,6 +95,55 @@ pub enum UrlError {
         /// What is wrong.
         reason: String,
     },
+    /// A Zenoh URL that is not `zenoh:FLEET/VEHICLE` or `zenoh:FLEET/*`.
+    #[error("link URL '{url}': {reason}")]
+    BadZenoh {
+        /// The whole URL.
+        url: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Checks one name of a Zenoh URL: a non-empty key chunk of letters, digits, `-`, `_` and `.`
+/// (no `/`, no wildcard, nothing Zenoh reserves).
+fn check_zenoh_name(url: &str, what: &str, name: &str) -> Result<(), UrlError> {
+    let bad = |reason: String| UrlError::BadZenoh {
+        url: url.to_string(),
+        reason,
+    };
+    if name.is_empty() {
+        return Err(bad(format!(
+            "the {what} name is empty; expected zenoh:FLEET/VEHICLE or zenoh:FLEET/*"
+        )));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')))
+    {
+        return Err(bad(format!(
+            "the {what} name '{name}' has '{c}'; names are letters, digits, '-', '_' and '.'"
+        )));
+    }
+    Ok(())
+}
+
+fn parse_zenoh(url: &str, rest: &str) -> Result<LinkUrl, UrlError> {
+    let (fleet, vehicle) = rest.split_once('/').ok_or_else(|| UrlError::BadZenoh {
+        url: url.to_string(),
+        reason: "expected zenoh:FLEET/VEHICLE or zenoh:FLEET/*".into(),
+    })?;
+    check_zenoh_name(url, "fleet", fleet)?;
+    let vehicle = if vehicle == "*" {
+        None
+    } else {
+        check_zenoh_name(url, "vehicle", vehicle)?;
+        Some(vehicle.to_string())
+    };
+    Ok(LinkUrl::Zenoh {
+        fleet: fleet.to_string(),
+        vehicle,
+    })
 }
 
 fn parse_host_port(url: &str, rest: &str) -> Result<(String, u16), UrlError> {
@@ -190,6 +249,7 @@ impl FromStr for LinkUrl {
                 LinkUrl::Tcp { host, port }
             }
             "serial" => parse_serial(s, rest, ':')?,
+            "zenoh" => parse_zenoh(s, rest)?,
             _ if rest.bytes().all(|c| c.is_ascii_digit()) && !rest.is_empty() => {
                 // "127.0.0.1:14550": pymavlink would take it as udpin; be explicit instead.
                 return Err(UrlError::MissingScheme(s.to_string()));
@@ -224,6 +284,9 @@ impl fmt::Display for LinkUrl {
             LinkUrl::TcpIn { host, port } => write!(f, "tcpin:{}", HostPort(host, *port)),
             LinkUrl::Tcp { host, port } => write!(f, "tcp:{}", HostPort(host, *port)),
             LinkUrl::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
+            LinkUrl::Zenoh { fleet, vehicle } => {
+                write!(f, "zenoh:{fleet}/{}", vehicle.as_deref().unwrap_or("*"))
+            }
         }
     }
 }
@@ -236,7 +299,7 @@ impl LinkUrl {
             | LinkUrl::UdpOut { host, port }
             | LinkUrl::TcpIn { host, port }
             | LinkUrl::Tcp { host, port } => Some((host, *port)),
-            LinkUrl::Serial { .. } => None,
+            LinkUrl::Serial { .. } | LinkUrl::Zenoh { .. } => None,
         }
     }
 
@@ -252,6 +315,40 @@ mod tests {
 
     fn p(s: &str) -> LinkUrl {
         s.parse().unwrap_or_else(|e| panic!("{s}: {e}"))
+    }
+
+    #[test]
+    fn zenoh_urls_name_a_fleet_and_one_vehicle_or_all() {
+        assert_eq!(
+            p("zenoh:test/v1"),
+            LinkUrl::Zenoh {
+                fleet: "test".into(),
+                vehicle: Some("v1".into())
+            }
+        );
+        assert_eq!(
+            p("zenoh:survey-2.a/*"),
+            LinkUrl::Zenoh {
+                fleet: "survey-2.a".into(),
+                vehicle: None
+            }
+        );
+        for s in ["zenoh:test/v1", "zenoh:test/*"] {
+            assert_eq!(p(s).to_string(), s);
+        }
+        for bad in [
+            "zenoh:test",
+            "zenoh:/v1",
+            "zenoh:test/",
+            "zenoh:*/v1",
+            "zenoh:test/v1/x",
+            "zenoh:te st/v1",
+            "zenoh:test/v*",
+            "zenoh:test/$*",
+        ] {
+            let e = bad.parse::<LinkUrl>().unwrap_err();
+            assert!(matches!(e, UrlError::BadZenoh { .. }), "{bad}: {e}");
+        }
     }
 
     #[test]

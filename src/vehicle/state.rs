@@ -75,6 +75,9 @@ pub struct VehicleView {
     pub status_texts: VecDeque<(u8, String)>,
     /// When the last heartbeat arrived.
     pub last_heartbeat: Instant,
+    /// The link of its last heartbeat went down (and no heartbeat came since): lost at once,
+    /// not after [`LINK_TIMEOUT`].
+    pub link_down: bool,
     /// When the vehicle was last seen to arm (None while disarmed): the flight time's start.
     pub armed_since: Option<Instant>,
     /// Reboots seen: ATTITUDE's `time_boot_ms` went back (the vehicle's clock restarted).
@@ -95,10 +98,10 @@ pub struct Reboot {
 }
 
 impl VehicleView {
-    /// Whether no heartbeat came for [`LINK_TIMEOUT`].
+    /// Whether no heartbeat came for [`LINK_TIMEOUT`], or the link it came on went down.
     #[must_use]
     pub fn is_lost(&self, now: Instant) -> bool {
-        now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
+        self.link_down || now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
     }
 
     /// Its frames per second over the last 2 s.
@@ -323,6 +326,7 @@ impl VehicleState {
                 servo_us: [0; 16],
                 status_texts: VecDeque::new(),
                 last_heartbeat: now,
+                link_down: false,
                 armed_since: None,
                 reboots: 0,
                 last_reboot: None,
@@ -340,6 +344,7 @@ impl VehicleState {
             };
             v.system_status = hb.system_status;
             v.last_heartbeat = now;
+            v.link_down = false;
             return Some(msg);
         }
         let v = self.vehicles.get_mut(&key)?;
@@ -433,6 +438,9 @@ impl VehicleState {
     pub fn forget_link(&mut self, link: LinkId) {
         self.links.remove(&link);
         self.last_seq.retain(|(l, _, _), _| *l != link);
+        for v in self.vehicles.values_mut().filter(|v| v.link == link) {
+            v.link_down = true;
+        }
     }
 
     /// Forgets every link not in `live` (the router's current links).
@@ -451,9 +459,7 @@ impl VehicleState {
     /// Whether no vehicle has been heard for [`LINK_TIMEOUT`] (or none ever was).
     #[must_use]
     pub fn vehicle_lost(&self, now: Instant) -> bool {
-        self.vehicles
-            .values()
-            .all(|v| now.duration_since(v.last_heartbeat) >= LINK_TIMEOUT)
+        self.vehicles.values().all(|v| v.is_lost(now))
     }
 }
 
@@ -578,5 +584,37 @@ mod tests {
             now,
         );
         assert_eq!(s.links[&LinkId(1)].lost, 0);
+    }
+
+    #[test]
+    fn a_vehicle_whose_link_goes_down_is_lost_at_once_and_back_with_its_next_heartbeat() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        for (link, sys) in [(1, 1), (2, 2)] {
+            s.apply(
+                LinkId(link),
+                Side::Vehicle,
+                &Frame::encode_v2(sys, 1, 0, &v),
+                now,
+            );
+        }
+        s.forget_link(LinkId(2));
+        let lost =
+            |s: &VehicleState, sys: u8| s.vehicles[&(SystemId(sys), ComponentId(1))].is_lost(now);
+        assert!(!lost(&s, 1));
+        assert!(lost(&s, 2));
+        assert!(!s.vehicle_lost(now));
+        s.apply(
+            LinkId(3),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, 1, &v),
+            now,
+        );
+        assert!(!lost(&s, 2));
     }
 }

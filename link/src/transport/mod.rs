@@ -11,6 +11,8 @@ mod serial;
 mod stream;
 mod tcp;
 mod udp;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;
 
 use std::fmt;
 use std::io;
@@ -398,6 +400,70 @@ pub struct LinkOptions {
     /// Which frames the links take (default: all). For an in-process consumer that reads only
     /// a few message types: the others are never copied to it.
     pub accept: Option<EgressFilter>,
+    /// The Zenoh session and this end's role, for `zenoh:` URLs.
+    pub zenoh: ZenohOptions,
+}
+
+/// How a `zenoh:` endpoint joins the Zenoh network, and which end of the fleet it is.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Hash)]
+pub struct ZenohOptions {
+    /// Peer (default), client of a router, or a router itself.
+    pub mode: ZenohMode,
+    /// Endpoints to connect to, e.g. `tcp/127.0.0.1:7447`.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Which end of the fleet a `zenoh:` URL opens here.
+    pub role: ZenohRole,
+}
+
+/// Zenoh's session modes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum ZenohMode {
+    /// Talks to peers directly, and to routers.
+    #[default]
+    Peer,
+    /// Talks through one router.
+    Client,
+    /// Routes for clients and peers (what `zenohd` does).
+    Router,
+}
+
+impl std::str::FromStr for ZenohMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "peer" => Ok(ZenohMode::Peer),
+            "client" => Ok(ZenohMode::Client),
+            "router" => Ok(ZenohMode::Router),
+            other => Err(format!(
+                "unknown Zenoh mode '{other}'; expected peer, client or router"
+            )),
+        }
+    }
+}
+
+impl fmt::Display for ZenohMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            ZenohMode::Peer => "peer",
+            ZenohMode::Client => "client",
+            ZenohMode::Router => "router",
+        })
+    }
+}
+
+/// Which end of a fleet a `zenoh:` URL opens.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum ZenohRole {
+    /// The ground end (a daemon's vehicle side): each vehicle of the fleet is a link, its
+    /// frames read from `from_vehicle`, its egress published on `to_vehicle`.
+    #[default]
+    Ground,
+    /// The vehicle's end (a daemon's serve side): one link whose egress, what the vehicle
+    /// sends, is published on `from_vehicle`, and whose ingress is `to_vehicle`.
+    Vehicle,
 }
 
 impl Default for LinkOptions {
@@ -409,6 +475,7 @@ impl Default for LinkOptions {
             reconnect_max: Duration::from_secs(2),
             wait_for_device: false,
             accept: None,
+            zenoh: ZenohOptions::default(),
         }
     }
 }
@@ -449,6 +516,9 @@ pub enum LinkError {
         /// The device path.
         device: String,
     },
+    /// A Zenoh session or declaration that failed, or a `zenoh:` URL this end cannot take.
+    #[error("{0}")]
+    Zenoh(String),
     /// Another I/O error while opening.
     #[error("{url}: {source}")]
     Io {
@@ -543,6 +613,18 @@ pub async fn spawn_endpoint(
             }
             let (id, task) = serial::spawn_serial(device.clone(), *baud, events, opts, cancel);
             (None, Some(id), task)
+        }
+        #[cfg(feature = "zenoh")]
+        LinkUrl::Zenoh { fleet, vehicle } => {
+            let (id, task) =
+                zenoh::spawn_zenoh(fleet, vehicle.as_deref(), events, opts, cancel).await?;
+            (None, id, task)
+        }
+        #[cfg(not(feature = "zenoh"))]
+        LinkUrl::Zenoh { .. } => {
+            return Err(LinkError::Zenoh(format!(
+                "{url}: this build has no Zenoh support (build with the `zenoh` feature)"
+            )));
         }
     };
     Ok(EndpointHandle {
