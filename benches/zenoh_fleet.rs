@@ -344,10 +344,10 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
                 tokio::time::sleep_until(due).await;
                 let sys = u8::try_from(i + 1).unwrap();
                 let mut frames = vec![(0usize, attitude(t_ms))];
-                if ticks % 5 == 0 {
+                if ticks.is_multiple_of(5) {
                     frames.push((1, servo(t_ms)));
                 }
-                if ticks % 50 == 0 {
+                if ticks.is_multiple_of(50) {
                     frames.push((2, heartbeat()));
                 }
                 for (kind, msg) in frames {

@@ -17,7 +17,7 @@ use vtol_gcs::params::file::{self, ParamFile};
 use vtol_gcs::params::plan::{ParamOutcome, PushReport, PushResult};
 use vtol_gcs::params::{self as params, Format, Param, ParamSet, Rules as _};
 use vtol_gcs::router::signing::{DaemonSigning, default_state_file, system_clock};
-use vtol_link::{LinkUrl, SigningKey};
+use vtol_link::{ComponentId, LinkUrl, SigningKey, SystemId};
 
 /// Done.
 pub const EXIT_OK: u8 = 0;
@@ -39,7 +39,7 @@ pub struct LinkArgs {
     link: LinkUrl,
     /// The vehicle as SYS[:COMP] (default: the first vehicle heard; COMP defaults to 1).
     #[arg(long, value_parser = parse_target, global = true)]
-    target: Option<(u8, u8)>,
+    target: Option<(SystemId, ComponentId)>,
     #[command(flatten)]
     signing: SigningArgs,
 }
@@ -117,10 +117,10 @@ impl SigningArgs {
     }
 }
 
-fn parse_target(s: &str) -> Result<(u8, u8), String> {
+fn parse_target(s: &str) -> Result<(SystemId, ComponentId), String> {
     let (sys, comp) = s.split_once(':').unwrap_or((s, "1"));
     match (sys.parse::<u8>(), comp.parse::<u8>()) {
-        (Ok(sys), Ok(comp)) if sys > 0 => Ok((sys, comp)),
+        (Ok(sys), Ok(comp)) if sys > 0 => Ok((SystemId(sys), ComponentId(comp))),
         _ => Err(format!(
             "'{s}' is not SYS[:COMP] with SYS 1-255 and COMP 0-255"
         )),
@@ -340,7 +340,7 @@ pub fn params(args: ParamsArgs) -> ExitCode {
                 let t0 = std::time::Instant::now();
                 let set = pull(&c).await?;
                 let took = t0.elapsed();
-                let vehicle = c.target().unwrap_or((1, 1));
+                let vehicle = c.target().unwrap_or((SystemId(1), ComponentId(1)));
                 match output {
                     Some(path) => {
                         file::save(&path, &set, format, vehicle)
@@ -358,8 +358,13 @@ pub fn params(args: ParamsArgs) -> ExitCode {
             }
             ParamsCommand::Save { file: path, format } => {
                 let set = pull(&c).await?;
-                file::save(&path, &set, format, c.target().unwrap_or((1, 1)))
-                    .map_err(|e| usage(e.to_string()))?;
+                file::save(
+                    &path,
+                    &set,
+                    format,
+                    c.target().unwrap_or((SystemId(1), ComponentId(1))),
+                )
+                .map_err(|e| usage(e.to_string()))?;
                 println!("{} parameters written to {}", set.len(), path.display());
                 Ok(())
             }

@@ -23,8 +23,8 @@ pub fn attach(
     ClientHandle::over_stream(
         stream,
         ClientConfig {
-            system_id,
-            component_id,
+            system_id: vtol_link::SystemId(system_id),
+            component_id: vtol_link::ComponentId(component_id),
             target: None,
         },
         cancel,

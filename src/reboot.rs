@@ -74,7 +74,6 @@ pub async fn watch(
             let s = state.borrow_and_update();
             let key = client
                 .target()
-                .map(|(sys, comp)| (SystemId(sys), ComponentId(comp)))
                 .or_else(|| s.vehicles.keys().next().copied());
             key.and_then(|k| s.vehicles.get(&k).map(|v| (k, v.reboots, v.last_reboot)))
         };

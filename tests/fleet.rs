@@ -362,7 +362,7 @@ async fn three_twins_one_daemon_the_ui_commands_the_selected_vehicle() {
     );
     assert_eq!(
         running.client.target(),
-        Some((2, 1)),
+        Some((SystemId(2), ComponentId(1))),
         "the client commands vehicle 2"
     );
     assert!(screen.contains("vehicles (v/V)"), "{screen}");

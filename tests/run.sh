@@ -6,6 +6,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Each stage says when it starts, in seconds since the run began (where the time goes).
+stage() { echo "=== tests/run.sh [${SECONDS} s] $*" >&2; }
+
 # --- system packages -------------------------------------------------------------------------
 if ! command -v socat >/dev/null 2>&1; then
     export DEBIAN_FRONTEND=noninteractive
@@ -34,9 +37,13 @@ if [ ! -x "$VENV/bin/python" ] || ! cmp -s "$REQ" "$VENV/.requirements.installed
 fi
 
 # --- Rust -------------------------------------------------------------------------------------
+stage "cargo fmt"
 cargo fmt --all -- --check
+stage "cargo clippy"
 cargo clippy --workspace --all-targets -- -D warnings
+stage "cargo test"
 cargo test --workspace
+stage "cargo build"
 cargo build --workspace --bins
 
 # --- fuzzing, in the background while the pymavlink suite runs --------------------------------
@@ -63,6 +70,7 @@ fuzz_stream d router tracker signing_verify & FUZZ_PIDS+=($!)
 BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
 export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
+stage "pytest tests/pymavlink"
 "$VENV/bin/python" -m pytest tests/pymavlink
 
 # --- the vtol_twin pytest plugin: installed as a user installs it, then its own tests ---------
@@ -75,9 +83,11 @@ if [ "$PLUGIN_SUM" != "$(cat "$VENV/.vtol_twin.installed" 2>/dev/null)" ]; then
     echo "$PLUGIN_SUM" > "$VENV/.vtol_twin.installed"
 fi
 # Sixteen workers: the parallel test runs sixteen twins at once.
+stage "pytest $PLUGIN/tests"
 "$VENV/bin/python" -m pytest -n 16 "$PLUGIN/tests"
 
 # --- the fuzz streams' results ---------------------------------------------------------------
+stage "waiting for the fuzz streams"
 FUZZ_RC=0
 for pid in "${FUZZ_PIDS[@]}"; do
     wait "$pid" || FUZZ_RC=1
@@ -88,3 +98,4 @@ if [ "$FUZZ_RC" -ne 0 ]; then
     echo "fuzzing found a crash: its input is in fuzz/regressions/ (see above)" >&2
     exit 1
 fi
+stage "all passed"

@@ -148,7 +148,11 @@ pub fn param_file(data: &[u8]) {
     match ParamFile::parse(&text(data), Path::new(PATH)) {
         Ok(file) => {
             for format in [Format::Mavproxy, Format::Missionplanner, Format::Qgc] {
-                let written = render(&file.params, format, (1, 1));
+                let written = render(
+                    &file.params,
+                    format,
+                    (vtol_link::SystemId(1), vtol_link::ComponentId(1)),
+                );
                 let back = ParamFile::parse(&written, Path::new(PATH))
                     .unwrap_or_else(|e| panic!("{format:?} output does not read back: {e}"));
                 assert_eq!(back.params.len(), file.params.len());

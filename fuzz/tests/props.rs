@@ -70,7 +70,7 @@ proptest! {
             .map(|(n, v)| (n.clone(), Param { value: *v, ty: vtol_link::dialect::MavParamType::MAV_PARAM_TYPE_REAL32 }))
             .collect();
         for format in [Format::Mavproxy, Format::Missionplanner, Format::Qgc] {
-            let text = render(&set, format, (1, 1));
+            let text = render(&set, format, (vtol_link::SystemId(1), vtol_link::ComponentId(1)));
             let back = ParamFile::parse(&text, Path::new("p.param")).map_err(|e| TestCaseError::fail(format!("{format:?}: {e}")))?;
             prop_assert_eq!(back.params.len(), set.len());
             for (name, p) in &set {

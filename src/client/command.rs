@@ -7,6 +7,7 @@
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
+use vtol_link::{ComponentId, SystemId};
 
 use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
 use super::statustext::TextAssembler;
@@ -50,8 +51,8 @@ pub struct NoAck {
 /// The command exchange.
 #[derive(Debug)]
 pub struct CommandMachine {
-    me: (u8, u8),
-    target: (u8, u8),
+    me: (SystemId, ComponentId),
+    target: (SystemId, ComponentId),
     command: MavCmd,
     params: [f32; 7],
     rto: Duration,
@@ -72,8 +73,8 @@ impl CommandMachine {
     /// A command from `me` to `target`, retried every `rto`.
     #[must_use]
     pub fn new(
-        me: (u8, u8),
-        target: (u8, u8),
+        me: (SystemId, ComponentId),
+        target: (SystemId, ComponentId),
         command: MavCmd,
         params: [f32; 7],
         rto: Duration,
@@ -111,8 +112,8 @@ impl CommandMachine {
             param6: p[5],
             param7: p[6],
             command: self.command,
-            target_system: self.target.0,
-            target_component: self.target.1,
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
             confirmation,
         })
     }
@@ -154,7 +155,7 @@ impl Machine for CommandMachine {
                 // Targets (0, 0) come from senders that leave the extension out: accept them.
                 // Otherwise the ACK must be ours: scripts speaking as (255, 0) get their own.
                 let to_us = (a.target_system, a.target_component) == (0, 0)
-                    || (a.target_system, a.target_component) == self.me;
+                    || (a.target_system, a.target_component) == (self.me.0.0, self.me.1.0);
                 if !to_us || self.refused.is_some() {
                     return Vec::new();
                 }
@@ -216,10 +217,10 @@ impl Machine for CommandMachine {
 mod tests {
     use super::*;
 
-    const ME: (u8, u8) = (255, 190);
-    const V: (u8, u8) = (1, 1);
+    const ME: (SystemId, ComponentId) = (SystemId(255), ComponentId(190));
+    const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
 
-    fn ack(result: MavResult, target: (u8, u8)) -> Inbound {
+    fn ack(result: MavResult, target: (SystemId, ComponentId)) -> Inbound {
         Inbound {
             sys: V.0,
             comp: V.1,
@@ -228,8 +229,8 @@ mod tests {
                 result,
                 progress: 0,
                 result_param2: 0,
-                target_system: target.0,
-                target_component: target.1,
+                target_system: target.0.0,
+                target_component: target.1.0,
             }),
         }
     }
@@ -295,7 +296,13 @@ mod tests {
         let t0 = Instant::now();
         let mut m = arm();
         m.start(t0);
-        m.on_message(t0, &ack(MavResult::MAV_RESULT_ACCEPTED, (255, 0)));
+        m.on_message(
+            t0,
+            &ack(
+                MavResult::MAV_RESULT_ACCEPTED,
+                (SystemId(255), ComponentId(0)),
+            ),
+        );
         assert!(m.result().is_none());
         let mut other = ack(MavResult::MAV_RESULT_ACCEPTED, ME);
         if let MavMessage::COMMAND_ACK(a) = &mut other.msg {

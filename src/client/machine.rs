@@ -9,9 +9,9 @@ use vtol_link::dialect::MavMessage;
 #[derive(Debug, Clone)]
 pub struct Inbound {
     /// Sender system id.
-    pub sys: u8,
+    pub sys: vtol_link::SystemId,
     /// Sender component id.
-    pub comp: u8,
+    pub comp: vtol_link::ComponentId,
     /// The message.
     pub msg: MavMessage,
 }

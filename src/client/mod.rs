@@ -25,7 +25,7 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use vtol_link::dialect::{MavCmd, MavMessage, MavResult};
-use vtol_link::{LinkOptions, LinkUrl};
+use vtol_link::{ComponentId, LinkOptions, LinkUrl, SystemId};
 
 use command::CommandMachine;
 pub use command::CommandOutcome;
@@ -92,18 +92,18 @@ pub enum ClientError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ClientConfig {
     /// Our system id (255 = ground station).
-    pub system_id: u8,
+    pub system_id: SystemId,
     /// Our component id (190 = MAV_COMP_ID_MISSIONPLANNER, what ground stations use).
-    pub component_id: u8,
+    pub component_id: ComponentId,
     /// The vehicle, when known in advance; otherwise the first vehicle heartbeat decides.
-    pub target: Option<(u8, u8)>,
+    pub target: Option<(SystemId, ComponentId)>,
 }
 
 impl Default for ClientConfig {
     fn default() -> Self {
         Self {
-            system_id: 255,
-            component_id: 190,
+            system_id: SystemId(255),
+            component_id: ComponentId(190),
             target: None,
         }
     }
@@ -112,12 +112,12 @@ impl Default for ClientConfig {
 /// The client: cheap to clone, `Send + Sync`; every method may run concurrently.
 #[derive(Debug, Clone)]
 pub struct ClientHandle {
-    me: (u8, u8),
+    me: (SystemId, ComponentId),
     out: mpsc::Sender<MavMessage>,
     inbound: broadcast::Sender<Arc<Inbound>>,
-    target: watch::Receiver<Option<(u8, u8)>>,
+    target: watch::Receiver<Option<(SystemId, ComponentId)>>,
     /// The session's target, for [`ClientHandle::select_vehicle`].
-    select: watch::Sender<Option<(u8, u8)>>,
+    select: watch::Sender<Option<(SystemId, ComponentId)>>,
     links_up: watch::Receiver<usize>,
     rtt: Arc<Mutex<Rtt>>,
     shared: Arc<session::Shared>,
@@ -241,20 +241,20 @@ impl ClientHandle {
 
     /// Our (system, component).
     #[must_use]
-    pub fn identity(&self) -> (u8, u8) {
+    pub fn identity(&self) -> (SystemId, ComponentId) {
         self.me
     }
 
     /// The vehicle the client talks to, once found (first vehicle heartbeat or `--target`).
     #[must_use]
-    pub fn target(&self) -> Option<(u8, u8)> {
+    pub fn target(&self) -> Option<(SystemId, ComponentId)> {
         *self.target.borrow()
     }
 
     /// Makes `system`/`component` the vehicle every later request goes to (the terminal UI's
     /// vehicle switch). The parameter cache belonged to the previous vehicle and is emptied.
     pub fn select_vehicle(&self, system: vtol_link::SystemId, component: vtol_link::ComponentId) {
-        let next = Some((system.0, component.0));
+        let next = Some((system, component));
         if self.select.send_replace(next) != next
             && let Ok(mut c) = self.cache.lock()
         {
@@ -286,7 +286,10 @@ impl ClientHandle {
     ///
     /// # Errors
     /// [`ClientError::NoVehicle`].
-    pub async fn wait_target(&self, timeout: Duration) -> Result<(u8, u8), ClientError> {
+    pub async fn wait_target(
+        &self,
+        timeout: Duration,
+    ) -> Result<(SystemId, ComponentId), ClientError> {
         let mut rx = self.target.clone();
         match tokio::time::timeout(timeout, rx.wait_for(Option::is_some)).await {
             Ok(Ok(t)) => (*t).ok_or(ClientError::NoVehicle),
@@ -387,7 +390,7 @@ impl ClientHandle {
         }
     }
 
-    async fn vehicle(&self) -> Result<(u8, u8), ClientError> {
+    async fn vehicle(&self) -> Result<(SystemId, ComponentId), ClientError> {
         match self.target() {
             Some(t) => Ok(t),
             None => self.wait_target(FIND_VEHICLE_TIMEOUT).await,

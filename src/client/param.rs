@@ -15,6 +15,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
+use vtol_link::{ComponentId, SystemId};
 
 use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Rtt, retry_wait};
 use crate::params::{Param, ParamSet, stored_value};
@@ -47,7 +48,7 @@ pub struct PullStalled {
 /// The whole-table download.
 #[derive(Debug)]
 pub struct PullMachine {
-    target: (u8, u8),
+    target: (SystemId, ComponentId),
     /// The client's estimate, refined by this download's own samples.
     rtt: Rtt,
     rto: Duration,
@@ -72,7 +73,7 @@ pub struct PullMachine {
 impl PullMachine {
     /// A download from `target`, starting from the client's round-trip estimate.
     #[must_use]
-    pub fn new(target: (u8, u8), rtt: Rtt) -> Self {
+    pub fn new(target: (SystemId, ComponentId), rtt: Rtt) -> Self {
         let now = Instant::now();
         Self {
             target,
@@ -104,8 +105,8 @@ impl PullMachine {
         self.list_sends += 1;
         self.deadline = now + self.rto;
         MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
-            target_system: self.target.0,
-            target_component: self.target.1,
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
         })
     }
 
@@ -115,8 +116,8 @@ impl PullMachine {
         self.outstanding.insert(index, (now + self.rto, now, first));
         MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
             param_index: index as i16,
-            target_system: self.target.0,
-            target_component: self.target.1,
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
             param_id: "".into(),
         })
     }
@@ -294,7 +295,7 @@ fn param_error_text(e: MavParamError) -> &'static str {
 /// One read by name, or one verified write.
 #[derive(Debug)]
 pub struct ParamMachine {
-    target: (u8, u8),
+    target: (SystemId, ComponentId),
     name: String,
     /// `Some((value, type))` for a write; `None` for a read.
     write: Option<(f32, MavParamType)>,
@@ -317,14 +318,14 @@ const REASON_GRACE: Duration = Duration::from_millis(150);
 impl ParamMachine {
     /// Reads `name`.
     #[must_use]
-    pub fn read(target: (u8, u8), name: &str, rto: Duration) -> Self {
+    pub fn read(target: (SystemId, ComponentId), name: &str, rto: Duration) -> Self {
         Self::new(target, name, None, rto)
     }
 
     /// Writes `value` to `name`, whose type on the vehicle is `ty`.
     #[must_use]
     pub fn write(
-        target: (u8, u8),
+        target: (SystemId, ComponentId),
         name: &str,
         value: f32,
         ty: MavParamType,
@@ -334,7 +335,7 @@ impl ParamMachine {
     }
 
     fn new(
-        target: (u8, u8),
+        target: (SystemId, ComponentId),
         name: &str,
         write: Option<(f32, MavParamType)>,
         rto: Duration,
@@ -362,15 +363,15 @@ impl ParamMachine {
         match self.write {
             Some((value, ty)) => MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
                 param_value: value,
-                target_system: self.target.0,
-                target_component: self.target.1,
+                target_system: self.target.0.0,
+                target_component: self.target.1.0,
                 param_id: self.name.as_str().into(),
                 param_type: ty,
             }),
             None => MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
                 param_index: -1,
-                target_system: self.target.0,
-                target_component: self.target.1,
+                target_system: self.target.0.0,
+                target_component: self.target.1.0,
                 param_id: self.name.as_str().into(),
             }),
         }
@@ -468,7 +469,7 @@ impl Machine for ParamMachine {
 mod tests {
     use super::*;
 
-    const V: (u8, u8) = (1, 1);
+    const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
     const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
 
     fn value(name: &str, v: f32, index: u16, count: u16, ty: MavParamType) -> Inbound {
@@ -593,8 +594,8 @@ mod tests {
         m.on_message(
             t0,
             &Inbound {
-                sys: 1,
-                comp: 1,
+                sys: SystemId(1),
+                comp: ComponentId(1),
                 msg: MavMessage::PARAM_ERROR(apm::PARAM_ERROR_DATA {
                     param_index: 7,
                     target_system: 255,
@@ -608,8 +609,8 @@ mod tests {
         m.on_message(
             t0,
             &Inbound {
-                sys: 1,
-                comp: 1,
+                sys: SystemId(1),
+                comp: ComponentId(1),
                 msg: MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
                     severity: apm::MavSeverity::MAV_SEVERITY_WARNING,
                     text: "Param write denied (LAT_SAT_B: needs a > b + c + d)".into(),

@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage};
+use vtol_link::{ComponentId, SystemId};
 
 use super::machine::{Inbound, Machine, Rtt};
 
@@ -18,7 +19,7 @@ pub const PROBE_WAIT: Duration = Duration::from_secs(1);
 /// The probe exchange; the result is the first round trip measured, if any.
 #[derive(Debug)]
 pub struct ProbeMachine {
-    target: (u8, u8),
+    target: (SystemId, ComponentId),
     base: i64,
     sent: HashMap<i64, Instant>,
     started: Instant,
@@ -30,7 +31,7 @@ pub struct ProbeMachine {
 impl ProbeMachine {
     /// A probe of `target`.
     #[must_use]
-    pub fn new(target: (u8, u8)) -> Self {
+    pub fn new(target: (SystemId, ComponentId)) -> Self {
         let now = Instant::now();
         // Distinct from other clients' requests that may echo on the same link.
         let base = i64::from(std::process::id()) << 32;
@@ -56,8 +57,8 @@ impl ProbeMachine {
         MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
             tc1: 0,
             ts1,
-            target_system: self.target.0,
-            target_component: self.target.1,
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
         })
     }
 }
@@ -115,8 +116,8 @@ mod tests {
 
     fn reply(ts1: i64) -> Inbound {
         Inbound {
-            sys: 1,
-            comp: 1,
+            sys: SystemId(1),
+            comp: ComponentId(1),
             msg: MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
                 tc1: 42,
                 ts1,
@@ -136,7 +137,7 @@ mod tests {
     #[test]
     fn an_answer_to_any_probe_times_that_probe() {
         let t0 = Instant::now();
-        let mut m = ProbeMachine::new((1, 1));
+        let mut m = ProbeMachine::new((SystemId(1), ComponentId(1)));
         let first = ts1(&m.start(t0));
         let second = ts1(&m.on_time(m.deadline()));
         assert_ne!(first, second);
@@ -152,7 +153,7 @@ mod tests {
     #[test]
     fn gives_up_after_the_probes_and_the_wait() {
         let t0 = Instant::now();
-        let mut m = ProbeMachine::new((1, 1));
+        let mut m = ProbeMachine::new((SystemId(1), ComponentId(1)));
         let mut sent = m.start(t0).len();
         while m.done.is_none() {
             let d = m.deadline();
@@ -161,7 +162,7 @@ mod tests {
         assert_eq!(sent, PROBES as usize);
         assert_eq!(m.result(), Some(None));
         // A reply to a request that is not ours is ignored.
-        let mut other = ProbeMachine::new((1, 1));
+        let mut other = ProbeMachine::new((SystemId(1), ComponentId(1)));
         other.start(t0);
         other.on_message(t0, &reply(7));
         assert_eq!(other.result(), None);

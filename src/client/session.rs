@@ -18,7 +18,7 @@ use std::time::Duration;
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
-use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
+use vtol_link::{ComponentId, Frame, LinkEvent, LinkId, LinkSender, SystemId};
 
 use super::machine::Inbound;
 use crate::router::signing::DaemonSigning;
@@ -60,11 +60,11 @@ pub(crate) struct Shared {
 /// What the session task owns besides its channels.
 pub(crate) struct Session {
     /// Our (system, component).
-    pub me: (u8, u8),
+    pub me: (SystemId, ComponentId),
     /// Decoded messages for the waiting requests.
     pub inbound: broadcast::Sender<Arc<Inbound>>,
     /// The vehicle, once found.
-    pub target: watch::Sender<Option<(u8, u8)>>,
+    pub target: watch::Sender<Option<(SystemId, ComponentId)>>,
     /// The target was given: never replace it by the first heartbeat.
     pub fixed_target: bool,
     pub shared: Arc<Shared>,
@@ -98,7 +98,7 @@ impl Session {
         let mut send = |links: &HashMap<LinkId, LinkSender>,
                         msg: &MavMessage,
                         signing: &mut Option<DaemonSigning>| {
-            let mut frame = Frame::encode_v2(me.0, me.1, seq, msg);
+            let mut frame = Frame::encode_v2(me.0.0, me.1.0, seq, msg);
             seq = seq.wrapping_add(1);
             if let Some(s) = signing {
                 match s.sign_own(&frame) {
@@ -151,13 +151,13 @@ impl Session {
                             && TELEMETRY.contains(&frame.message_id())
                             && target.borrow().is_none()
                         {
-                            target.send_replace(Some((frame.system_id(), AUTOPILOT1)));
+                            target.send_replace(Some((SystemId(frame.system_id()), ComponentId(AUTOPILOT1))));
                         }
                         if !WANTED.contains(&frame.message_id()) {
                             continue;
                         }
                         let Ok(msg) = frame.decode() else { continue };
-                        let (sys, comp) = (frame.system_id(), frame.component_id());
+                        let (sys, comp) = frame.sender();
                         if !fixed_target
                             && target.borrow().is_none()
                             && let MavMessage::HEARTBEAT(h) = &msg

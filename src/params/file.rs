@@ -15,6 +15,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::{MavParamType, Param, ParamSet, valid_name};
+use vtol_link::{ComponentId, SystemId};
 
 /// A parameter file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -223,7 +224,7 @@ pub fn format_value(v: f32) -> String {
 /// A parameter set as file text. `vehicle` is (system, component) for the QGroundControl
 /// columns.
 #[must_use]
-pub fn render(params: &ParamSet, format: Format, vehicle: (u8, u8)) -> String {
+pub fn render(params: &ParamSet, format: Format, vehicle: (SystemId, ComponentId)) -> String {
     let mut out = String::new();
     match format {
         Format::Mavproxy => {
@@ -262,7 +263,7 @@ pub fn save(
     path: &Path,
     params: &ParamSet,
     format: Format,
-    vehicle: (u8, u8),
+    vehicle: (SystemId, ComponentId),
 ) -> Result<(), FileError> {
     let io = |source| FileError::Io {
         path: path.to_owned(),
@@ -340,7 +341,7 @@ mod tests {
             let mut set = ParamSet::new();
             set.insert("LAT_SAT_A".into(), Param { value: v, ty: MavParamType::MAV_PARAM_TYPE_REAL32 });
             set.insert("SR0_EXTRA1".into(), Param { value: -1.0, ty: MavParamType::MAV_PARAM_TYPE_INT16 });
-            let text = render(&set, format, (1, 1));
+            let text = render(&set, format, (SystemId(1), ComponentId(1)));
             let back = parse(&text).expect("own output parses");
             prop_assert_eq!(back.format, format);
             prop_assert_eq!(back.params["LAT_SAT_A"].value.to_bits(), bits);

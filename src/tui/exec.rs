@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use tokio::sync::{mpsc, watch};
 use vtol_link::dialect::{self, MavFrame, MavMessage, PositionTargetTypemask};
+use vtol_link::{ComponentId, SystemId};
 
 use super::Control;
 use super::app::{Outcome, Request};
@@ -70,7 +71,7 @@ fn table(set: &ParamSet) -> Vec<(String, f32)> {
 
 /// The frame that moves the QLOITER hold point: position only, in LOCAL_NED.
 #[must_use]
-pub fn position_target(target: (u8, u8), ned: [f32; 3]) -> MavMessage {
+pub fn position_target(target: (SystemId, ComponentId), ned: [f32; 3]) -> MavMessage {
     use PositionTargetTypemask as M;
     MavMessage::SET_POSITION_TARGET_LOCAL_NED(dialect::SET_POSITION_TARGET_LOCAL_NED_DATA {
         time_boot_ms: 0,
@@ -93,8 +94,8 @@ pub fn position_target(target: (u8, u8), ned: [f32; 3]) -> MavMessage {
             | M::POSITION_TARGET_TYPEMASK_AZ_IGNORE
             | M::POSITION_TARGET_TYPEMASK_YAW_IGNORE
             | M::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE,
-        target_system: target.0,
-        target_component: target.1,
+        target_system: target.0.0,
+        target_component: target.1.0,
         coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
     })
 }
@@ -225,6 +226,6 @@ impl Control for ClientControl {
     ) -> bool {
         let before = self.client.target();
         self.client.select_vehicle(system, component);
-        before.is_some() && before != Some((system.0, component.0))
+        before.is_some() && before != Some((system, component))
     }
 }
