@@ -1,5 +1,6 @@
 """The terminal UI end to end: the real `vtol-gcs` binary in a real terminal (tmux), driven by
-keys and read from the screen as a user would, with the embedded twin flying behind it.
+keys and read from the screen as a user would, with the embedded twin flying behind it (or, in
+the fleet test, three twins over Zenoh).
 
 Every wait is "until the screen shows it, with a deadline" (`Screen.wait`), never a sleep. The
 terminal is checked afterwards: the process exited 0, the alternate screen is off and the tty
@@ -30,7 +31,7 @@ WIDTH, HEIGHT = 120, 36
 class Screen:
     """One tmux server (own socket) with one window running `command` in `workdir`."""
 
-    def __init__(self, workdir: Path, command: str):
+    def __init__(self, workdir: Path, command: str, width: int = WIDTH, height: int = HEIGHT):
         assert shutil.which("tmux"), "tmux is needed (tests/run.sh installs it)"
         self.workdir = workdir
         self.sock = str(workdir / "tmux.sock")
@@ -41,26 +42,27 @@ class Screen:
             f"stty -g > {shlex.quote(str(self.before))}; {command}; echo EXIT=$?; "
             f"stty -g > {shlex.quote(str(self.after))}; exec sleep 600"
         )
-        self.tmux("new-session", "-d", "-x", str(WIDTH), "-y", str(HEIGHT), "-c", str(workdir),
+        self.tmux("new-session", "-d", "-x", str(width), "-y", str(height), "-c", str(workdir),
                   "sh", "-c", script)
 
     def tmux(self, *args: str) -> str:
         return subprocess.run(["tmux", "-S", self.sock, *args], check=True, capture_output=True,
                               text=True, timeout=10).stdout
 
-    def text(self) -> str:
-        return self.tmux("capture-pane", "-p")
+    def text(self, escapes: bool = False) -> str:
+        """The screen as text; with `escapes`, with the SGR sequences of its attributes."""
+        return self.tmux("capture-pane", "-p", *(["-e"] if escapes else []))
 
     def keys(self, *keys: str) -> None:
         self.tmux("send-keys", *keys)
 
-    def wait(self, pattern: str, timeout: float = 20.0) -> re.Match:
-        """The first match of `pattern` on the screen; AssertionError with the screen after
-        `timeout` seconds."""
+    def wait(self, pattern: str, timeout: float = 20.0, escapes: bool = False) -> re.Match:
+        """The first match of `pattern` on the screen (with `escapes`, on the text with its
+        attributes); AssertionError with the screen after `timeout` seconds."""
         deadline = time.monotonic() + timeout
         rx = re.compile(pattern)
         while True:
-            screen = self.text()
+            screen = self.text(escapes)
             if m := rx.search(screen):
                 return m
             if time.monotonic() > deadline:
@@ -103,8 +105,8 @@ class Screen:
 def screen_factory(tmp_path):
     screens: list[Screen] = []
 
-    def make(command: str) -> Screen:
-        s = Screen(tmp_path, command)
+    def make(command: str, width: int = WIDTH, height: int = HEIGHT) -> Screen:
+        s = Screen(tmp_path, command, width, height)
         screens.append(s)
         return s
 
@@ -218,5 +220,98 @@ def test_connect_to_a_running_daemon(screen_factory, daemon_factory):  # noqa: F
     s.keys("t")
     s.wait(r"mode QHOVER: done")
     s.wait(r"QHOVER ")
+    s.keys("q")
+    s.assert_exited_cleanly()
+
+
+# One entry of the fleet's vehicle list: system id, mode, armed state, and its link health (a
+# rate that is not zero, and the loss).
+def fleet_entry(n: int, mode: str = r"[A-Z]+") -> str:
+    return rf"{n} {mode} (?:disarmed|ARMED) [1-9]\d* Hz \d+\.\d%"
+
+
+def fleet_list(*entries: str) -> str:
+    return r"vehicles \(v/V\)\s+" + r"\s+│\s+".join(entries)
+
+
+def highlighted(n: int) -> str:
+    """Vehicle n's entry right after an SGR that turns on reverse video (the selection)."""
+    return rf"vehicles \(v/V\).*\x1b\[(?:[0-9;]*;)?7(?:;[0-9;]*)?m(?:\x1b\[[0-9;]*m)* {n} "
+
+
+def test_a_zenoh_fleet_in_the_terminal(screen_factory, twin_factory, daemon_factory):  # noqa: F811
+    """The UI is the ground end of a Zenoh fleet (`tui --vehicle 'zenoh:test/*'`, listening on a
+    free port) with three twins, each behind its own daemon serving `zenoh:test/vN`: the list
+    shows the three with their link health; v and V switch the selected vehicle and the header,
+    the attitude and position pane (twin n stands n m north) and the commands follow it; a
+    vehicle whose daemon dies is LOST on screen while the others go on."""
+    from test_zenoh_fleet import free_tcp_port, vehicle_daemon
+
+    port = free_tcp_port()
+    s = screen_factory(
+        f"{shlex.quote(str(GCS_BIN))} tui --vehicle 'zenoh:test/*' "
+        f"--zenoh-listen tcp/127.0.0.1:{port} --serve tcpin:127.0.0.1:0 --no-log",
+        width=150,  # three vehicles at about 100 Hz each take 120 columns and more
+    )
+    s.wait(r"waiting for a vehicle heartbeat")
+    joins = ["--zenoh-connect", f"tcp/127.0.0.1:{port}"]
+    # Twin n stands n m north of the origin (paper frame: north is -x).
+    daemons = {
+        n: vehicle_daemon(twin_factory, daemon_factory, n, joins, ["--initial", f"x={-n}"])[1]
+        for n in (1, 2, 3)
+    }
+    s.wait(fleet_list(*(fleet_entry(n) for n in (1, 2, 3))), 15)
+
+    def north(n: int) -> float:
+        return s.wait_value(r"North\s+([+-]\d+\.\d+) m", lambda x: abs(x - n) < 0.2, 10,
+                            f"vehicle {n}'s position in the detail pane")
+
+    def shows(n: int) -> None:
+        s.wait(rf"vtol-gcs\s+sys {n} ")
+        s.wait(highlighted(n), 10, escapes=True)
+        north(n)
+
+    def after(n: int, k: int) -> int:
+        """The vehicle k places after n in the list (system ids 1..3, wrapping)."""
+        return (n - 1 + k) % 3 + 1
+
+    first = int(s.wait(r"vtol-gcs\s+sys (\d) ").group(1))
+    shows(first)
+    s.keys("v")
+    shows(after(first, 1))
+    s.wait(rf"vehicle {after(first, 1)} \(component 1\) selected")
+    s.keys("v")
+    shows(after(first, 2))
+    s.keys("V")
+    selected = after(first, 1)
+    shows(selected)
+
+    # A command goes to the selected vehicle only. In QHOVER the setpoint is the HOVER_ALT of
+    # the parameter table, which a switch empties: it shows once this vehicle's table is in.
+    s.keys("t")
+    s.wait(r"mode QHOVER: done")
+    s.wait(r"Alt\s+[+-]\d+\.\d+ m\s+setpoint\s+\+\d+\.\d+ m", 10)
+    s.wait(fleet_list(*(fleet_entry(n, "QHOVER" if n == selected else "QSTABILIZE")
+                        for n in (1, 2, 3))))
+
+    # The daemon of another vehicle dies: that one is LOST within 5 s, the others go on.
+    victim = after(selected, 1)
+    d = daemons[victim]
+    daemon_factory.forget(d)
+    d.proc.kill()
+    d.proc.wait(timeout=10)
+    entries = {n: fleet_entry(n) for n in (1, 2, 3)}
+    entries[victim] = rf"{victim} LOST \d+ s"
+    s.wait(fleet_list(*(entries[n] for n in (1, 2, 3))), 5)
+    s.keys("s")
+    s.wait(r"mode QSTABILIZE: done")
+    entries[selected] = fleet_entry(selected, "QSTABILIZE")
+    s.wait(fleet_list(*(entries[n] for n in (1, 2, 3))))
+
+    # Selecting the lost vehicle shows it lost in the header too.
+    s.keys("v")
+    s.wait(rf"vtol-gcs\s+sys {victim} .*LINK LOST")
+    s.wait(highlighted(victim), 10, escapes=True)
+
     s.keys("q")
     s.assert_exited_cleanly()

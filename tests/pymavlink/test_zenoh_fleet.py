@@ -21,9 +21,13 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def vehicle_daemon(twin_factory, daemon_factory, n: int, zenoh: list[str]):  # noqa: F811
-    """Twin n (system id n) and its own daemon publishing it as zenoh:test/vn."""
-    twin = twin_factory(listen=["tcpin:127.0.0.1:0"], speed=1, extra=["--sysid", str(n)])
+def vehicle_daemon(twin_factory, daemon_factory, n: int, zenoh: list[str],  # noqa: F811
+                   twin_extra: list[str] = ()):
+    """Twin n (system id n, more twin flags in `twin_extra`) and its own daemon publishing it
+    as zenoh:test/vn."""
+    twin = twin_factory(
+        listen=["tcpin:127.0.0.1:0"], speed=1, extra=["--sysid", str(n), *twin_extra]
+    )
     host, port = twin.host_port("tcpin")
     d = daemon_factory(
         vehicle=f"tcp:{host}:{port}", serve=[f"zenoh:test/v{n}"], log=False, extra=zenoh
