@@ -181,6 +181,24 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
             >= 1
     );
 
+    // Vehicles do not hear each other's broadcasts (a fleet's telemetry would flood every
+    // vehicle's radio), but a frame one addresses to the other gets there.
+    let got = read_until(&mut a, Duration::from_millis(300), |f| !f.is_empty()).await;
+    assert!(got.is_empty(), "B's broadcasts reached A: {got:?}");
+    let to_a = MavMessage::COMMAND_LONG(dialect::COMMAND_LONG_DATA {
+        target_system: 1,
+        target_component: 1,
+        command: dialect::MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        param1: 0.0,
+        ..Default::default()
+    });
+    b.write_all(Frame::encode_v2(2, 1, 1, &to_a).as_bytes())
+        .await
+        .unwrap();
+    let got = read_until(&mut a, Duration::from_secs(5), |f| !f.is_empty()).await;
+    assert_eq!(got.len(), 1, "B's command for system 1 reaches A");
+    assert_eq!(got[0].system_id(), 2);
+
     // A goes away: the dispute ends and B may now speak as system 1.
     drop(a);
     tokio::time::timeout(Duration::from_secs(5), conflicts.wait_for(Vec::is_empty))

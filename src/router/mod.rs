@@ -518,8 +518,15 @@ impl Router {
         if route == Route::Unroutable {
             self.stats.unroutable.fetch_add(1, Ordering::Relaxed);
         }
+        // A vehicle's broadcasts go to the clients, not to the other vehicles: a fleet's
+        // telemetry would otherwise reach every vehicle (N² traffic over their radios). What
+        // one vehicle addresses to another still goes there.
+        let clients_only = side == Side::Vehicle && route == Route::Broadcast;
         for link in &self.out {
             if let Some(e) = self.egress.get_mut(link) {
+                if clients_only && e.side == Side::Vehicle {
+                    continue;
+                }
                 if let Some(bucket) = &mut e.bucket
                     && !bucket.take(now)
                 {
