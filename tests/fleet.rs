@@ -293,6 +293,47 @@ fn ui_lists_three_vehicles_and_switches() {
     assert_eq!(app.selected, Some(ids(3)));
 }
 
+#[test]
+fn a_fleet_wider_than_the_screen_wraps_and_scrolls_to_the_selected_vehicle() {
+    let t0 = Instant::now();
+    let mut state = VehicleState::new(t0);
+    let history = History::new(t0);
+    for sys in 1u8..=20 {
+        state.apply(
+            LinkId(u32::from(sys)),
+            Side::Vehicle,
+            &Frame::encode_v2(sys, 1, 0, &heartbeat(17, false)),
+            t0,
+        );
+    }
+    let mut app = App::default();
+    let screen = render(&mut app, &state, &history, t0);
+    let lines: Vec<&str> = screen.lines().collect();
+    // The rows under the two header lines hold the list.
+    let list: Vec<&str> = lines
+        .iter()
+        .copied()
+        .filter(|l| l.contains("disarmed") && l.contains(" Hz "))
+        .collect();
+    assert_eq!(list.len(), 3, "three rows of vehicles:\n{screen}");
+    assert!(list[0].contains("vehicles (v/V)  1 QSTABILIZE"), "{screen}");
+    assert!(list[2].contains("more"), "the rest counted:\n{screen}");
+    assert!(!screen.contains(" 20 QSTABILIZE"), "{screen}");
+    // Select the last one: the list scrolls to show it, and counts what is before.
+    let Event::Key(k) = key('V') else {
+        unreachable!()
+    };
+    app.on_key(k, &state, t0);
+    assert_eq!(app.selected, Some(ids(20)));
+    let screen = render(&mut app, &state, &history, t0);
+    assert!(screen.contains(" 20 QSTABILIZE disarmed"), "{screen}");
+    let first = screen
+        .lines()
+        .find(|l| l.contains("vehicles (v/V)"))
+        .unwrap();
+    assert!(first.contains("vehicles (v/V) +"), "{screen}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn three_twins_one_daemon_the_ui_commands_the_selected_vehicle() {
     let cancel = CancellationToken::new();

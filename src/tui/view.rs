@@ -224,22 +224,25 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         );
         return;
     }
-    let fleet = snap.state.vehicles.len() > 1;
+    let fleet = if snap.state.vehicles.len() > 1 {
+        vehicle_list_lines(app, snap, area.width)
+    } else {
+        Vec::new()
+    };
+    let list_rows = u16::try_from(fleet.len()).unwrap_or(u16::MAX);
     let [header, body, footer] = Layout::vertical([
-        Constraint::Length(if fleet { 3 } else { 2 }),
+        Constraint::Length(2 + list_rows),
         Constraint::Min(10),
         Constraint::Length(1),
     ])
     .areas(area);
     draw_header(f, app, snap, header);
-    if fleet {
-        draw_vehicle_list(
-            f,
-            app,
-            snap,
+    if !fleet.is_empty() {
+        f.render_widget(
+            Paragraph::new(fleet),
             Rect {
                 y: header.y + 2,
-                height: 1,
+                height: list_rows,
                 ..header
             },
         );
@@ -353,48 +356,106 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
 }
 
 /// One line per fleet: each vehicle with its link health, the selected one highlighted.
-fn draw_vehicle_list(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
+/// Rows the vehicle list may take under the header; more vehicles than fit scroll so that the
+/// selected one shows.
+const VEHICLE_LIST_ROWS: usize = 3;
+
+/// The vehicle list, wrapped to `width` over at most [`VEHICLE_LIST_ROWS`] rows. When the
+/// vehicles do not all fit, the rows start at the selected one's row and say how many are
+/// left out on each side.
+fn vehicle_list_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> Vec<Line<'static>> {
     let now = snap.now;
     let selected = app
         .vehicle(snap.state)
         .map(|v| (v.system_id, v.component_id));
-    let mut spans = vec![Span::styled(
-        " vehicles (v/V) ",
-        Style::new().fg(Color::DarkGray),
-    )];
-    for (key, v) in &snap.state.vehicles {
-        let text = if v.is_lost(now) {
-            format!(
-                " {} LOST {:.0} s ",
-                v.system_id,
-                now.saturating_duration_since(v.last_heartbeat)
-                    .as_secs_f64()
-            )
-        } else {
-            format!(
-                " {} {} {} {:.0} Hz {:.1}% ",
-                v.system_id,
-                v.mode_name(),
-                if v.armed { "ARMED" } else { "disarmed" },
-                v.rate_hz(now),
-                v.loss_pct(now)
-            )
-        };
-        let mut style = if v.is_lost(now) {
-            Style::new().fg(Color::Red)
-        } else if v.armed {
-            Style::new().fg(Color::Yellow)
-        } else {
-            Style::new()
-        };
-        if Some(*key) == selected {
-            style = style.add_modifier(Modifier::REVERSED | Modifier::BOLD);
+    let entries: Vec<(String, Style, bool)> = snap
+        .state
+        .vehicles
+        .iter()
+        .map(|(key, v)| {
+            let text = if v.is_lost(now) {
+                format!(
+                    " {} LOST {:.0} s ",
+                    v.system_id,
+                    now.saturating_duration_since(v.last_heartbeat)
+                        .as_secs_f64()
+                )
+            } else {
+                format!(
+                    " {} {} {} {:.0} Hz {:.1}% ",
+                    v.system_id,
+                    v.mode_name(),
+                    if v.armed { "ARMED" } else { "disarmed" },
+                    v.rate_hz(now),
+                    v.loss_pct(now)
+                )
+            };
+            let mut style = if v.is_lost(now) {
+                Style::new().fg(Color::Red)
+            } else if v.armed {
+                Style::new().fg(Color::Yellow)
+            } else {
+                Style::new()
+            };
+            let is_selected = Some(*key) == selected;
+            if is_selected {
+                style = style.add_modifier(Modifier::REVERSED | Modifier::BOLD);
+            }
+            (text, style, is_selected)
+        })
+        .collect();
+    let width = usize::from(width);
+    let title = " vehicles (v/V) ";
+    // Greedy rows of whole entries; a "+N" marker needs room at the end of a row.
+    let marker = 8;
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut used = title.len();
+    for (i, (text, _, _)) in entries.iter().enumerate() {
+        let w = text.chars().count() + 1;
+        if used + w + marker > width && !rows.last().is_some_and(Vec::is_empty) {
+            rows.push(Vec::new());
+            used = 0;
         }
-        spans.push(Span::styled(text, style));
-        spans.push(Span::raw("│"));
+        used += w;
+        if let Some(r) = rows.last_mut() {
+            r.push(i);
+        }
     }
-    spans.pop();
-    f.render_widget(Paragraph::new(Line::from(spans)), area);
+    let sel_row = rows
+        .iter()
+        .position(|r| r.iter().any(|&i| entries[i].2))
+        .unwrap_or(0);
+    let first = if sel_row < VEHICLE_LIST_ROWS {
+        0
+    } else {
+        sel_row + 1 - VEHICLE_LIST_ROWS
+    };
+    let shown = &rows[first..rows.len().min(first + VEHICLE_LIST_ROWS)];
+    let before: usize = rows[..first].iter().map(Vec::len).sum();
+    let after: usize = rows[first + shown.len()..].iter().map(Vec::len).sum();
+    let dim = Style::new().fg(Color::DarkGray);
+    let mut lines = Vec::new();
+    for (n, row) in shown.iter().enumerate() {
+        let mut spans = Vec::new();
+        if n == 0 {
+            spans.push(Span::styled(title, dim));
+            if before > 0 {
+                spans.push(Span::styled(format!("+{before} "), dim));
+            }
+        }
+        for (k, &i) in row.iter().enumerate() {
+            if k > 0 {
+                spans.push(Span::raw("│"));
+            }
+            let (text, style, _) = &entries[i];
+            spans.push(Span::styled(text.clone(), *style));
+        }
+        if n + 1 == shown.len() && after > 0 {
+            spans.push(Span::styled(format!(" +{after} more"), dim));
+        }
+        lines.push(Line::from(spans));
+    }
+    lines
 }
 
 fn draw_footer(f: &mut Frame<'_>, app: &App, area: Rect) {

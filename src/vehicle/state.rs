@@ -1,7 +1,7 @@
 //! What the daemon knows about each vehicle and each link, built by applying frames one at a
 //! time. Pure: `apply` takes the frame and the time it arrived, so it tests without sockets.
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
@@ -217,6 +217,9 @@ pub struct VehicleState {
     last_seq: HashMap<(LinkId, SystemId, ComponentId), u8>,
     /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
     text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
+    /// Links that went down: frames of theirs still on the way to the tracker are stale and
+    /// must not bring their vehicles back (a link that reconnects under its id leaves the set).
+    down: HashSet<LinkId>,
 }
 
 impl Default for VehicleState {
@@ -249,6 +252,7 @@ impl VehicleState {
             messages: BTreeMap::new(),
             last_seq: HashMap::new(),
             text_chunks: HashMap::new(),
+            down: HashSet::new(),
         }
     }
 
@@ -261,6 +265,9 @@ impl VehicleState {
         frame: &Frame,
         now: Instant,
     ) -> Option<MavMessage> {
+        if self.down.contains(&link) {
+            return None;
+        }
         let lost = self.account(link, side, frame, now);
         let key = frame.sender();
         let epoch = self.epoch;
@@ -434,8 +441,11 @@ impl VehicleState {
     }
 
     /// Forgets a link that went down: its health and its sequence history (a link that comes
-    /// back starts afresh instead of counting the gap as loss).
+    /// back starts afresh instead of counting the gap as loss). Its vehicles are lost at once,
+    /// and its frames still on their way to the tracker are ignored until
+    /// [`VehicleState::retain_links`] sees it live again.
     pub fn forget_link(&mut self, link: LinkId) {
+        self.down.insert(link);
         self.links.remove(&link);
         self.last_seq.retain(|(l, _, _), _| *l != link);
         for v in self.vehicles.values_mut().filter(|v| v.link == link) {
@@ -445,6 +455,9 @@ impl VehicleState {
 
     /// Forgets every link not in `live` (the router's current links).
     pub fn retain_links(&mut self, live: &[LinkId]) {
+        for id in live {
+            self.down.remove(id);
+        }
         let gone: Vec<LinkId> = self
             .links
             .keys()
@@ -575,8 +588,10 @@ mod tests {
         assert_eq!(h.frames, 7);
         assert_eq!(h.lost, 3);
         assert!((h.loss_pct(now) - 30.0).abs() < 1e-9);
-        // Once the link goes down and comes back, the gap is not loss.
-        s.forget_link(LinkId(1));
+        // Once the link goes down and comes back (a reconnect keeps its id), the gap is not
+        // loss.
+        s.retain_links(&[]);
+        s.retain_links(&[LinkId(1)]);
         s.apply(
             LinkId(1),
             Side::Vehicle,
@@ -604,6 +619,13 @@ mod tests {
             );
         }
         s.forget_link(LinkId(2));
+        // A heartbeat of link 2 still on its way to the tracker is stale: 2 stays lost.
+        s.apply(
+            LinkId(2),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, 1, &v),
+            now,
+        );
         let lost =
             |s: &VehicleState, sys: u8| s.vehicles[&(SystemId(sys), ComponentId(1))].is_lost(now);
         assert!(!lost(&s, 1));
@@ -612,7 +634,7 @@ mod tests {
         s.apply(
             LinkId(3),
             Side::Vehicle,
-            &Frame::encode_v2(2, 1, 1, &v),
+            &Frame::encode_v2(2, 1, 2, &v),
             now,
         );
         assert!(!lost(&s, 2));

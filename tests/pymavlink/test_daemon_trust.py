@@ -186,19 +186,27 @@ def test_trusted_frames_pass_unchanged_and_the_vehicle_is_verified(daemon_factor
     )
     rx = mavutil.mavlink.MAVLink(None)
 
+    # Frames the vehicle got that no wait has taken yet: the two clients' first frames may
+    # reach it in either order.
+    backlog: list = []
+
     def next_to_vehicle(pred, what: str):
-        """The next frame the daemon sends to the vehicle for which pred(msgid, frame)."""
+        """The first frame the daemon sent to the vehicle, not yet taken, for which
+        pred(msgid, frame)."""
         deadline = time.monotonic() + 5
-        while time.monotonic() < deadline:
+        while True:
+            for k, (frame, addr) in enumerate(backlog):
+                if pred(frame_ids(frame)[3], frame):
+                    del backlog[k]
+                    return frame, addr
+            if time.monotonic() >= deadline:
+                raise AssertionError(f"the vehicle never got {what}")
             data, addr = vehicle.recvfrom(4096)
             i = 0
             while i < len(data):
                 n = 10 + data[i + 1] + 2 + (13 if data[i + 2] & 1 else 0) if data[i] == 0xFD else 8 + data[i + 1]
-                frame = data[i:i + n]
+                backlog.append((data[i:i + n], addr))
                 i += n
-                if pred(frame_ids(frame)[3], frame):
-                    return frame, addr
-        raise AssertionError(f"the vehicle never got {what}")
 
     packer = signed_packer(KEY)
     with Gcs("tcp:" + daemon.addr("tcpin", 0), source_system=255, source_component=0) as trusted, \

@@ -102,7 +102,7 @@ def test_three_vehicles_over_zenoh_peers(twin_factory, daemon_factory):  # noqa:
 
 def test_parameters_through_a_zenoh_router(twin_factory, daemon_factory, tmp_path):  # noqa: F811
     """Every daemon a client of one Zenoh router (a daemon in router mode): a pull and a
-    verified push reach vehicle 2 only."""
+    verified push reach vehicle 2 only; a ground end for vehicle 1 alone hears only it."""
     port = free_tcp_port()
     router_ep = f"tcp/127.0.0.1:{port}"
     daemon_factory(
@@ -131,6 +131,18 @@ def test_parameters_through_a_zenoh_router(twin_factory, daemon_factory, tmp_pat
     assert "2.75" in twins[2].param_file.read_text()
     assert not twins[1].param_file.exists() or "2.75" not in twins[1].param_file.read_text()
     assert ground.alive(), ground.tail()
+
+    # A ground end for one vehicle of the fleet hears that vehicle only.
+    one = daemon_factory(
+        vehicle="zenoh:test/v1", serve=["tcpin:127.0.0.1:0"], log=False, extra=client
+    )
+    g = script(one.tcp)
+    try:
+        heartbeats_by_sysid(g, {1}, timeout=30)
+        last, _ = count_gaps(g, {1, 2}, 2.0)
+        assert set(last) == {1}, last
+    finally:
+        g.close()
 
 
 def test_a_fleet_url_the_end_cannot_take_is_one_clear_error(tmp_path):

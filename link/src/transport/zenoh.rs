@@ -13,12 +13,12 @@
 //!   it holds the vehicle's liveliness token;
 //! - the *ground* end (a daemon's `--vehicle zenoh:FLEET/*`, or one vehicle) makes one link per
 //!   vehicle: up when the vehicle's token appears (or its first frames arrive), down when the
-//!   token goes away (its daemon stopped or its session was lost); its egress is published on
-//!   that vehicle's `to_vehicle`.
+//!   token goes away (its daemon stopped or its session was lost), and not up again until a
+//!   new token appears; its egress is published on that vehicle's `to_vehicle`.
 //!
 //! One Zenoh session per process and set of [`ZenohOptions`] carries every endpoint.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, OnceLock};
 
 use tokio::sync::{Mutex, mpsc};
@@ -288,15 +288,20 @@ async fn spawn_ground_end(
     let fleet = fleet.to_string();
     Ok(tokio::spawn(async move {
         let mut links: HashMap<String, GroundLink> = HashMap::new();
+        // Vehicles whose token went away: their last samples, still queued behind the token's
+        // removal, must not bring the link back. A new token does.
+        let mut gone: HashSet<String> = HashSet::new();
         let mut frames = Vec::new();
         loop {
             tokio::select! {
+                biased;
                 _ = cancel.cancelled() => break,
                 s = live.recv_async() => {
                     let Ok(sample) = s else { break };
                     let Some(v) = vehicle_of(sample.key_expr().as_str(), 2) else { continue };
                     match sample.kind() {
                         SampleKind::Put => {
+                            gone.remove(v);
                             if !links.contains_key(v)
                                 && !ground_link_up(&session, &fleet, v, &mut links, &events, &opts, &cancel).await
                             {
@@ -304,6 +309,7 @@ async fn spawn_ground_end(
                             }
                         }
                         SampleKind::Delete => {
+                            gone.insert(v.to_string());
                             if let Some(l) = links.remove(v) {
                                 l.stop.cancel();
                                 let why = format!(
@@ -317,6 +323,9 @@ async fn spawn_ground_end(
                 s = data.recv_async() => {
                     let Ok(sample) = s else { break };
                     let Some(v) = vehicle_of(sample.key_expr().as_str(), 3) else { continue };
+                    if gone.contains(v) {
+                        continue;
+                    }
                     if !links.contains_key(v)
                         && !ground_link_up(&session, &fleet, v, &mut links, &events, &opts, &cancel).await
                     {
