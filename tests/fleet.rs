@@ -216,12 +216,22 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
 }
 
 fn render(app: &mut App, state: &VehicleState, history: &History, now: Instant) -> String {
+    render_with_links(app, state, history, now, Vec::new())
+}
+
+fn render_with_links(
+    app: &mut App,
+    state: &VehicleState,
+    history: &History,
+    now: Instant,
+    links: Vec<view::LinkRow>,
+) -> String {
     let mut terminal = Terminal::new(TestBackend::new(110, 30)).expect("test backend");
     let snap = Snapshot {
         now,
         state,
         history,
-        links: Vec::new(),
+        links,
         router: RouterCounters::default(),
         tlog: None,
         serving: vec!["tcpin:127.0.0.1:5770".into()],
@@ -332,6 +342,21 @@ fn a_fleet_wider_than_the_screen_wraps_and_scrolls_to_the_selected_vehicle() {
         .find(|l| l.contains("vehicles (v/V)"))
         .unwrap();
     assert!(first.contains("vehicles (v/V) +"), "{screen}");
+
+    // Twenty vehicle links: the header gives the shown vehicle's link health only.
+    let links = (1u32..=20)
+        .map(|id| view::LinkRow {
+            id: LinkId(id),
+            side: Side::Vehicle,
+            peer: format!("zenoh test/v{id}"),
+            own: false,
+            stats: vtol_link::LinkStatsSnapshot::default(),
+            policy: None,
+        })
+        .collect();
+    let screen = render_with_links(&mut app, &state, &history, t0, links);
+    let header = screen.lines().next().unwrap();
+    assert_eq!(header.matches("% loss").count(), 1, "{screen}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -314,7 +314,14 @@ fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
             }
         }
     }
-    for l in snap.links.iter().filter(|l| l.side == Side::Vehicle) {
+    // With several vehicle links (a fleet over Zenoh, several UDP peers) the header shows the
+    // health of the shown vehicle's link; the vehicle list has every vehicle's.
+    let vehicle_links = snap.links.iter().filter(|l| l.side == Side::Vehicle);
+    let shown_link = app
+        .vehicle(snap.state)
+        .map(|v| v.link)
+        .filter(|_| vehicle_links.clone().count() > 1);
+    for l in vehicle_links.filter(|l| shown_link.is_none_or(|s| s == l.id)) {
         if let Some(h) = snap.state.links.get(&l.id) {
             spans.push(Span::raw(format!(
                 " │ {:.0} Hz {:.1}% loss",
