@@ -117,12 +117,15 @@ pub(crate) async fn spawn_zenoh(
     opts: LinkOptions,
     cancel: CancellationToken,
 ) -> Result<(Option<LinkId>, JoinHandle<()>), LinkError> {
-    let session = session(&opts.zenoh).await?;
-    match (opts.zenoh.role, vehicle) {
-        (ZenohRole::Vehicle, None) => Err(LinkError::Zenoh(format!(
+    if opts.zenoh.role == ZenohRole::Vehicle && vehicle.is_none() {
+        return Err(LinkError::Zenoh(format!(
             "zenoh:{fleet}/* names no vehicle: the vehicle's end of a fleet is \
              zenoh:{fleet}/VEHICLE (the ground end may take zenoh:{fleet}/*)"
-        ))),
+        )));
+    }
+    let session = session(&opts.zenoh).await?;
+    match (opts.zenoh.role, vehicle) {
+        (ZenohRole::Vehicle, None) => unreachable!("refused above"),
         (ZenohRole::Vehicle, Some(v)) => {
             let id = LinkId::next();
             let task = spawn_vehicle_end(session, fleet, v, id, events, opts, cancel).await?;
