@@ -103,6 +103,26 @@ fn zenoh_endpoint(s: &str) -> Result<String, String> {
     vtol_gcs::config::check_zenoh_endpoint(s).map(|()| s.to_string())
 }
 
+impl RunArgs {
+    fn zenoh_flags_given(&self) -> bool {
+        self.zenoh_mode.is_some() || !self.zenoh_connect.is_empty() || !self.zenoh_listen.is_empty()
+    }
+}
+
+/// `--zenoh-*` flags with no `zenoh:` link to use them would be silently ignored: refuse them.
+fn refuse_unused_zenoh_flags(config: &Config, given: bool) -> anyhow::Result<()> {
+    let is_zenoh = |u: &LinkUrl| matches!(u, LinkUrl::Zenoh { .. });
+    let used = matches!(&config.vehicle, VehicleSource::Url(u) if is_zenoh(u))
+        || config.serve.iter().any(|s| is_zenoh(&s.url));
+    if given && !used {
+        anyhow::bail!(
+            "--zenoh-mode, --zenoh-connect and --zenoh-listen need a zenoh: link \
+             (--vehicle 'zenoh:FLEET/*' or --serve zenoh:FLEET/VEHICLE)"
+        );
+    }
+    Ok(())
+}
+
 fn build_config(args: RunArgs) -> anyhow::Result<Config> {
     let mut config = Config::default();
     if let Some(path) = &args.config {
@@ -222,8 +242,10 @@ fn init_ui_tracing(log_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
 fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
     let explicit_log = args.log_dir.is_some();
     let explicit_serve = !args.serve.is_empty();
+    let zenoh_flags = args.zenoh_flags_given();
     let mut config = build_config(args)?;
     if config.headless {
+        refuse_unused_zenoh_flags(&config, zenoh_flags)?;
         init_stderr_tracing();
         return run_config(config);
     }
@@ -236,6 +258,7 @@ fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
             config.log_dir = None;
         }
     }
+    refuse_unused_zenoh_flags(&config, zenoh_flags)?;
     init_ui_tracing(config.log_dir.as_deref())?;
     until_shutdown(|cancel| async move {
         let mut tasks = tokio::task::JoinSet::new();
@@ -253,7 +276,10 @@ fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
 }
 
 fn run(args: RunArgs) -> anyhow::Result<()> {
-    run_config(build_config(args)?)
+    let zenoh_flags = args.zenoh_flags_given();
+    let config = build_config(args)?;
+    refuse_unused_zenoh_flags(&config, zenoh_flags)?;
+    run_config(config)
 }
 
 fn run_config(config: Config) -> anyhow::Result<()> {

@@ -34,6 +34,34 @@ def heartbeats_by_sysid(g, want: set[int], pred=lambda h: True, timeout: float =
     return seen
 
 
+def count_gaps(g, ids: set[int], seconds: float) -> tuple[dict, int]:
+    """Last sequence number per vehicle in `ids` over `seconds`, and the frames missing between
+    consecutive ones (each vehicle's own sequence)."""
+    last: dict = {}
+    gaps = 0
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        m = g.m.recv_match(blocking=True, timeout=0.25)
+        if m is None or m.get_srcSystem() not in ids or m.get_type() == "BAD_DATA":
+            continue
+        s, seq = m.get_srcSystem(), m.get_seq()
+        if s in last:
+            gaps += (seq - last[s] - 1) % 256
+        last[s] = seq
+    return last, gaps
+
+
+def arm_only(g, ids: set[int], target: int) -> None:
+    """Arms `target`: its COMMAND_ACK is ACCEPTED, and afterwards only it of `ids` reports armed."""
+    g.drain()
+    g.mav.command_long_send(target, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    ack = g.recv("COMMAND_ACK", sysid=target, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
+    assert ack.result == MAV_RESULT_ACCEPTED, ack
+    g.drain()
+    after = heartbeats_by_sysid(g, ids)
+    assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {target}, after
+
+
 def test_three_twins_one_endpoint(twin_factory, gcs_factory, tmp_path):
     twin = twin_factory(speed=4, extra=["--count", str(COUNT)])
     g = gcs_factory(twin.tcp)
@@ -42,14 +70,7 @@ def test_three_twins_one_endpoint(twin_factory, gcs_factory, tmp_path):
     assert all(not hb.base_mode & FLAG_ARMED for hb in first.values())
 
     # Arm vehicle 2 only: its ACK comes from system 2, and only it reports armed afterwards.
-    g.drain()
-    g.mav.command_long_send(2, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-    ack = g.recv("COMMAND_ACK", sysid=2, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
-    assert ack.result == MAV_RESULT_ACCEPTED, ack
-    g.drain()
-    after = heartbeats_by_sysid(g, ids)
-    armed = {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED}
-    assert armed == {2}, after
+    arm_only(g, ids, 2)
 
     # A parameter written on vehicle 3 changes vehicle 3 and its own file, nothing else.
     g.drain()
@@ -108,26 +129,10 @@ def test_three_twins_through_one_daemon(twin_factory, daemon_factory, tmp_path):
         ids = {1, 2, 3}
         heartbeats_by_sysid(g, ids, timeout=20)
         # Sequence numbers are each vehicle's own, unchanged through the daemon: no gaps.
-        last: dict = {}
-        gaps = 0
-        deadline = time.monotonic() + 2.0
-        while time.monotonic() < deadline:
-            m = g.m.recv_match(blocking=True, timeout=0.25)
-            if m is None or m.get_srcSystem() not in ids or m.get_type() == "BAD_DATA":
-                continue
-            s, seq = m.get_srcSystem(), m.get_seq()
-            if s in last:
-                gaps += (seq - last[s] - 1) % 256
-            last[s] = seq
+        last, gaps = count_gaps(g, ids, 2.0)
         assert set(last) == ids and gaps == 0, (last, gaps)
 
-        g.drain()
-        g.mav.command_long_send(3, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        ack = g.recv("COMMAND_ACK", sysid=3, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
-        assert ack.result == MAV_RESULT_ACCEPTED, ack
-        g.drain()
-        after = heartbeats_by_sysid(g, ids)
-        assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {3}, after
+        arm_only(g, ids, 3)
 
         # A pull and a verified push through the daemon to vehicle 2 only.
         pulled = tmp_path / "sys2.param"
@@ -166,13 +171,7 @@ def test_vehicles_on_their_own_links_lost_conflict_and_back(twin_factory, daemon
     try:
         heartbeats_by_sysid(g, {1, 2, 3}, timeout=20)
         # Across links: the command for 2 reaches 2 only.
-        g.drain()
-        g.mav.command_long_send(2, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        ack = g.recv("COMMAND_ACK", sysid=2, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
-        assert ack.result == MAV_RESULT_ACCEPTED, ack
-        g.drain()
-        after = heartbeats_by_sysid(g, {1, 2, 3})
-        assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {2}, after
+        arm_only(g, {1, 2, 3}, 2)
 
         # Vehicle 3 dies: LOST within 5 s of its last heartbeat (status lines every second).
         twin_factory.twins.remove(twins[3])

@@ -9,8 +9,7 @@ import socket
 import time
 
 from daemon_support import daemon_factory, script  # noqa: F401 (fixture)
-from conftest import FLAG_ARMED, MAV_CMD_COMPONENT_ARM_DISARM, MAV_RESULT_ACCEPTED
-from test_fleet_twins import gcs_cli, heartbeats_by_sysid
+from test_fleet_twins import arm_only, count_gaps, gcs_cli, heartbeats_by_sysid
 
 IDS = {1, 2, 3}
 
@@ -35,22 +34,6 @@ def vehicle_daemon(twin_factory, daemon_factory, n: int, zenoh: list[str],  # no
     return twin, d
 
 
-def count_gaps(g, ids: set[int], seconds: float) -> tuple[dict, int]:
-    """Last sequence number per vehicle and the frames missing between consecutive ones."""
-    last: dict = {}
-    gaps = 0
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        m = g.m.recv_match(blocking=True, timeout=0.25)
-        if m is None or m.get_srcSystem() not in ids or m.get_type() == "BAD_DATA":
-            continue
-        s, seq = m.get_srcSystem(), m.get_seq()
-        if s in last:
-            gaps += (seq - last[s] - 1) % 256
-        last[s] = seq
-    return last, gaps
-
-
 def test_three_vehicles_over_zenoh_peers(twin_factory, daemon_factory):  # noqa: F811
     port = free_tcp_port()
     ground = daemon_factory(
@@ -69,13 +52,7 @@ def test_three_vehicles_over_zenoh_peers(twin_factory, daemon_factory):  # noqa:
         assert set(last) == IDS and gaps == 0, (last, gaps)
 
         # Arm vehicle 2 through the fleet: its ACK, and only it arms.
-        g.drain()
-        g.mav.command_long_send(2, 1, MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        ack = g.recv("COMMAND_ACK", sysid=2, pred=lambda a: a.command == MAV_CMD_COMPONENT_ARM_DISARM)
-        assert ack.result == MAV_RESULT_ACCEPTED, ack
-        g.drain()
-        after = heartbeats_by_sysid(g, IDS)
-        assert {s for s, hb in after.items() if hb.base_mode & FLAG_ARMED} == {2}, after
+        arm_only(g, IDS, 2)
 
         # Vehicle 3's daemon dies: the ground shows it LOST within 5 s, the others go on.
         twin3, d3 = vehicles[3]
@@ -164,3 +141,11 @@ def test_a_fleet_url_the_end_cannot_take_is_one_clear_error(tmp_path):
         capture_output=True, text=True, timeout=30,
     )
     assert r.returncode == 2 and "tcp only" in r.stderr, r.stderr
+    # Zenoh flags with no zenoh: link would do nothing: refused, not ignored.
+    r = subprocess.run(
+        [str(DAEMON_BIN), "run", "--headless", "--no-log", "--vehicle", "tcp:127.0.0.1:9",
+         "--serve", "udpin:127.0.0.1:0", "--zenoh-listen", "tcp/127.0.0.1:7447"],
+        capture_output=True, text=True, timeout=30,
+    )
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode != 0 and len(lines) == 1 and "need a zenoh: link" in lines[0], r.stderr

@@ -786,6 +786,29 @@ pub(crate) async fn emit_down(
     }
 }
 
+/// Starts `batch` with `first` and appends the frames already queued behind it, up to
+/// `max_bytes` (one write of a stream, one publication): returns how many frames it holds.
+pub(crate) fn take_batch(
+    first: &Frame,
+    rx: &mut mpsc::Receiver<Frame>,
+    batch: &mut Vec<u8>,
+    max_bytes: usize,
+) -> usize {
+    batch.clear();
+    batch.extend_from_slice(first.as_bytes());
+    let mut frames = 1;
+    while batch.len() < max_bytes {
+        match rx.try_recv() {
+            Ok(f) => {
+                batch.extend_from_slice(f.as_bytes());
+                frames += 1;
+            }
+            Err(_) => break,
+        }
+    }
+    frames
+}
+
 /// Sleeps unless cancelled; false if cancelled.
 pub(crate) async fn sleep_or_cancel(d: Duration, cancel: &CancellationToken) -> bool {
     tokio::select! {

@@ -15,7 +15,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::{
     Backoff, Events, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, emit, emit_down,
-    emit_frames, sleep_or_cancel,
+    emit_frames, sleep_or_cancel, take_batch,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
@@ -130,18 +130,7 @@ async fn write_loop<W: AsyncWrite>(
             std::future::pending::<()>().await;
             unreachable!();
         };
-        batch.clear();
-        batch.extend_from_slice(first.as_bytes());
-        let mut frames = 1;
-        while batch.len() < MAX_BATCH_BYTES {
-            match rx.try_recv() {
-                Ok(f) => {
-                    batch.extend_from_slice(f.as_bytes());
-                    frames += 1;
-                }
-                Err(_) => break,
-            }
-        }
+        let frames = take_batch(&first, &mut rx, &mut batch, MAX_BATCH_BYTES);
         // No flush: on a serial port it is tcdrain(), which would block the runtime thread
         // until the UART has sent everything. Streams passed here must not buffer writes.
         if let Err(e) = wr.write_all(&batch).await {

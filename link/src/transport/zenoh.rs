@@ -30,7 +30,7 @@ use zenoh::sample::{Sample, SampleKind};
 
 use super::{
     Events, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, ZenohMode,
-    ZenohOptions, ZenohRole, emit, emit_down, emit_frames,
+    ZenohOptions, ZenohRole, emit, emit_down, emit_frames, take_batch,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
@@ -156,18 +156,7 @@ async fn publish_loop(
     };
     let mut batch: Vec<u8> = Vec::with_capacity(MAX_BATCH_BYTES);
     while let Some(first) = rx.recv().await {
-        batch.clear();
-        batch.extend_from_slice(first.as_bytes());
-        let mut frames = 1;
-        while batch.len() < MAX_BATCH_BYTES {
-            match rx.try_recv() {
-                Ok(f) => {
-                    batch.extend_from_slice(f.as_bytes());
-                    frames += 1;
-                }
-                Err(_) => break,
-            }
-        }
+        let frames = take_batch(&first, &mut rx, &mut batch, MAX_BATCH_BYTES);
         let n = batch.len();
         match publisher.put(std::mem::take(&mut batch)).await {
             Ok(()) => stats.add_tx(frames, n),
