@@ -22,7 +22,7 @@
 //!
 //! Every byte discarded outside a yielded or deliberately dropped frame counts as garbage.
 
-use bytes::{Buf, BytesMut};
+use bytes::{Buf, Bytes, BytesMut};
 
 use crate::frame::{
     CRC_LEN, Frame, HEADER_LEN_V1, HEADER_LEN_V2, INCOMPAT_SIGNED, MAGIC_V1, MAGIC_V2, crc_extra,
@@ -151,6 +151,52 @@ impl FrameDecoder {
         frames
     }
 
+    /// Decodes one whole datagram (or any input known to end at its last byte): the bytes
+    /// buffered so far, then `data`, as if followed by [`FrameDecoder::finish_with`]. With
+    /// nothing buffered (always, for a decoder that only ever sees whole datagrams) the frames
+    /// are read straight from `data`, each copied into one allocation of its own, instead of
+    /// through the stream buffer.
+    pub fn push_final_with(&mut self, data: &[u8], mut each: impl FnMut(Frame)) {
+        if !self.buf.is_empty() {
+            self.push(data);
+            self.finish_with(each);
+            return;
+        }
+        let mut rest = data;
+        loop {
+            let Some(start) = rest.iter().position(|&b| is_magic(b)) else {
+                self.stats.garbage_bytes += rest.len() as u64;
+                return;
+            };
+            self.stats.garbage_bytes += start as u64;
+            rest = &rest[start..];
+            let advance = match judge(rest, true) {
+                Verdict::Yield { len, verified } => {
+                    self.stats.frames += 1;
+                    if !verified {
+                        self.stats.unknown_id += 1;
+                    }
+                    each(Frame::from_checked(frame_bytes(&rest[..len]), verified));
+                    len
+                }
+                Verdict::DropFrame { len } => {
+                    self.stats.bad_incompat += 1;
+                    len
+                }
+                Verdict::Skip { bad_crc } => {
+                    self.stats.bad_crc += u64::from(bad_crc);
+                    self.stats.garbage_bytes += 1;
+                    1
+                }
+                Verdict::Wait => {
+                    self.stats.garbage_bytes += 1;
+                    1
+                }
+            };
+            rest = &rest[advance..];
+        }
+    }
+
     /// [`FrameDecoder::finish`] handing each frame to `each` instead of collecting them.
     pub fn finish_with(&mut self, mut each: impl FnMut(Frame)) {
         self.eof = true;
@@ -170,7 +216,7 @@ impl FrameDecoder {
             };
             self.stats.garbage_bytes += start as u64;
             self.buf.advance(start);
-            match self.judge() {
+            match judge(&self.buf, self.eof) {
                 Verdict::Wait if self.eof => {
                     self.stats.garbage_bytes += 1;
                     self.buf.advance(1);
@@ -196,46 +242,79 @@ impl FrameDecoder {
             }
         }
     }
+}
 
-    /// Judges the candidate at `buf[0]` (a magic byte).
-    fn judge(&self) -> Verdict {
-        let buf = &self.buf[..];
-        let Some(total) = frame_len_from_prefix(buf) else {
-            return Verdict::Wait;
-        };
-        if buf.len() < total {
-            return Verdict::Wait;
-        }
-        let candidate = &buf[..total];
-        let incompat_ok = candidate[0] == MAGIC_V1 || candidate[2] & !INCOMPAT_SIGNED == 0;
-        let id = header_message_id(candidate);
-        if let Some(extra) = crc_extra(id) {
-            return match (crc_ok(candidate, extra), incompat_ok) {
-                (false, _) => Verdict::Skip { bad_crc: true },
-                (true, false) => Verdict::DropFrame { len: total },
-                (true, true) => Verdict::Yield {
-                    len: total,
-                    verified: true,
-                },
-            };
-        }
-        // Unknown id: only framing can vouch for it.
-        if !incompat_ok {
-            return Verdict::Skip { bad_crc: false };
-        }
-        let boundary_ok = buf.len() == total || is_magic(buf[total]);
-        if !boundary_ok {
-            return Verdict::Skip { bad_crc: false };
-        }
-        match known_frame_inside(buf, total) {
-            Inside::Found => Verdict::Skip { bad_crc: false },
-            // At EOF an incomplete inner candidate can never become a frame.
-            Inside::Maybe if !self.eof => Verdict::Wait,
-            Inside::Maybe | Inside::None => Verdict::Yield {
+/// A frame's bytes in one allocation that also holds the reference count: the common small
+/// frames inline, larger ones in a buffer of their own.
+fn frame_bytes(frame: &[u8]) -> Bytes {
+    match SmallFrame::new(frame) {
+        Some(small) => Bytes::from_owner(small),
+        None => Bytes::copy_from_slice(frame),
+    }
+}
+
+/// Bytes of a frame of up to [`SmallFrame::CAP`] bytes (ATTITUDE is 40, a heartbeat 21).
+struct SmallFrame {
+    len: u8,
+    data: [u8; SmallFrame::CAP],
+}
+
+impl SmallFrame {
+    const CAP: usize = 64;
+
+    fn new(frame: &[u8]) -> Option<SmallFrame> {
+        let len = u8::try_from(frame.len())
+            .ok()
+            .filter(|&n| usize::from(n) <= Self::CAP)?;
+        let mut data = [0u8; Self::CAP];
+        data[..frame.len()].copy_from_slice(frame);
+        Some(SmallFrame { len, data })
+    }
+}
+
+impl AsRef<[u8]> for SmallFrame {
+    fn as_ref(&self) -> &[u8] {
+        &self.data[..usize::from(self.len)]
+    }
+}
+
+/// Judges the candidate at `buf[0]` (a magic byte); `eof`: no more bytes will follow `buf`.
+fn judge(buf: &[u8], eof: bool) -> Verdict {
+    let Some(total) = frame_len_from_prefix(buf) else {
+        return Verdict::Wait;
+    };
+    if buf.len() < total {
+        return Verdict::Wait;
+    }
+    let candidate = &buf[..total];
+    let incompat_ok = candidate[0] == MAGIC_V1 || candidate[2] & !INCOMPAT_SIGNED == 0;
+    let id = header_message_id(candidate);
+    if let Some(extra) = crc_extra(id) {
+        return match (crc_ok(candidate, extra), incompat_ok) {
+            (false, _) => Verdict::Skip { bad_crc: true },
+            (true, false) => Verdict::DropFrame { len: total },
+            (true, true) => Verdict::Yield {
                 len: total,
-                verified: false,
+                verified: true,
             },
-        }
+        };
+    }
+    // Unknown id: only framing can vouch for it.
+    if !incompat_ok {
+        return Verdict::Skip { bad_crc: false };
+    }
+    let boundary_ok = buf.len() == total || is_magic(buf[total]);
+    if !boundary_ok {
+        return Verdict::Skip { bad_crc: false };
+    }
+    match known_frame_inside(buf, total) {
+        Inside::Found => Verdict::Skip { bad_crc: false },
+        // At EOF an incomplete inner candidate can never become a frame.
+        Inside::Maybe if !eof => Verdict::Wait,
+        Inside::Maybe | Inside::None => Verdict::Yield {
+            len: total,
+            verified: false,
+        },
     }
 }
 

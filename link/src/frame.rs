@@ -6,7 +6,6 @@
 //! PROTOCOL.md E.6.1) without losing the frame. Routing data (`target()`) is read from byte
 //! offsets learnt once from the dialect, so it works even when the typed decode would fail.
 
-use std::collections::HashMap;
 use std::fmt;
 use std::sync::OnceLock;
 
@@ -119,10 +118,10 @@ fn field_offset(msg: &MavMessage, set: impl Fn(&mut MavMessage) -> bool) -> Opti
 
 /// The dialect's message table. The generated code has no list of ids, so probe every id that
 /// fits in 16 bits (all ardupilotmega ids do) once; that takes a few milliseconds.
-fn dialect_table() -> &'static HashMap<u32, MsgInfo> {
-    static TABLE: OnceLock<HashMap<u32, MsgInfo>> = OnceLock::new();
+fn dialect_table() -> &'static foldhash::HashMap<u32, MsgInfo> {
+    static TABLE: OnceLock<foldhash::HashMap<u32, MsgInfo>> = OnceLock::new();
     TABLE.get_or_init(|| {
-        let mut table = HashMap::new();
+        let mut table = foldhash::HashMap::default();
         for id in 0..=u32::from(u16::MAX) {
             let Some(msg) = MavMessage::default_message_from_id(id) else {
                 continue;
@@ -167,7 +166,12 @@ pub fn message_name(message_id: u32) -> Option<&'static str> {
 
 /// MAVLink's CRC (X.25 / MCRF4XX) over `data` followed by `crc_extra`.
 pub fn frame_crc(data: &[u8], crc_extra: u8) -> u16 {
-    mavlink::calculate_crc(data, crc_extra)
+    static MCRF4XX: crc::Crc<u16, crc::Table<16>> =
+        crc::Crc::<u16, crc::Table<16>>::new(&crc::CRC_16_MCRF4XX);
+    let mut digest = MCRF4XX.digest();
+    digest.update(data);
+    digest.update(&[crc_extra]);
+    digest.finalize()
 }
 
 /// Total frame length from the first bytes of a candidate frame, if enough bytes are there
@@ -734,6 +738,14 @@ mod tests {
             system_status: apm::MavState::MAV_STATE_STANDBY,
             mavlink_version: 3,
         })
+    }
+
+    proptest::proptest! {
+        /// The sliced CRC is the `mavlink` crate's, byte for byte, at every length.
+        #[test]
+        fn frame_crc_is_the_mavlink_crates(data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300), extra: u8) {
+            proptest::prop_assert_eq!(frame_crc(&data, extra), mavlink::calculate_crc(&data, extra));
+        }
     }
 
     #[test]

@@ -96,6 +96,42 @@ proptest! {
         }
     }
 
+    /// A whole datagram decoded in place ([`FrameDecoder::push_final_with`]) gives exactly
+    /// what pushing it and finishing gives: the same frames, verdicts and counters, with or
+    /// without a partial frame buffered before it.
+    #[test]
+    fn datagram_path_matches_the_stream_path(
+        items in proptest::collection::vec(
+            (proptest::collection::vec(any::<u8>(), 0..48), valid_frame()), 0..8),
+        tail in proptest::collection::vec(any::<u8>(), 0..48),
+        head in proptest::collection::vec(any::<u8>(), 0..24),
+    ) {
+        let mut dgram = Vec::new();
+        for (garbage, f) in &items {
+            dgram.extend_from_slice(garbage);
+            dgram.extend_from_slice(f.as_bytes());
+        }
+        dgram.extend_from_slice(&tail);
+        for buffered in [&[][..], &head[..]] {
+            let (mut a, mut b) = (FrameDecoder::new(), FrameDecoder::new());
+            a.push(buffered);
+            b.push(buffered);
+            let mut via_stream: Vec<Frame> = a.frames().collect();
+            a.push(&dgram);
+            a.finish_with(|f| via_stream.push(f));
+            let mut in_place: Vec<Frame> = b.frames().collect();
+            b.push_final_with(&dgram, |f| in_place.push(f));
+            prop_assert_eq!(a.stats(), b.stats());
+            prop_assert_eq!(via_stream.len(), in_place.len());
+            for (x, y) in via_stream.iter().zip(&in_place) {
+                prop_assert_eq!(x.as_bytes(), y.as_bytes());
+                prop_assert_eq!(x.is_verified(), y.is_verified());
+            }
+            prop_assert_eq!(a.buffered_len(), 0);
+            prop_assert_eq!(b.buffered_len(), 0);
+        }
+    }
+
     /// Random garbage between valid frames: every valid frame comes out, in order, and every
     /// verified frame that comes out has a correct CRC.
     #[test]

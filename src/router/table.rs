@@ -20,7 +20,7 @@
 //! each command id from each sender and delivers the ACK to that link only, so each script
 //! gets its own ACK and no other.
 
-use std::collections::HashMap;
+use foldhash::HashMap;
 use std::time::{Duration, Instant};
 
 use vtol_link::{ComponentId, LinkId, SystemId};

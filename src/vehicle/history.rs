@@ -5,10 +5,11 @@
 //! Shared with the UI behind a mutex ([`SharedHistory`]) instead of travelling in every
 //! published snapshot: copying 30 s of samples 50 times a second would cost more than the UI.
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use foldhash::HashMap;
 use vtol_link::Frame;
 use vtol_link::dialect::MavMessage;
 
@@ -74,7 +75,7 @@ impl History {
         Self {
             epoch,
             vehicles: BTreeMap::new(),
-            frames: HashMap::new(),
+            frames: HashMap::default(),
             next_index: 0,
         }
     }

@@ -1,9 +1,10 @@
 //! What the daemon knows about each vehicle and each link, built by applying frames one at a
 //! time. Pure: `apply` takes the frame and the time it arrived, so it tests without sockets.
 
-use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
+use foldhash::{HashMap, HashSet};
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
@@ -250,9 +251,9 @@ impl VehicleState {
             vehicles: BTreeMap::new(),
             links: BTreeMap::new(),
             messages: BTreeMap::new(),
-            last_seq: HashMap::new(),
-            text_chunks: HashMap::new(),
-            down: HashSet::new(),
+            last_seq: HashMap::default(),
+            text_chunks: HashMap::default(),
+            down: HashSet::default(),
         }
     }
 

@@ -5,7 +5,8 @@
 use std::time::{Duration, Instant};
 
 /// Width of one bucket.
-pub const BUCKET: Duration = Duration::from_millis(250);
+pub const BUCKET: Duration = Duration::from_millis(BUCKET_MS);
+const BUCKET_MS: u64 = 250;
 /// Buckets kept: 10 s of history.
 const BUCKETS: usize = 40;
 /// Rates are taken over this many newest buckets (2 s): long enough to be steady at 1 Hz
@@ -36,7 +37,10 @@ impl Window {
     }
 
     fn bucket_of(&self, t: Instant) -> u64 {
-        (t.saturating_duration_since(self.epoch).as_nanos() / BUCKET.as_nanos()) as u64
+        // In whole milliseconds and u64: the tracker calls this for every frame, and a u128
+        // division of nanoseconds is a library call.
+        let d = t.saturating_duration_since(self.epoch);
+        (d.as_secs() * 1000 + u64::from(d.subsec_millis())) / BUCKET_MS
     }
 
     /// Moves the window so that `bucket` is the newest, clearing what falls out.

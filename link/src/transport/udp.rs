@@ -27,7 +27,6 @@
 //! `sendto`, or one `sendmmsg` for a run of frames, never waiting), so the writer task only
 //! wakes when the socket buffer was full.
 
-use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::io::{self, IoSlice, IoSliceMut};
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
@@ -403,7 +402,7 @@ struct Peer {
 /// The peers of a udpin socket.
 struct Peers {
     sock: Arc<UdpSock>,
-    by_addr: HashMap<SocketAddr, Peer>,
+    by_addr: foldhash::HashMap<SocketAddr, Peer>,
     writers: TaskTracker,
     runtime: tokio::runtime::Handle,
     opts: LinkOptions,
@@ -414,7 +413,7 @@ impl Peers {
     fn new(sock: Arc<UdpSock>, opts: LinkOptions, cancel: CancellationToken) -> Self {
         Peers {
             sock,
-            by_addr: HashMap::new(),
+            by_addr: foldhash::HashMap::default(),
             writers: TaskTracker::new(),
             runtime: tokio::runtime::Handle::current(),
             opts,
@@ -459,9 +458,9 @@ impl Peers {
         };
         peer.last_heard = now;
         peer.stats.add_rx_bytes(data.len());
-        peer.decoder.push(data);
         let id = peer.id;
-        peer.decoder.finish_with(|frame| frames.push((id, frame)));
+        peer.decoder
+            .push_final_with(data, |frame| frames.push((id, frame)));
         peer.stats.add_decode(&peer.decoder.take_stats());
         up
     }
@@ -762,8 +761,7 @@ fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
             Ok(_) => {
                 for (data, _from) in dgrams.iter() {
                     link.stats.add_rx_bytes(data.len());
-                    decoder.push(data);
-                    decoder.finish_with(|frame| frames.push((link.id, frame)));
+                    decoder.push_final_with(data, |frame| frames.push((link.id, frame)));
                     link.stats.add_decode(&decoder.take_stats());
                 }
                 if !handler.frames(&mut frames) {
@@ -810,8 +808,7 @@ async fn udpout_task(link: &UdpOut, events: &Events) -> String {
             }
         };
         link.stats.add_rx_bytes(n);
-        decoder.push(&buf[..n]);
-        decoder.finish_with(|frame| frames.push((link.id, frame)));
+        decoder.push_final_with(&buf[..n], |frame| frames.push((link.id, frame)));
         link.stats.add_decode(&decoder.take_stats());
         if !emit_frames(events, &mut frames, &link.cancel).await {
             return "event receiver closed".to_string();

@@ -179,10 +179,8 @@ fn decode_sample(
 ) {
     let bytes = sample.payload().to_bytes();
     stats.add_rx_bytes(bytes.len());
-    decoder.push(&bytes);
-    out.extend(decoder.frames().map(|f| (id, f)));
     // A publication holds whole frames: what is left is garbage, not the start of the next.
-    decoder.finish_with(|f| out.push((id, f)));
+    decoder.push_final_with(&bytes, |f| out.push((id, f)));
     stats.add_decode(&decoder.take_stats());
 }
 
