@@ -7,7 +7,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use firmware_sim::serve::{ServeConfig, Twin};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_link};
@@ -169,7 +169,7 @@ pub async fn start(
     let tlog_path = tlog.as_ref().map(|t| t.path.clone());
     let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
 
-    let (tap_tx, tap_rx) = mpsc::channel(TAP_QUEUE);
+    let (tap_tx, tap_rx) = crate::router::tap::tap(TAP_QUEUE);
     let (state_tx, state_rx) = watch::channel(VehicleState::default());
 
     // The hot path: each link task routes what it receives itself (no router task, no queue

@@ -21,13 +21,15 @@
 //!   and no task hop between a link and the router. A run of frames (one wake-up of a link
 //!   task) is routed under one lock, each egress link gets the run's frames for it in one go
 //!   (one `sendmmsg` for a UDP peer whose queue is empty), the tlog gets the run's records in
-//!   one hand-off, and the tracker's tap is filled without waking the tracker.
+//!   one hand-off, and the tracker's tap gets the run's copies in one hand-off too, without
+//!   waking the tracker ([`tap`]).
 //! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
 //!   queues.
 
 pub mod policy;
 pub mod signing;
 pub mod table;
+pub mod tap;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -45,6 +47,7 @@ use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
 use policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
 use signing::{DaemonSigning, SigningCounters};
 use table::{Addressing, Route, RoutingTable};
+use tap::TapSender;
 
 const MSG_ID_COMMAND_ACK: u32 = 77;
 /// Events taken from a queue per wake-up ([`Router::run`]): under load a run of frames is
@@ -161,7 +164,9 @@ pub struct Router {
     tlog: Option<TlogHandle>,
     /// Records of the current run, handed to the tlog writer after the run is forwarded.
     pending_log: Vec<Record>,
-    tap: Option<mpsc::Sender<Tapped>>,
+    tap: Option<TapSender>,
+    /// Copies of the current run for the tap, handed over after the run.
+    pending_tap: Vec<Tapped>,
     signing: Option<DaemonSigning>,
     conflicts_tx: watch::Sender<Vec<SysidConflict>>,
 }
@@ -181,7 +186,7 @@ impl Router {
     #[must_use]
     pub fn new(
         tlog: Option<TlogHandle>,
-        tap: Option<mpsc::Sender<Tapped>>,
+        tap: Option<TapSender>,
     ) -> (Self, RouterHandle) {
         let (links_tx, links) = watch::channel(Vec::new());
         let stats = Arc::new(RouterStats::default());
@@ -196,6 +201,7 @@ impl Router {
             tlog,
             pending_log: Vec::with_capacity(BATCH),
             tap,
+            pending_tap: Vec::with_capacity(BATCH),
             signing: None,
             conflicts_tx,
         };
@@ -303,6 +309,14 @@ impl Router {
             && !self.pending_log.is_empty()
         {
             tlog.log_many(self.pending_log.drain(..));
+        }
+        if let Some(tap) = &self.tap {
+            let dropped = tap.send_run(&mut self.pending_tap);
+            if dropped > 0 {
+                self.stats
+                    .dropped_tap
+                    .fetch_add(dropped as u64, Ordering::Relaxed);
+            }
         }
         self.send_runs();
     }
@@ -490,16 +504,12 @@ impl Router {
         if let Some(command) = addressing.command {
             self.table.note_command(ingress, system, component, command);
         }
-        if let Some(tap) = &self.tap
-            && tap
-                .try_send(Tapped {
-                    link: ingress,
-                    side,
-                    frame: frame.clone(),
-                })
-                .is_err()
-        {
-            self.stats.dropped_tap.fetch_add(1, Ordering::Relaxed);
+        if self.tap.is_some() {
+            self.pending_tap.push(Tapped {
+                link: ingress,
+                side,
+                frame: frame.clone(),
+            });
         }
         if self.tlog.is_some() {
             let direction = match side {

@@ -12,10 +12,11 @@ pub mod window;
 
 use std::time::{Duration, Instant};
 
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 use tokio::time::Instant as TokioInstant;
 use tokio_util::sync::CancellationToken;
 
+use crate::router::tap::TapReceiver;
 use crate::router::{LinkInfo, Tapped};
 pub use history::{History, SharedHistory};
 pub use state::{Reboot, VehicleState, VehicleView};
@@ -23,8 +24,6 @@ pub use state::{Reboot, VehicleState, VehicleView};
 /// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second;
 /// also how often the tap is read.
 const PUBLISH_EVERY: Duration = Duration::from_millis(20);
-/// Most frames taken from the tap per tick (the tap holds more only after a stall).
-const TAP_DRAIN: usize = 16_384;
 /// Frames applied per lock of the history.
 const TAP_RUN: usize = 256;
 
@@ -37,7 +36,7 @@ pub fn now() -> Instant {
 /// Runs the tracker until the tap closes or `cancel` fires. `links` is the router's list of
 /// live links: a link that leaves it is forgotten, so its health does not go stale on screen.
 pub async fn run(
-    mut tap: mpsc::Receiver<Tapped>,
+    tap: TapReceiver,
     mut links: watch::Receiver<Vec<LinkInfo>>,
     publish: watch::Sender<VehicleState>,
     history: SharedHistory,
@@ -50,6 +49,7 @@ pub async fn run(
     let mut links_open = true;
     let mut tick = tokio::time::interval(PUBLISH_EVERY);
     let mut tap_open = true;
+    let mut taken: Vec<Tapped> = Vec::new();
     while tap_open {
         // The tick is the publishing rate: publish what a tick took at once.
         let mut ticked = false;
@@ -70,32 +70,18 @@ pub async fn run(
                 // tick, under one lock.
                 ticked = true;
                 let at = now();
-                let mut taken = 0;
-                while tap_open && taken < TAP_DRAIN {
-                    // One lock per run of frames, not per frame.
+                tap_open = tap.take(&mut taken);
+                dirty |= !taken.is_empty();
+                // One lock of the history per run of frames, not per frame, and never held
+                // for long (the UI reads it).
+                for run in taken.chunks(TAP_RUN) {
                     let Ok(mut h) = history.lock() else { break };
-                    let mut run = 0;
-                    while run < TAP_RUN {
-                        match tap.try_recv() {
-                            Ok(t) => {
-                                let msg = state.apply(t.link, t.side, &t.frame, at);
-                                h.record(&t.frame, msg.as_ref(), at);
-                                run += 1;
-                            }
-                            Err(mpsc::error::TryRecvError::Empty) => break,
-                            Err(mpsc::error::TryRecvError::Disconnected) => tap_open = false,
-                        }
-                        if !tap_open {
-                            break;
-                        }
-                    }
-                    drop(h);
-                    dirty |= run > 0;
-                    taken += run;
-                    if run < TAP_RUN {
-                        break;
+                    for t in run {
+                        let msg = state.apply(t.link, t.side, &t.frame, at);
+                        h.record(&t.frame, msg.as_ref(), at);
                     }
                 }
+                taken.clear();
                 // Time alone changes rates and the lost state: publish once in a while even
                 // when nothing arrives.
                 if last_publish.elapsed() >= Duration::from_millis(500) {
@@ -132,21 +118,18 @@ mod tests {
 
     #[tokio::test]
     async fn a_link_that_goes_down_leaves_the_state() {
-        let (tap_tx, tap_rx) = mpsc::channel(16);
+        let (tap_tx, tap_rx) = crate::router::tap::tap(16);
         let (links_tx, links_rx) = watch::channel(vec![info(LinkId(7))]);
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(Instant::now())));
         let cancel = CancellationToken::new();
         let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
         let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
-        tap_tx
-            .send(Tapped {
-                link: LinkId(7),
-                side: Side::Vehicle,
-                frame,
-            })
-            .await
-            .unwrap();
+        tap_tx.send_run(&mut vec![Tapped {
+            link: LinkId(7),
+            side: Side::Vehicle,
+            frame,
+        }]);
         let wait = |rx: &mut watch::Receiver<VehicleState>, present: bool| {
             let mut rx = rx.clone();
             async move {
@@ -181,7 +164,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn the_tracker_runs_on_tokio_time() {
-        let (tap_tx, tap_rx) = mpsc::channel(16);
+        let (tap_tx, tap_rx) = crate::router::tap::tap(16);
         let (_links_tx, links_rx) = watch::channel(vec![info(LinkId(3))]);
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(now())));
@@ -211,13 +194,13 @@ mod tests {
                 }
             }
         };
-        tap_tx.send(beat()).await.unwrap();
+        tap_tx.send_run(&mut vec![beat()]);
         let first = heard_after(&mut state_rx, None).await;
         assert!(!state_rx.borrow().vehicle_lost(now()));
         // A minute passes in no time at all: the vehicle is lost by the tracker's clock.
         tokio::time::advance(Duration::from_secs(60)).await;
         assert!(state_rx.borrow().vehicle_lost(now()));
-        tap_tx.send(beat()).await.unwrap();
+        tap_tx.send_run(&mut vec![beat()]);
         let second = heard_after(&mut state_rx, Some(first)).await;
         assert!(
             second.duration_since(first) >= Duration::from_secs(60),
