@@ -197,6 +197,10 @@ pub fn frame_len_from_prefix(prefix: &[u8]) -> Option<usize> {
 pub struct Frame {
     bytes: Bytes,
     verified: bool,
+    /// Read from `bytes` once: routing, logging and tracking ask for them many times a frame.
+    message_id: u32,
+    system_id: u8,
+    component_id: u8,
 }
 
 impl fmt::Debug for Frame {
@@ -235,10 +239,7 @@ impl Frame {
         if first == MAGIC_V2 && bytes[2] & !INCOMPAT_SIGNED != 0 {
             return Err(FrameError::BadIncompat(bytes[2]));
         }
-        let mut frame = Frame {
-            bytes,
-            verified: false,
-        };
+        let mut frame = Frame::new(bytes, false);
         if let Some(extra) = crc_extra(frame.message_id()) {
             if frame.computed_crc(extra) != frame.crc() {
                 return Err(FrameError::BadCrc {
@@ -252,7 +253,27 @@ impl Frame {
 
     /// Wraps bytes whose framing the decoder already checked.
     pub(crate) fn from_checked(bytes: Bytes, verified: bool) -> Frame {
-        Frame { bytes, verified }
+        Frame::new(bytes, verified)
+    }
+
+    /// Wraps bytes whose length fields match them (at least a whole header).
+    fn new(bytes: Bytes, verified: bool) -> Frame {
+        let (message_id, system_id, component_id) = if bytes[0] == MAGIC_V2 {
+            (
+                u32::from_le_bytes([bytes[7], bytes[8], bytes[9], 0]),
+                bytes[5],
+                bytes[6],
+            )
+        } else {
+            (u32::from(bytes[5]), bytes[3], bytes[4])
+        };
+        Frame {
+            bytes,
+            verified,
+            message_id,
+            system_id,
+            component_id,
+        }
     }
 
     /// Builds a MAVLink 2 frame (unsigned) from a typed message. Trailing zero bytes of the
@@ -315,10 +336,7 @@ impl Frame {
         buf.extend_from_slice(&payload[..len]);
         let crc = frame_crc(&buf[1..], MavMessage::extra_crc(id));
         buf.extend_from_slice(&crc.to_le_bytes());
-        Ok(Frame {
-            bytes: Bytes::from(buf),
-            verified: true,
-        })
+        Ok(Frame::new(Bytes::from(buf), true))
     }
 
     /// Builds an unsigned MAVLink 2 frame from a raw payload with an explicit CRC_EXTRA, for
@@ -355,10 +373,7 @@ impl Frame {
         let crc = frame_crc(&buf[1..], crc_extra);
         buf.extend_from_slice(&crc.to_le_bytes());
         let verified = crc_extra_matches(message_id, crc_extra);
-        Ok(Frame {
-            bytes: Bytes::from(buf),
-            verified,
-        })
+        Ok(Frame::new(Bytes::from(buf), verified))
     }
 
     /// The protocol version (from the magic byte).
@@ -395,21 +410,17 @@ impl Frame {
 
     /// Sender's system id.
     pub fn system_id(&self) -> u8 {
-        self.bytes[if self.is_v2() { 5 } else { 3 }]
+        self.system_id
     }
 
     /// Sender's component id.
     pub fn component_id(&self) -> u8 {
-        self.bytes[if self.is_v2() { 6 } else { 4 }]
+        self.component_id
     }
 
     /// Message id (24 bits in v2, 8 in v1).
     pub fn message_id(&self) -> u32 {
-        if self.is_v2() {
-            u32::from_le_bytes([self.bytes[7], self.bytes[8], self.bytes[9], 0])
-        } else {
-            u32::from(self.bytes[5])
-        }
+        self.message_id
     }
 
     /// Incompat flags (0 for v1).

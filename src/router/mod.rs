@@ -534,7 +534,9 @@ impl Router {
         let clients_only = side == Side::Vehicle && route == Route::Broadcast;
         for link in &self.out {
             if let Some(e) = self.egress.get_mut(link) {
-                if clients_only && e.side == Side::Vehicle {
+                // What the link does not want (the daemon's own link reads a few message
+                // types) is not copied for it at all.
+                if (clients_only && e.side == Side::Vehicle) || !e.tx.accepts(&frame) {
                     continue;
                 }
                 if let Some(bucket) = &mut e.bucket

@@ -58,6 +58,8 @@ pub struct History {
     /// Raw frames per (system, component, message id).
     pub frames: HashMap<(vtol_link::SystemId, vtol_link::ComponentId, u32), VecDeque<TimedFrame>>,
     next_index: u64,
+    /// The last arrival time recorded and its [`History::t_s`]: a tick's frames share one.
+    last_at: Option<(Instant, f64)>,
 }
 
 fn push<T>(q: &mut VecDeque<Sample<T>>, t_s: f64, v: T) {
@@ -77,6 +79,7 @@ impl History {
             vehicles: BTreeMap::new(),
             frames: HashMap::default(),
             next_index: 0,
+            last_at: None,
         }
     }
 
@@ -89,7 +92,14 @@ impl History {
     /// Records a frame that arrived at `now`; `decoded` is the tracker's decode of it when it
     /// is a message of a known vehicle (attitude, outputs, position go to the typed series).
     pub fn record(&mut self, frame: &Frame, decoded: Option<&MavMessage>, now: Instant) {
-        let t_s = self.t_s(now);
+        let t_s = match self.last_at {
+            Some((at, t_s)) if at == now => t_s,
+            _ => {
+                let t_s = self.t_s(now);
+                self.last_at = Some((now, t_s));
+                t_s
+            }
+        };
         let key = frame.sender();
         let ring = self
             .frames

@@ -14,7 +14,7 @@ const BUCKETS: usize = 40;
 const RATE_BUCKETS: u64 = 8;
 
 /// Received and lost counts over the last 10 s, bucketed by 250 ms from an epoch.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Window {
     epoch: Instant,
     /// Bucket number (since `epoch`) of `counts[newest % BUCKETS]`.
@@ -22,6 +22,15 @@ pub struct Window {
     /// When the first count arrived, so a young window is not diluted by empty history.
     first: Option<u64>,
     counts: [(u32, u32); BUCKETS],
+    /// The last time counted and its bucket: the tracker counts a tick's frames at one time.
+    last: Option<(Instant, u64)>,
+}
+
+impl PartialEq for Window {
+    /// Equal counts over the same buckets (the time cache aside).
+    fn eq(&self, o: &Self) -> bool {
+        (self.epoch, self.newest, self.first, self.counts) == (o.epoch, o.newest, o.first, o.counts)
+    }
 }
 
 impl Window {
@@ -33,6 +42,7 @@ impl Window {
             newest: 0,
             first: None,
             counts: [(0, 0); BUCKETS],
+            last: None,
         }
     }
 
@@ -57,7 +67,14 @@ impl Window {
 
     /// Counts `received` frames and `lost` missing ones at `t`.
     pub fn add(&mut self, t: Instant, received: u32, lost: u32) {
-        let b = self.bucket_of(t);
+        let b = match self.last {
+            Some((at, b)) if at == t => b,
+            _ => {
+                let b = self.bucket_of(t);
+                self.last = Some((t, b));
+                b
+            }
+        };
         self.advance(b);
         // A time older than the window (clock skew in a test) counts in the newest bucket.
         let slot = &mut self.counts[(self.newest % BUCKETS as u64) as usize];

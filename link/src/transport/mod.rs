@@ -260,7 +260,9 @@ impl LinkSender {
         }
     }
 
-    fn accepts(&self, frame: &Frame) -> bool {
+    /// Whether the link wants `frame` ([`LinkOptions::accept`]); what it does not want is
+    /// dropped by the sending calls and counted as filtered.
+    pub fn accepts(&self, frame: &Frame) -> bool {
         self.accept.as_ref().is_none_or(|a| a.accepts(frame))
     }
 
