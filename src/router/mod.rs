@@ -184,10 +184,7 @@ impl Router {
     /// is filled without waiting and without caring whether its reader is awake: a full tap
     /// drops the copy and counts it.
     #[must_use]
-    pub fn new(
-        tlog: Option<TlogHandle>,
-        tap: Option<TapSender>,
-    ) -> (Self, RouterHandle) {
+    pub fn new(tlog: Option<TlogHandle>, tap: Option<TapSender>) -> (Self, RouterHandle) {
         let (links_tx, links) = watch::channel(Vec::new());
         let stats = Arc::new(RouterStats::default());
         let (conflicts_tx, conflicts) = watch::channel(Vec::new());

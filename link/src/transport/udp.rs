@@ -188,6 +188,10 @@ impl DirectUdp {
     }
 }
 
+/// A busy blocking reader looks at cancellation once per this many wake-ups (and after every
+/// receive timeout or error).
+const CANCEL_CHECK_EVERY: u32 = 16;
+
 /// Datagrams closer together than this put a reader in batch mode (about 50 000 a second).
 const BATCH_GAP: Duration = Duration::from_micros(20);
 
@@ -557,7 +561,14 @@ fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
     let mut next_expiry = Instant::now() + period;
     let mut dgrams = Datagrams::new(RECV_BATCH);
     let mut frames: Vec<(LinkId, Frame)> = Vec::with_capacity(RECV_BATCH);
-    'run: while !peers.cancel.is_cancelled() {
+    // A cancellation check takes a lock: look every few wake-ups under traffic, and after
+    // every timeout.
+    let mut wakeups: u32 = 0;
+    'run: loop {
+        if wakeups % CANCEL_CHECK_EVERY == 0 && peers.cancel.is_cancelled() {
+            break;
+        }
+        wakeups = wakeups.wrapping_add(1);
         let mut now = None;
         match dgrams.recv(sock) {
             Ok((_, t)) => {
@@ -580,11 +591,15 @@ fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
                 if matches!(
                     e.kind(),
                     io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) => {}
+                ) =>
+            {
+                wakeups = 0;
+            }
             Err(e) => {
                 // E.g. ECONNREFUSED from an ICMP error on some platforms: not fatal.
                 tracing::debug!("udpin receive error: {e}");
                 std::thread::sleep(RECV_ERROR_PAUSE);
+                wakeups = 0;
             }
         }
         let now = now.unwrap_or_else(Instant::now);
