@@ -78,6 +78,10 @@ pub struct Config {
     pub link: LinkOptions,
     /// Seconds between status lines.
     pub status_interval: Duration,
+    /// How often the vehicle tracker takes the routed frames and publishes its state: the
+    /// terminal UI's frame rate ([`crate::vehicle::UI_PERIOD`]); the headless daemon sets
+    /// [`crate::vehicle::HEADLESS_PERIOD`].
+    pub tracker_period: Duration,
     /// Download the vehicle's parameters when it is first heard and after each reboot
     /// ([`crate::reboot`]).
     pub fetch_params: bool,
@@ -103,6 +107,7 @@ impl Default for Config {
             component_id: 190,
             link: LinkOptions::default(),
             status_interval: Duration::from_secs(1),
+            tracker_period: crate::vehicle::UI_PERIOD,
             fetch_params: false,
             signing: None,
             signing_state: None,

@@ -205,6 +205,7 @@ pub async fn start(
         crate::vehicle::History::new(crate::vehicle::now()),
     ));
     tasks.spawn(vehicle::run(
+        config.tracker_period,
         tap_rx,
         router_handle.links.clone(),
         state_tx,

@@ -287,7 +287,9 @@ fn run_config(config: Config) -> anyhow::Result<()> {
 }
 
 /// The headless daemon: start-up lines, then a status line per interval.
-async fn run_daemon(config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
+async fn run_daemon(mut config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
+    // No screen to refresh fifty times a second.
+    config.tracker_period = vtol_gcs::vehicle::HEADLESS_PERIOD;
     let mut tasks = tokio::task::JoinSet::new();
     let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
     let mut out = StatusOut::default();

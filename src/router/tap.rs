@@ -1,8 +1,12 @@
 //! The tracker's tap: the router hands over each run's frames under one lock, and the tracker
 //! takes everything waiting on its own tick, so neither side pays a channel operation or a
-//! wake-up per frame. Bounded: what does not fit is dropped and counted by the router.
+//! wake-up per frame. Bounded: what does not fit is dropped and counted by the router. A tap
+//! half full wakes its reader before its tick ([`TapReceiver::filling`]), so a slow tick does
+//! not turn a burst into drops.
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+
+use tokio::sync::Notify;
 
 use super::Tapped;
 
@@ -17,6 +21,8 @@ struct Queue {
 struct Shared {
     queue: Mutex<Queue>,
     capacity: usize,
+    /// Signalled once the queue holds half its capacity.
+    filling: Notify,
 }
 
 impl Shared {
@@ -32,6 +38,7 @@ pub fn tap(capacity: usize) -> (TapSender, TapReceiver) {
     let shared = Arc::new(Shared {
         queue: Mutex::new(Queue::default()),
         capacity: capacity.max(1),
+        filling: Notify::new(),
     });
     (
         TapSender {
@@ -55,7 +62,8 @@ impl TapSender {
             return 0;
         }
         let mut q = self.shared.lock();
-        let room = self.shared.capacity.saturating_sub(q.frames.len());
+        let before = q.frames.len();
+        let room = self.shared.capacity.saturating_sub(before);
         let dropped = run.len().saturating_sub(room);
         run.truncate(run.len() - dropped);
         if q.frames.is_empty() {
@@ -64,8 +72,13 @@ impl TapSender {
         } else {
             q.frames.append(run);
         }
+        let half = self.shared.capacity / 2;
+        let wake = before < half && q.frames.len() >= half;
         drop(q);
         run.clear();
+        if wake {
+            self.shared.filling.notify_one();
+        }
         dropped
     }
 }
@@ -93,6 +106,11 @@ impl TapReceiver {
             into.append(&mut q.frames);
         }
         !(q.closed && into.is_empty())
+    }
+
+    /// Waits until the tap is half full (at once if it filled since the last wait).
+    pub async fn filling(&self) {
+        self.shared.filling.notified().await;
     }
 }
 
@@ -132,6 +150,21 @@ mod tests {
         assert_eq!(tx.send_run(&mut run), 0);
         assert!(rx.take(&mut got));
         assert_eq!(seqs(&got), vec![9]);
+    }
+
+    #[tokio::test]
+    async fn a_half_full_tap_wakes_its_reader() {
+        let (tx, rx) = tap(8);
+        tx.send_run(&mut (0..3).map(tapped).collect());
+        let early = tokio::time::timeout(std::time::Duration::from_millis(50), rx.filling());
+        assert!(early.await.is_err(), "three of eight frames wake nobody");
+        tx.send_run(&mut vec![tapped(3)]);
+        tokio::time::timeout(std::time::Duration::from_secs(5), rx.filling())
+            .await
+            .expect("the fourth frame wakes the reader");
+        let mut got = Vec::new();
+        rx.take(&mut got);
+        assert_eq!(seqs(&got), vec![0, 1, 2, 3]);
     }
 
     #[test]

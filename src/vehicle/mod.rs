@@ -21,9 +21,13 @@ use crate::router::{LinkInfo, Tapped};
 pub use history::{History, SharedHistory};
 pub use state::{Reboot, VehicleState, VehicleView};
 
-/// Publishes at most this often, so a 10 kHz link does not wake the UI 10 000 times a second;
-/// also how often the tap is read.
-const PUBLISH_EVERY: Duration = Duration::from_millis(20);
+/// How often the tracker reads its tap and publishes, at most, with a terminal UI: its frame
+/// rate, so a 10 kHz link does not wake the UI 10 000 times a second.
+pub const UI_PERIOD: Duration = Duration::from_millis(20);
+/// The same for a headless daemon, whose status lines come once a second: each tick is a
+/// wake-up of a runtime thread, so an idle bridge should not take fifty a second. A tap
+/// filling up wakes the tracker before its tick.
+pub const HEADLESS_PERIOD: Duration = Duration::from_millis(100);
 /// Frames applied per lock of the history.
 const TAP_RUN: usize = 256;
 
@@ -33,9 +37,11 @@ pub fn now() -> Instant {
     TokioInstant::now().into_std()
 }
 
-/// Runs the tracker until the tap closes or `cancel` fires. `links` is the router's list of
-/// live links: a link that leaves it is forgotten, so its health does not go stale on screen.
+/// Runs the tracker until the tap closes or `cancel` fires, reading the tap and publishing
+/// every `period` ([`UI_PERIOD`], [`HEADLESS_PERIOD`]). `links` is the router's list of live
+/// links: a link that leaves it is forgotten, so its health does not go stale on screen.
 pub async fn run(
+    period: Duration,
     tap: TapReceiver,
     mut links: watch::Receiver<Vec<LinkInfo>>,
     publish: watch::Sender<VehicleState>,
@@ -47,7 +53,7 @@ pub async fn run(
     let mut last_publish = TokioInstant::now();
     let mut dirty = false;
     let mut links_open = true;
-    let mut tick = tokio::time::interval(PUBLISH_EVERY);
+    let mut tick = tokio::time::interval(period);
     let mut tap_open = true;
     let mut taken: Vec<Tapped> = Vec::new();
     while tap_open {
@@ -64,7 +70,13 @@ pub async fn run(
                 state.retain_links(&live);
                 dirty = true;
             }
-            _ = tick.tick() => {
+            // A tap half full is taken at once.
+            _ = async {
+                tokio::select! {
+                    _ = tick.tick() => {}
+                    () = tap.filling() => {}
+                }
+            } => {
                 // The router fills the tap without waking this task (a wake-up per frame
                 // would cost more than the frame's routing): take what came since the last
                 // tick, under one lock.
@@ -89,7 +101,7 @@ pub async fn run(
                 }
             }
         }
-        if dirty && (ticked || last_publish.elapsed() >= PUBLISH_EVERY) {
+        if dirty && (ticked || last_publish.elapsed() >= period) {
             publish.send_replace(state.clone());
             last_publish = TokioInstant::now();
             dirty = false;
@@ -123,7 +135,14 @@ mod tests {
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(Instant::now())));
         let cancel = CancellationToken::new();
-        let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
+        let task = tokio::spawn(run(
+            UI_PERIOD,
+            tap_rx,
+            links_rx,
+            state_tx,
+            history,
+            cancel.clone(),
+        ));
         let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
         tap_tx.send_run(&mut vec![Tapped {
             link: LinkId(7),
@@ -169,7 +188,14 @@ mod tests {
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(now())));
         let cancel = CancellationToken::new();
-        let task = tokio::spawn(run(tap_rx, links_rx, state_tx, history, cancel.clone()));
+        let task = tokio::spawn(run(
+            UI_PERIOD,
+            tap_rx,
+            links_rx,
+            state_tx,
+            history,
+            cancel.clone(),
+        ));
         let beat = || Tapped {
             link: LinkId(3),
             side: Side::Vehicle,
