@@ -565,7 +565,7 @@ fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
     // every timeout.
     let mut wakeups: u32 = 0;
     'run: loop {
-        if wakeups % CANCEL_CHECK_EVERY == 0 && peers.cancel.is_cancelled() {
+        if wakeups.is_multiple_of(CANCEL_CHECK_EVERY) && peers.cancel.is_cancelled() {
             break;
         }
         wakeups = wakeups.wrapping_add(1);
