@@ -22,8 +22,8 @@ use crate::tlog::TlogStats;
 use crate::vehicle::{SharedHistory, VehicleState};
 use crate::{gcs, vehicle};
 
-/// Frames buffered for the tracker, which takes them every 20 ms; a drop only loses a display
-/// update.
+/// Frames buffered for the tracker, which takes them on its tick or every
+/// [`vehicle::TAP_RUN`] frames; a drop only loses a display update.
 const TAP_QUEUE: usize = 8192;
 /// Records waiting for the tlog writer thread at most (it writes every 50 ms).
 const TLOG_QUEUE: usize = 65_536;
@@ -169,7 +169,7 @@ pub async fn start(
     let tlog_path = tlog.as_ref().map(|t| t.path.clone());
     let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
 
-    let (tap_tx, tap_rx) = crate::router::tap::tap(TAP_QUEUE);
+    let (tap_tx, tap_rx) = crate::router::tap::tap(TAP_QUEUE, vehicle::TAP_RUN);
     let (state_tx, state_rx) = watch::channel(VehicleState::default());
 
     // The hot path: each link task routes what it receives itself (no router task, no queue

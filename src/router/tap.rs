@@ -1,8 +1,9 @@
 //! The tracker's tap: the router hands over each run's frames under one lock, and the tracker
 //! takes everything waiting on its own tick, so neither side pays a channel operation or a
 //! wake-up per frame. Bounded: what does not fit is dropped and counted by the router. A tap
-//! half full wakes its reader before its tick ([`TapReceiver::filling`]), so a slow tick does
-//! not turn a burst into drops.
+//! holding `wake_at` frames wakes its reader before its tick ([`TapReceiver::filling`]): the
+//! reader's work comes in short runs however slow its tick (a long run on a small machine
+//! holds a CPU that forwarding needs, and shows in its latency), and a burst is not dropped.
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
@@ -21,7 +22,8 @@ struct Queue {
 struct Shared {
     queue: Mutex<Queue>,
     capacity: usize,
-    /// Signalled once the queue holds half its capacity.
+    wake_at: usize,
+    /// Signalled once the queue holds `wake_at` frames.
     filling: Notify,
 }
 
@@ -32,12 +34,15 @@ impl Shared {
     }
 }
 
-/// A tap holding at most `capacity` frames: the router's end and the tracker's.
+/// A tap holding at most `capacity` frames, whose reader is woken when `wake_at` wait: the
+/// router's end and the tracker's.
 #[must_use]
-pub fn tap(capacity: usize) -> (TapSender, TapReceiver) {
+pub fn tap(capacity: usize, wake_at: usize) -> (TapSender, TapReceiver) {
+    let capacity = capacity.max(1);
     let shared = Arc::new(Shared {
         queue: Mutex::new(Queue::default()),
-        capacity: capacity.max(1),
+        capacity,
+        wake_at: wake_at.clamp(1, capacity),
         filling: Notify::new(),
     });
     (
@@ -72,8 +77,8 @@ impl TapSender {
         } else {
             q.frames.append(run);
         }
-        let half = self.shared.capacity / 2;
-        let wake = before < half && q.frames.len() >= half;
+        let at = self.shared.wake_at;
+        let wake = before < at && q.frames.len() >= at;
         drop(q);
         run.clear();
         if wake {
@@ -108,7 +113,8 @@ impl TapReceiver {
         !(q.closed && into.is_empty())
     }
 
-    /// Waits until the tap is half full (at once if it filled since the last wait).
+    /// Waits until the tap holds `wake_at` frames (at once if it got there since the last
+    /// wait).
     pub async fn filling(&self) {
         self.shared.filling.notified().await;
     }
@@ -134,7 +140,7 @@ mod tests {
 
     #[test]
     fn runs_arrive_in_order_and_the_overflow_is_counted() {
-        let (tx, rx) = tap(5);
+        let (tx, rx) = tap(5, 5);
         let mut run: Vec<_> = (0..3).map(tapped).collect();
         assert_eq!(tx.send_run(&mut run), 0);
         assert!(run.is_empty());
@@ -153,8 +159,8 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn a_half_full_tap_wakes_its_reader() {
-        let (tx, rx) = tap(8);
+    async fn a_filling_tap_wakes_its_reader() {
+        let (tx, rx) = tap(8, 4);
         tx.send_run(&mut (0..3).map(tapped).collect());
         let early = tokio::time::timeout(std::time::Duration::from_millis(50), rx.filling());
         assert!(early.await.is_err(), "three of eight frames wake nobody");
@@ -169,7 +175,7 @@ mod tests {
 
     #[test]
     fn a_dropped_sender_closes_the_tap_after_what_it_sent() {
-        let (tx, rx) = tap(8);
+        let (tx, rx) = tap(8, 8);
         tx.send_run(&mut vec![tapped(1)]);
         drop(tx);
         let mut got = Vec::new();

@@ -25,11 +25,12 @@ pub use state::{Reboot, VehicleState, VehicleView};
 /// rate, so a 10 kHz link does not wake the UI 10 000 times a second.
 pub const UI_PERIOD: Duration = Duration::from_millis(20);
 /// The same for a headless daemon, whose status lines come once a second: each tick is a
-/// wake-up of a runtime thread, so an idle bridge should not take fifty a second. A tap
-/// filling up wakes the tracker before its tick.
+/// wake-up of a runtime thread, so an idle bridge should not take fifty a second. Under
+/// traffic the tap wakes the tracker every [`TAP_RUN`] frames instead.
 pub const HEADLESS_PERIOD: Duration = Duration::from_millis(100);
-/// Frames applied per lock of the history.
-const TAP_RUN: usize = 256;
+/// Frames applied per lock of the history, and how many waiting in the tap wake the tracker
+/// before its tick.
+pub const TAP_RUN: usize = 256;
 
 /// The tracker's clock as a `std` instant: tokio's, so a paused test clock moves it.
 #[must_use]
@@ -70,7 +71,7 @@ pub async fn run(
                 state.retain_links(&live);
                 dirty = true;
             }
-            // A tap half full is taken at once.
+            // A tap filling up is taken at once.
             _ = async {
                 tokio::select! {
                     _ = tick.tick() => {}
@@ -130,7 +131,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_link_that_goes_down_leaves_the_state() {
-        let (tap_tx, tap_rx) = crate::router::tap::tap(16);
+        let (tap_tx, tap_rx) = crate::router::tap::tap(16, TAP_RUN);
         let (links_tx, links_rx) = watch::channel(vec![info(LinkId(7))]);
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(Instant::now())));
@@ -183,7 +184,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn the_tracker_runs_on_tokio_time() {
-        let (tap_tx, tap_rx) = crate::router::tap::tap(16);
+        let (tap_tx, tap_rx) = crate::router::tap::tap(16, TAP_RUN);
         let (_links_tx, links_rx) = watch::channel(vec![info(LinkId(3))]);
         let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
         let history = Arc::new(Mutex::new(History::new(now())));
