@@ -129,21 +129,47 @@ mod tests {
         }
     }
 
-    #[tokio::test]
-    async fn a_link_that_goes_down_leaves_the_state() {
-        let (tap_tx, tap_rx) = crate::router::tap::tap(16, TAP_RUN);
-        let (links_tx, links_rx) = watch::channel(vec![info(LinkId(7))]);
-        let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
-        let history = Arc::new(Mutex::new(History::new(Instant::now())));
+    /// A tracker on one live link, ticking every `period`.
+    struct Tracker {
+        tap: crate::router::tap::TapSender,
+        links: watch::Sender<Vec<LinkInfo>>,
+        state: watch::Receiver<VehicleState>,
+        cancel: CancellationToken,
+        task: tokio::task::JoinHandle<()>,
+    }
+
+    fn tracker(period: Duration, link: LinkId) -> Tracker {
+        let (tap, tap_rx) = crate::router::tap::tap(4 * TAP_RUN, TAP_RUN);
+        let (links, links_rx) = watch::channel(vec![info(link)]);
+        let (state_tx, state) = watch::channel(VehicleState::default());
+        let history = Arc::new(Mutex::new(History::new(now())));
         let cancel = CancellationToken::new();
         let task = tokio::spawn(run(
-            UI_PERIOD,
+            period,
             tap_rx,
             links_rx,
             state_tx,
             history,
             cancel.clone(),
         ));
+        Tracker {
+            tap,
+            links,
+            state,
+            cancel,
+            task,
+        }
+    }
+
+    #[tokio::test]
+    async fn a_link_that_goes_down_leaves_the_state() {
+        let Tracker {
+            tap: tap_tx,
+            links: links_tx,
+            state: mut state_rx,
+            cancel,
+            task,
+        } = tracker(UI_PERIOD, LinkId(7));
         let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
         tap_tx.send_run(&mut vec![Tapped {
             link: LinkId(7),
@@ -184,19 +210,13 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn the_tracker_runs_on_tokio_time() {
-        let (tap_tx, tap_rx) = crate::router::tap::tap(16, TAP_RUN);
-        let (_links_tx, links_rx) = watch::channel(vec![info(LinkId(3))]);
-        let (state_tx, mut state_rx) = watch::channel(VehicleState::default());
-        let history = Arc::new(Mutex::new(History::new(now())));
-        let cancel = CancellationToken::new();
-        let task = tokio::spawn(run(
-            UI_PERIOD,
-            tap_rx,
-            links_rx,
-            state_tx,
-            history,
-            cancel.clone(),
-        ));
+        let Tracker {
+            tap: tap_tx,
+            links: _links_tx,
+            state: mut state_rx,
+            cancel,
+            task,
+        } = tracker(UI_PERIOD, LinkId(3));
         let beat = || Tapped {
             link: LinkId(3),
             side: Side::Vehicle,
@@ -237,5 +257,43 @@ mod tests {
         assert!(!state_rx.borrow().vehicle_lost(now()));
         cancel.cancel();
         task.await.unwrap();
+    }
+
+    /// A slow tick (a headless daemon's) does not hold frames back: [`TAP_RUN`] of them
+    /// waiting wake the tracker at once.
+    #[tokio::test(start_paused = true)]
+    async fn a_run_of_frames_wakes_a_slow_tracker() {
+        let mut t = tracker(Duration::from_secs(3600), LinkId(5));
+        // A millisecond of the paused clock: the tracker's first tick (at once) is behind it,
+        // and the next is an hour away. The clock only moves when every task waits, so the
+        // 5 s timeout below comes first unless the run wakes the tracker.
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        let hb = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        let key = (vtol_link::SystemId(1), vtol_link::ComponentId(1), 0);
+        let mut run: Vec<Tapped> = (0..TAP_RUN)
+            .map(|_| Tapped {
+                link: LinkId(5),
+                side: Side::Vehicle,
+                frame: hb.clone(),
+            })
+            .collect();
+        t.tap.send_run(&mut run);
+        tokio::time::timeout(Duration::from_secs(5), async {
+            while t
+                .state
+                .borrow_and_update()
+                .messages
+                .get(&key)
+                .map(|m| m.count)
+                != Some(TAP_RUN as u64)
+            {
+                t.state.changed().await.unwrap();
+            }
+        })
+        .await
+        .expect("the tracker took the run long before its hour-long tick");
+        drop(t.links);
+        t.cancel.cancel();
+        t.task.await.unwrap();
     }
 }
