@@ -20,9 +20,10 @@
 //!   link task routes the frames it received itself, before it reads its socket again: no queue
 //!   and no task hop between a link and the router. A run of frames (one wake-up of a link
 //!   task) is routed under one lock, each egress link gets the run's frames for it in one go
-//!   (one `sendmmsg` for a UDP peer whose queue is empty), the tlog gets the run's records in
-//!   one hand-off, and the tracker's tap gets the run's copies in one hand-off too, without
-//!   waking the tracker ([`tap`]).
+//!   (one `sendmmsg` for a UDP peer whose queue is empty); then the tlog gets the run's records
+//!   in one hand-off, and the tracker's tap gets the run's copies in one hand-off too, which
+//!   the tracker's state usually takes at once on the same thread, without waking the tracker
+//!   ([`tap`]).
 //! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
 //!   queues.
 
@@ -298,10 +299,12 @@ impl Router {
         }
     }
 
-    /// Hands the run's records to the tlog, then sends what the run routed to each egress
-    /// link: the sends come last, so a link task goes back to its socket right after them (a
-    /// datagram sent wakes its receiver, which may take this CPU at once).
+    /// Sends what the run routed to each egress link, then hands the run's records to the tlog
+    /// and its copies to the tracker's tap (which the tracker's state may take at once, on this
+    /// thread). The sends come first: nothing a frame's bookkeeping costs, or a thread it
+    /// wakes, comes between its arrival and its departure.
     fn end_run(&mut self) {
+        self.send_runs();
         if let Some(tlog) = &self.tlog
             && !self.pending_log.is_empty()
         {
@@ -315,7 +318,6 @@ impl Router {
                     .fetch_add(dropped as u64, Ordering::Relaxed);
             }
         }
-        self.send_runs();
     }
 
     /// Hands each egress link the frames routed to it in this run.

@@ -1,15 +1,32 @@
-//! The tracker's tap: the router hands over each run's frames under one lock, and the tracker
-//! takes everything waiting on its own tick, so neither side pays a channel operation or a
-//! wake-up per frame. Bounded: what does not fit is dropped and counted by the router. A tap
-//! holding `wake_at` frames wakes its reader before its tick ([`TapReceiver::filling`]): the
-//! reader's work comes in short runs however slow its tick (a long run on a small machine
-//! holds a CPU that forwarding needs, and shows in its latency), and a burst is not dropped.
+//! The tracker's tap: the router hands over each run's frames under one lock, so neither side
+//! pays a channel operation or a wake-up per frame. Bounded: what does not fit is dropped and
+//! counted by the router.
+//!
+//! Where the frames are applied:
+//! - **By the router's thread, inline** ([`TapReceiver::drain_inline`]): right after a run is
+//!   handed over, the sender applies everything waiting itself if the reader's state is free
+//!   at that instant ([`Drain::try_apply`] never waits). This is the common case: the frames
+//!   are applied on the CPU that just routed them, in the thread that allocated them, and the
+//!   reader is not woken at all.
+//! - **By the reader, on its tick**: what could not be applied inline (the reader's state was
+//!   busy: being published, or read by the terminal UI) waits in the tap for the reader's next
+//!   tick or for the sender's next run. A tap holding `wake_at` frames wakes its reader before
+//!   its tick ([`TapReceiver::filling`]): the reader's work comes in short runs however slow
+//!   its tick (a long run on a small machine holds a CPU that forwarding needs, and shows in
+//!   its latency), and a burst is not dropped.
 
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 
 use tokio::sync::Notify;
 
 use super::Tapped;
+
+/// Work on tapped frames that the sender may do itself, after handing a run over.
+pub trait Drain: Send + Sync {
+    /// Applies `frames` (emptying it) and returns `true` if that needs no waiting: when the
+    /// state it applies them to is busy it returns `false` at once and leaves them.
+    fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool;
+}
 
 #[derive(Debug, Default)]
 struct Queue {
@@ -18,13 +35,24 @@ struct Queue {
     closed: bool,
 }
 
-#[derive(Debug)]
 struct Shared {
     queue: Mutex<Queue>,
+    /// Set by the reader: the sender applies the frames itself when it can.
+    drain: OnceLock<Arc<dyn Drain>>,
     capacity: usize,
     wake_at: usize,
     /// Signalled once the queue holds `wake_at` frames.
     filling: Notify,
+}
+
+impl std::fmt::Debug for Shared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Shared")
+            .field("capacity", &self.capacity)
+            .field("wake_at", &self.wake_at)
+            .field("inline", &self.drain.get().is_some())
+            .finish_non_exhaustive()
+    }
 }
 
 impl Shared {
@@ -41,6 +69,7 @@ pub fn tap(capacity: usize, wake_at: usize) -> (TapSender, TapReceiver) {
     let capacity = capacity.max(1);
     let shared = Arc::new(Shared {
         queue: Mutex::new(Queue::default()),
+        drain: OnceLock::new(),
         capacity,
         wake_at: wake_at.clamp(1, capacity),
         filling: Notify::new(),
@@ -60,8 +89,9 @@ pub struct TapSender {
 }
 
 impl TapSender {
-    /// Hands over `run` (emptied) in order, as much as the tap has room for: returns how many
-    /// frames were dropped for want of room (the newest).
+    /// Hands over `run` (emptied) in order, as much as the tap has room for, then applies
+    /// everything waiting if the reader's [`Drain`] can take it without waiting: returns how
+    /// many frames were dropped for want of room (the newest).
     pub fn send_run(&self, run: &mut Vec<Tapped>) -> usize {
         if run.is_empty() {
             return 0;
@@ -76,6 +106,13 @@ impl TapSender {
             std::mem::swap(&mut q.frames, run);
         } else {
             q.frames.append(run);
+        }
+        // Under the tap's lock, so frames are applied in the order they were routed whoever
+        // applies them (the reader takes the tap only while it holds its own state).
+        if let Some(drain) = self.shared.drain.get()
+            && drain.try_apply(&mut q.frames)
+        {
+            q.frames.clear();
         }
         let at = self.shared.wake_at;
         let wake = before < at && q.frames.len() >= at;
@@ -111,6 +148,13 @@ impl TapReceiver {
             into.append(&mut q.frames);
         }
         !(q.closed && into.is_empty())
+    }
+
+    /// Lets the sender apply frames itself through `drain` when it can ([`Drain::try_apply`]).
+    /// The reader must then take the tap only while it holds the state `drain` applies to, so
+    /// that frames are applied in order. A tap has one drain: a second is ignored.
+    pub fn drain_inline(&self, drain: Arc<dyn Drain>) {
+        let _ = self.shared.drain.set(drain);
     }
 
     /// Waits until the tap holds `wake_at` frames (at once if it got there since the last
@@ -183,5 +227,40 @@ mod tests {
         assert_eq!(seqs(&got), vec![1]);
         got.clear();
         assert!(!rx.take(&mut got));
+    }
+
+    /// A drain that takes frames only while `open`, recording what it took.
+    #[derive(Default)]
+    struct Gate {
+        open: std::sync::atomic::AtomicBool,
+        took: Mutex<Vec<u8>>,
+    }
+
+    impl Drain for Gate {
+        fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool {
+            if !self.open.load(std::sync::atomic::Ordering::Relaxed) {
+                return false;
+            }
+            self.took.lock().unwrap().extend(seqs(frames));
+            frames.clear();
+            true
+        }
+    }
+
+    #[test]
+    fn the_sender_applies_what_waits_when_the_drain_is_free_and_leaves_it_otherwise() {
+        let (tx, rx) = tap(8, 4);
+        let gate = Arc::new(Gate::default());
+        rx.drain_inline(Arc::clone(&gate) as Arc<dyn Drain>);
+        // Busy: the run waits in the tap.
+        tx.send_run(&mut (0..2).map(tapped).collect());
+        assert!(gate.took.lock().unwrap().is_empty());
+        // Free: the next run takes what waited first, in order, and nothing is left.
+        gate.open.store(true, std::sync::atomic::Ordering::Relaxed);
+        tx.send_run(&mut vec![tapped(2)]);
+        assert_eq!(*gate.took.lock().unwrap(), vec![0, 1, 2]);
+        let mut got = Vec::new();
+        assert!(rx.take(&mut got));
+        assert!(got.is_empty(), "left in the tap: {:?}", seqs(&got));
     }
 }

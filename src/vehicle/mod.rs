@@ -10,13 +10,14 @@ pub mod history;
 pub mod state;
 pub mod window;
 
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 use tokio::time::Instant as TokioInstant;
 use tokio_util::sync::CancellationToken;
 
-use crate::router::tap::TapReceiver;
+use crate::router::tap::{Drain, TapReceiver};
 use crate::router::{LinkInfo, Tapped};
 pub use history::{History, SharedHistory};
 pub use state::{Reboot, VehicleState, VehicleView};
@@ -38,9 +39,55 @@ pub fn now() -> Instant {
     TokioInstant::now().into_std()
 }
 
-/// Runs the tracker until the tap closes or `cancel` fires, reading the tap and publishing
-/// every `period` ([`UI_PERIOD`], [`HEADLESS_PERIOD`]). `links` is the router's list of live
-/// links: a link that leaves it is forgotten, so its health does not go stale on screen.
+/// The tracker's state, shared between its task and the router's thread (which applies
+/// frames itself when the state is free, [`Drain`]).
+struct Core {
+    state: VehicleState,
+    /// Changed since it was last published.
+    dirty: bool,
+}
+
+/// What the router's thread needs to apply tapped frames itself.
+struct Inline {
+    core: Arc<Mutex<Core>>,
+    history: SharedHistory,
+}
+
+impl Drain for Inline {
+    fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool {
+        // Never wait: the tracker may be publishing, the terminal UI may be drawing from the
+        // history. The frames then wait in the tap for the next run or the tracker's tick.
+        let Ok(mut core) = self.core.try_lock() else {
+            return false;
+        };
+        let Ok(mut history) = self.history.try_lock() else {
+            return false;
+        };
+        apply(&mut core, &mut history, frames);
+        frames.clear();
+        true
+    }
+}
+
+/// Applies `frames` to the state and the history, at the tracker's time.
+fn apply(core: &mut Core, history: &mut History, frames: &[Tapped]) {
+    if frames.is_empty() {
+        return;
+    }
+    let at = now();
+    for t in frames {
+        let msg = core.state.apply(t.link, t.side, &t.frame, at);
+        history.record(&t.frame, msg.as_ref(), at);
+    }
+    core.dirty = true;
+}
+
+/// Runs the tracker until the tap closes or `cancel` fires, publishing every `period`
+/// ([`UI_PERIOD`], [`HEADLESS_PERIOD`]) when something changed. The frames are applied by the
+/// router's thread as it routes them, whenever the state is free at that instant, and
+/// otherwise by this task from the tap, on its tick or when [`TAP_RUN`] of them wait. `links`
+/// is the router's list of live links: a link that leaves it is forgotten, so its health does
+/// not go stale on screen.
 pub async fn run(
     period: Duration,
     tap: TapReceiver,
@@ -50,15 +97,23 @@ pub async fn run(
     cancel: CancellationToken,
 ) {
     let epoch = history.lock().map_or_else(|_| now(), |h| h.epoch);
-    let mut state = VehicleState::new(epoch);
+    let core = Arc::new(Mutex::new(Core {
+        state: VehicleState::new(epoch),
+        dirty: false,
+    }));
+    tap.drain_inline(Arc::new(Inline {
+        core: Arc::clone(&core),
+        history: Arc::clone(&history),
+    }));
+    // Plain data: a panic elsewhere leaves it usable.
+    let lock_core = || core.lock().unwrap_or_else(PoisonError::into_inner);
     let mut last_publish = TokioInstant::now();
-    let mut dirty = false;
     let mut links_open = true;
     let mut tick = tokio::time::interval(period);
     let mut tap_open = true;
     let mut taken: Vec<Tapped> = Vec::new();
     while tap_open {
-        // The tick is the publishing rate: publish what a tick took at once.
+        // The tick is the publishing rate: publish what a tick found at once.
         let mut ticked = false;
         tokio::select! {
             () = cancel.cancelled() => break,
@@ -68,8 +123,9 @@ pub async fn run(
                     continue;
                 }
                 let live: Vec<_> = links.borrow_and_update().iter().map(|l| l.id).collect();
-                state.retain_links(&live);
-                dirty = true;
+                let mut c = lock_core();
+                c.state.retain_links(&live);
+                c.dirty = true;
             }
             // A tap filling up is taken at once.
             _ = async {
@@ -78,37 +134,33 @@ pub async fn run(
                     () = tap.filling() => {}
                 }
             } => {
-                // The router fills the tap without waking this task (a wake-up per frame
-                // would cost more than the frame's routing): take what came since the last
-                // tick, under one lock.
                 ticked = true;
-                let at = now();
+                let mut c = lock_core();
+                // What the router could not apply itself, taken while holding the state (so
+                // no later frame is applied before these), in runs of at most TAP_RUN per
+                // lock of the history, which the UI reads.
                 tap_open = tap.take(&mut taken);
-                dirty |= !taken.is_empty();
-                // One lock of the history per run of frames, not per frame, and never held
-                // for long (the UI reads it).
                 for run in taken.chunks(TAP_RUN) {
                     let Ok(mut h) = history.lock() else { break };
-                    for t in run {
-                        let msg = state.apply(t.link, t.side, &t.frame, at);
-                        h.record(&t.frame, msg.as_ref(), at);
-                    }
+                    apply(&mut c, &mut h, run);
                 }
                 taken.clear();
                 // Time alone changes rates and the lost state: publish once in a while even
                 // when nothing arrives.
                 if last_publish.elapsed() >= Duration::from_millis(500) {
-                    dirty = true;
+                    c.dirty = true;
                 }
             }
         }
-        if dirty && (ticked || last_publish.elapsed() >= period) {
-            publish.send_replace(state.clone());
+        let mut c = lock_core();
+        if c.dirty && (ticked || last_publish.elapsed() >= period) {
+            publish.send_replace(c.state.clone());
+            c.dirty = false;
+            drop(c);
             last_publish = TokioInstant::now();
-            dirty = false;
         }
     }
-    publish.send_replace(state);
+    publish.send_replace(lock_core().state.clone());
 }
 
 #[cfg(test)]
@@ -134,6 +186,7 @@ mod tests {
         tap: crate::router::tap::TapSender,
         links: watch::Sender<Vec<LinkInfo>>,
         state: watch::Receiver<VehicleState>,
+        history: SharedHistory,
         cancel: CancellationToken,
         task: tokio::task::JoinHandle<()>,
     }
@@ -149,13 +202,14 @@ mod tests {
             tap_rx,
             links_rx,
             state_tx,
-            history,
+            Arc::clone(&history),
             cancel.clone(),
         ));
         Tracker {
             tap,
             links,
             state,
+            history,
             cancel,
             task,
         }
@@ -169,6 +223,7 @@ mod tests {
             state: mut state_rx,
             cancel,
             task,
+            ..
         } = tracker(UI_PERIOD, LinkId(7));
         let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
         tap_tx.send_run(&mut vec![Tapped {
@@ -216,6 +271,7 @@ mod tests {
             state: mut state_rx,
             cancel,
             task,
+            ..
         } = tracker(UI_PERIOD, LinkId(3));
         let beat = || Tapped {
             link: LinkId(3),
@@ -259,7 +315,29 @@ mod tests {
         task.await.unwrap();
     }
 
-    /// A slow tick (a headless daemon's) does not hold frames back: [`TAP_RUN`] of them
+    /// Messages counted for sysid 1 compid 1, message 0, in the last published state.
+    fn heartbeats_published(t: &mut Tracker) -> Option<u64> {
+        let key = (vtol_link::SystemId(1), vtol_link::ComponentId(1), 0);
+        t.state
+            .borrow_and_update()
+            .messages
+            .get(&key)
+            .map(|m| m.count)
+    }
+
+    fn heartbeat_run(link: LinkId, n: usize) -> Vec<Tapped> {
+        let hb = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        (0..n)
+            .map(|_| Tapped {
+                link,
+                side: Side::Vehicle,
+                frame: hb.clone(),
+            })
+            .collect()
+    }
+
+    /// A slow tick (a headless daemon's) does not hold frames back: when the router's thread
+    /// cannot apply them itself (the history is busy, e.g. being drawn), [`TAP_RUN`] of them
     /// waiting wake the tracker at once.
     #[tokio::test(start_paused = true)]
     async fn a_run_of_frames_wakes_a_slow_tracker() {
@@ -268,30 +346,58 @@ mod tests {
         // and the next is an hour away. The clock only moves when every task waits, so the
         // 5 s timeout below comes first unless the run wakes the tracker.
         tokio::time::sleep(Duration::from_millis(1)).await;
-        let hb = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
-        let key = (vtol_link::SystemId(1), vtol_link::ComponentId(1), 0);
-        let mut run: Vec<Tapped> = (0..TAP_RUN)
-            .map(|_| Tapped {
-                link: LinkId(5),
-                side: Side::Vehicle,
-                frame: hb.clone(),
-            })
-            .collect();
-        t.tap.send_run(&mut run);
+        {
+            let _drawing = t.history.lock().unwrap();
+            t.tap.send_run(&mut heartbeat_run(LinkId(5), TAP_RUN));
+        }
         tokio::time::timeout(Duration::from_secs(5), async {
-            while t
-                .state
-                .borrow_and_update()
-                .messages
-                .get(&key)
-                .map(|m| m.count)
-                != Some(TAP_RUN as u64)
-            {
+            while heartbeats_published(&mut t) != Some(TAP_RUN as u64) {
                 t.state.changed().await.unwrap();
             }
         })
         .await
         .expect("the tracker took the run long before its hour-long tick");
+        drop(t.links);
+        t.cancel.cancel();
+        t.task.await.unwrap();
+    }
+
+    /// Frames are applied by the thread that routes them when the tracker's state is free: the
+    /// tracker is not woken for them, and publishes them on its next tick.
+    #[tokio::test(start_paused = true)]
+    async fn the_router_thread_applies_frames_and_the_tick_publishes_them() {
+        let period = Duration::from_secs(1);
+        let mut t = tracker(period, LinkId(6));
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        t.state.borrow_and_update();
+        t.tap.send_run(&mut heartbeat_run(LinkId(6), TAP_RUN));
+        // Applied already: the history, written with the state in the same call, has them.
+        let recorded: usize = t
+            .history
+            .lock()
+            .unwrap()
+            .frames
+            .values()
+            .map(std::collections::VecDeque::len)
+            .sum();
+        assert_eq!(
+            recorded, TAP_RUN,
+            "the frames were left in the tap for the tracker"
+        );
+        // Nothing is published before the tick (the tracker was not woken)...
+        tokio::time::sleep(period / 2).await;
+        assert!(
+            !t.state.has_changed().unwrap(),
+            "published before the tick: something woke the tracker"
+        );
+        // ...and the run is on the next one.
+        tokio::time::timeout(period, async {
+            while heartbeats_published(&mut t) != Some(TAP_RUN as u64) {
+                t.state.changed().await.unwrap();
+            }
+        })
+        .await
+        .expect("the tick published the frames the router's thread applied");
         drop(t.links);
         t.cancel.cancel();
         t.task.await.unwrap();
