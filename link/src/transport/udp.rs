@@ -18,8 +18,10 @@
 //!   or, while they come in bursts, one `recvmmsg` takes every datagram waiting; the owner
 //!   routes their frames before the next one. The socket is
 //!   never registered with the async reactor, so sending on it (which the kernel follows with
-//!   a "writable" event for every datagram) wakes nobody. The thread looks at its timers and
-//!   at cancellation at least every [`BLOCKING_TICK`].
+//!   a "writable" event for every datagram) wakes nobody. Nor does the thread sleep with a
+//!   timeout (a kernel timer armed and cancelled per datagram): a task wakes it with an empty
+//!   datagram of its own when it is to stop, or when it has timers due and no traffic woke it
+//!   ([`Wakeup`]).
 //! - **Queue owner** ([`Events::Queue`]): a task on the runtime, for owners that read a queue
 //!   (the twin, tools).
 //!
@@ -32,7 +34,7 @@ use std::io::{self, IoSlice, IoSliceMut};
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
@@ -62,8 +64,8 @@ const REPLY_BATCH: usize = 8;
 const SEND_BATCH: usize = 64;
 /// Most frames a UDP writer takes from its queue per wake-up.
 const WRITE_BATCH: usize = 64;
-/// Longest a blocking reader waits for a datagram before it looks at its timers and at
-/// cancellation.
+/// How often a stopping blocking reader is woken again until it is gone, and its receive
+/// timeout when it cannot be woken by a datagram ([`Wakeup`]).
 pub(crate) const BLOCKING_TICK: Duration = Duration::from_millis(100);
 /// How long a writer whose blocking socket's buffer is full waits before it tries again (a
 /// blocking socket has no readiness events to wait on; a full UDP send buffer is rare).
@@ -187,10 +189,6 @@ impl DirectUdp {
         done
     }
 }
-
-/// A busy blocking reader looks at cancellation once per this many wake-ups (and after every
-/// receive timeout or error).
-const CANCEL_CHECK_EVERY: u32 = 16;
 
 /// Datagrams closer together than this put a reader in batch mode (about 50 000 a second).
 const BATCH_GAP: Duration = Duration::from_micros(20);
@@ -513,17 +511,167 @@ fn expiry_period(opts: &LinkOptions) -> Duration {
     (opts.udp_peer_timeout / 4).clamp(Duration::from_millis(5), Duration::from_secs(1))
 }
 
-/// The stop signal of a blocking reader: `cancel`, and also the end of the runtime (a task
-/// that holds a guard is dropped then), so a runtime shut down without cancelling never waits
-/// on the thread for more than its tick.
-fn blocking_stop(cancel: &CancellationToken) -> CancellationToken {
+/// How a blocking reader learns that it is to stop, and is woken when no datagram comes.
+///
+/// The reader sleeps in its receive with no timeout, as a bare `recvfrom` loop does: a
+/// receive timeout arms and cancels a kernel timer on every sleep, about 2 % of a forwarded
+/// frame's CPU on this machine (BENCHMARKS.md). Instead a task of the runtime sends it an empty
+/// datagram from a socket of its own (the alarm), which the reader knows by its source address
+/// and discards: when the reader is to stop (cancelled, or the runtime ends), and after every
+/// `idle` period in which the reader did not wake by itself (a udpin reader's peer expiry).
+/// Without a loopback to send the alarm on, the reader falls back to a receive timeout.
+#[derive(Debug)]
+struct Wakeup {
+    stopped: AtomicBool,
+    /// The reader's wake-ups so far (written by the reader alone).
+    count: AtomicU64,
+    /// The alarm's address: datagrams from it are wake-ups, not traffic. `None`: the reader
+    /// sleeps with a receive timeout instead.
+    alarm: Option<SocketAddr>,
+}
+
+impl Wakeup {
+    fn stopped(&self) -> bool {
+        self.stopped.load(Ordering::Relaxed)
+    }
+
+    /// Notes a wake-up of the reader (`n` so far).
+    fn woke(&self, n: u64) {
+        self.count.store(n, Ordering::Relaxed);
+    }
+
+    /// A datagram from this address is the alarm.
+    fn is_alarm(&self, from: Option<SocketAddr>) -> bool {
+        from.is_some() && from == self.alarm
+    }
+}
+
+/// The alarm's socket, bound on the reader's address (its loopback when the reader listens on
+/// every address).
+#[derive(Debug)]
+struct Alarm {
+    sock: std::net::UdpSocket,
+    to: SocketAddr,
+}
+
+impl Alarm {
+    fn new(reader: SocketAddr) -> io::Result<Alarm> {
+        let ip = match reader.ip() {
+            std::net::IpAddr::V4(ip) if ip.is_unspecified() => Ipv4Addr::LOCALHOST.into(),
+            std::net::IpAddr::V6(ip) if ip.is_unspecified() => Ipv6Addr::LOCALHOST.into(),
+            ip => ip,
+        };
+        let sock = std::net::UdpSocket::bind(SocketAddr::new(ip, 0))?;
+        sock.set_nonblocking(true)?;
+        Ok(Alarm {
+            sock,
+            to: SocketAddr::new(ip, reader.port()),
+        })
+    }
+
+    fn ring(&self) {
+        // A full receive buffer means the reader is awake anyway.
+        let _ = self.sock.send_to(&[], self.to);
+    }
+}
+
+/// Stops the reader when dropped: by its task at the end, or with the runtime.
+struct Ring {
+    stop: CancellationToken,
+    wake: Arc<Wakeup>,
+    alarm: Option<Alarm>,
+}
+
+impl Ring {
+    fn ring(&self) {
+        if let Some(a) = &self.alarm {
+            a.ring();
+        }
+    }
+}
+
+impl Drop for Ring {
+    fn drop(&mut self) {
+        self.stop.cancel();
+        self.wake.stopped.store(true, Ordering::Relaxed);
+        self.ring();
+    }
+}
+
+/// Sets up the stop signal and the wake-ups of a blocking reader on `sock`: `cancel`, and also
+/// the end of the runtime (the task holding the [`Ring`] is dropped then), so a runtime shut
+/// down without cancelling never waits on the thread. Returns the stop token (for the
+/// reader's writers) and what the reader looks at.
+fn blocking_wakeup(
+    cancel: &CancellationToken,
+    sock: &std::net::UdpSocket,
+    idle: Option<Duration>,
+) -> (CancellationToken, Arc<Wakeup>) {
     let stop = cancel.child_token();
-    let (guard, watch) = (stop.clone().drop_guard(), stop.clone());
-    tokio::spawn(async move {
-        let _guard = guard;
-        watch.cancelled().await;
+    let alarm = sock
+        .local_addr()
+        .and_then(Alarm::new)
+        .and_then(|a| Ok((a.sock.local_addr()?, a)));
+    let alarm = match alarm {
+        Ok((from, a)) => match sock.set_read_timeout(None) {
+            Ok(()) => Some((from, a)),
+            Err(e) => {
+                tracing::debug!("udp reader without a timeout: {e}");
+                None
+            }
+        },
+        Err(e) => {
+            tracing::debug!("udp reader alarm: {e}; waking on a timeout instead");
+            None
+        }
+    };
+    let wake = Arc::new(Wakeup {
+        stopped: AtomicBool::new(false),
+        count: AtomicU64::new(0),
+        alarm: alarm.as_ref().map(|(from, _)| *from),
     });
-    stop
+    let ring = Ring {
+        stop: stop.clone(),
+        wake: Arc::clone(&wake),
+        alarm: alarm.map(|(_, a)| a),
+    };
+    if ring.alarm.is_none() {
+        let tick = idle.map_or(BLOCKING_TICK, |i| i.min(BLOCKING_TICK));
+        if let Err(e) = sock.set_read_timeout(Some(tick)) {
+            tracing::debug!("udp reader timeout: {e}");
+        }
+    }
+    let idle = idle.filter(|_| ring.alarm.is_some());
+    tokio::spawn(async move {
+        let mut seen = 0;
+        loop {
+            tokio::select! {
+                () = ring.stop.cancelled() => break,
+                () = async {
+                    match idle {
+                        Some(p) => tokio::time::sleep(p).await,
+                        None => std::future::pending().await,
+                    }
+                } => {
+                    let n = ring.wake.count.load(Ordering::Relaxed);
+                    // Its own ring wakes the reader once more: that is not traffic.
+                    seen = if n == seen {
+                        ring.ring();
+                        n + 1
+                    } else {
+                        n
+                    };
+                }
+            }
+        }
+        ring.wake.stopped.store(true, Ordering::Relaxed);
+        // Until the reader is gone: an alarm may be lost to a full receive buffer.
+        while Arc::strong_count(&ring.wake) > 1 {
+            ring.ring();
+            tokio::time::sleep(BLOCKING_TICK).await;
+        }
+    });
+    (stop, wake)
 }
 
 /// Binds a udpin socket and starts its reader.
@@ -541,8 +689,12 @@ pub(super) async fn spawn_udpin(
     tracing::info!(%url, %local, "udpin listening");
     let task = match events {
         Events::Inline(handler) => {
-            let peers = Peers::new(sock, opts, blocking_stop(&cancel));
-            tokio::task::spawn_blocking(move || udpin_blocking(peers, &*handler))
+            let UdpSock::Blocking(s) = &*sock else {
+                unreachable!("an inline owner's socket is blocking")
+            };
+            let (stop, wake) = blocking_wakeup(&cancel, s, Some(expiry_period(&opts)));
+            let peers = Peers::new(sock, opts, stop);
+            tokio::task::spawn_blocking(move || udpin_blocking(peers, &wake, &*handler))
         }
         events @ Events::Queue(_) => tokio::spawn(udpin_task(sock, events, opts, cancel)),
     };
@@ -550,31 +702,27 @@ pub(super) async fn spawn_udpin(
 }
 
 /// The udpin reader on a thread of its own, routing inline.
-fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
+fn udpin_blocking(mut peers: Peers, wake: &Wakeup, handler: &dyn LinkEventHandler) {
     let UdpSock::Blocking(sock) = &*Arc::clone(&peers.sock) else {
         return;
     };
     let period = expiry_period(&peers.opts);
-    if let Err(e) = sock.set_read_timeout(Some(BLOCKING_TICK.min(period))) {
-        tracing::debug!("udpin read timeout: {e}");
-    }
     let mut next_expiry = Instant::now() + period;
     let mut dgrams = Datagrams::new(RECV_BATCH);
     let mut frames: Vec<(LinkId, Frame)> = Vec::with_capacity(RECV_BATCH);
-    // A cancellation check takes a lock: look every few wake-ups under traffic, and after
-    // every timeout.
-    let mut wakeups: u32 = 0;
-    'run: loop {
-        if wakeups.is_multiple_of(CANCEL_CHECK_EVERY) && peers.cancel.is_cancelled() {
-            break;
-        }
-        wakeups = wakeups.wrapping_add(1);
+    let mut wakeups: u64 = 0;
+    'run: while !wake.stopped() {
+        wakeups += 1;
+        wake.woke(wakeups);
         let mut now = None;
         match dgrams.recv(sock) {
             Ok((_, t)) => {
                 now = Some(t);
                 for (data, addr) in dgrams.iter() {
                     let Some(addr) = addr else { continue };
+                    if wake.is_alarm(Some(addr)) {
+                        continue;
+                    }
                     if let Some(up) = peers.on_datagram(addr, data, t, &mut frames)
                         && !handler.event(up)
                     {
@@ -591,15 +739,11 @@ fn udpin_blocking(mut peers: Peers, handler: &dyn LinkEventHandler) {
                 if matches!(
                     e.kind(),
                     io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) =>
-            {
-                wakeups = 0;
-            }
+                ) => {}
             Err(e) => {
                 // E.g. ECONNREFUSED from an ICMP error on some platforms: not fatal.
                 tracing::debug!("udpin receive error: {e}");
                 std::thread::sleep(RECV_ERROR_PAUSE);
-                wakeups = 0;
             }
         }
         let now = now.unwrap_or_else(Instant::now);
@@ -703,9 +847,12 @@ pub(super) async fn spawn_udpout(
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, "udpout sending to {dest}");
     let stats = Arc::new(LinkStats::default());
-    let cancel = match events {
-        Events::Inline(_) => blocking_stop(&cancel),
-        Events::Queue(_) => cancel,
+    let (cancel, wake) = match (&events, &*sock) {
+        (Events::Inline(_), UdpSock::Blocking(s)) => {
+            let (stop, wake) = blocking_wakeup(&cancel, s, None);
+            (stop, Some(wake))
+        }
+        _ => (cancel, None),
     };
     let writer_cancel = cancel.child_token();
     let (tx, writer) = udp_link(&sock, dest, &stats, &opts, writer_cancel.clone());
@@ -718,6 +865,7 @@ pub(super) async fn spawn_udpout(
     let link = UdpOut {
         id,
         sock,
+        wake,
         stats,
         writer,
         writer_cancel,
@@ -755,6 +903,8 @@ pub(super) async fn spawn_udpout(
 struct UdpOut {
     id: LinkId,
     sock: Arc<UdpSock>,
+    /// A blocking reader's stop and wake-ups.
+    wake: Option<Arc<Wakeup>>,
     stats: Arc<LinkStats>,
     writer: JoinHandle<()>,
     writer_cancel: CancellationToken,
@@ -763,7 +913,7 @@ struct UdpOut {
 
 /// Hears a udpout peer's replies on a thread of its own; returns why it stopped.
 fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
-    let UdpSock::Blocking(sock) = &*link.sock else {
+    let (UdpSock::Blocking(sock), Some(wake)) = (&*link.sock, &link.wake) else {
         return "not a blocking socket".to_string();
     };
     // Replies may come from any address (the peer may answer from another port); one decoder
@@ -771,10 +921,16 @@ fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
     let mut decoder = FrameDecoder::new();
     let mut dgrams = Datagrams::new(REPLY_BATCH);
     let mut frames: Vec<(LinkId, Frame)> = Vec::new();
-    while !link.cancel.is_cancelled() {
+    let mut wakeups: u64 = 0;
+    while !wake.stopped() {
+        wakeups += 1;
+        wake.woke(wakeups);
         match dgrams.recv(sock) {
             Ok(_) => {
-                for (data, _from) in dgrams.iter() {
+                for (data, from) in dgrams.iter() {
+                    if wake.is_alarm(from) {
+                        continue;
+                    }
                     link.stats.add_rx_bytes(data.len());
                     decoder.push_final_with(data, |frame| frames.push((link.id, frame)));
                     link.stats.add_decode(&decoder.take_stats());
