@@ -112,6 +112,16 @@ struct Acc {
     first_ns: u64,
     last_ns: u64,
     lat_ns: Vec<u32>,
+    /// Receive times, kept only for `FORWARDING_LATENCY_DUMP`.
+    rx_ns: Vec<u64>,
+}
+
+/// `FORWARDING_LATENCY_DUMP=DIR` (diagnostic): each paced phase's frames as `receive_ns
+/// latency_ns` lines in `DIR/phase<N>-<rate>.txt`, to see when the slow ones come.
+fn latency_dump() -> Option<&'static std::path::Path> {
+    static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| std::env::var_os("FORWARDING_LATENCY_DUMP").map(Into::into))
+        .as_deref()
 }
 
 struct Sink {
@@ -226,6 +236,9 @@ fn sink_loop(sock: &UdpSocket, acc: &Mutex<Acc>, stop: &AtomicBool) {
         a.last_ns = t;
         a.lat_ns
             .push(u32::try_from(t.saturating_sub(sent)).unwrap_or(u32::MAX));
+        if latency_dump().is_some() {
+            a.rx_ns.push(t);
+        }
     }
 }
 
@@ -598,6 +611,16 @@ fn run_phase(
     // Frames forwarded to every client (on average): the unit of work of a forwarder.
     let frames = (delivered as f64 / n as f64).max(1.0);
     let last_rx = accs.iter().map(|a| a.last_ns).max().unwrap_or(first_send);
+    if let (Some(dir), Some(rate)) = (latency_dump(), load.rate) {
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        for a in &accs {
+            for (t, l) in a.rx_ns.iter().zip(&a.lat_ns) {
+                let _ = writeln!(text, "{t} {l}");
+            }
+        }
+        let _ = std::fs::write(dir.join(format!("phase{phase}-{rate}.txt")), text);
+    }
     let mut lat: Vec<u32> = accs.iter().flat_map(|a| a.lat_ns.iter().copied()).collect();
     lat.sort_unstable();
     let pct = |q: f64| {

@@ -27,7 +27,8 @@ pub use state::{Reboot, VehicleState, VehicleView};
 pub const UI_PERIOD: Duration = Duration::from_millis(20);
 /// The same for a headless daemon, whose status lines come once a second: each tick is a
 /// wake-up of a runtime thread, so an idle bridge should not take fifty a second. Under
-/// traffic the tap wakes the tracker every [`TAP_RUN`] frames instead.
+/// traffic the router's thread applies the frames itself, and when it cannot (the state is
+/// busy) the tap wakes the tracker every [`TAP_RUN`] frames.
 pub const HEADLESS_PERIOD: Duration = Duration::from_millis(100);
 /// Frames applied per lock of the history, and how many waiting in the tap wake the tracker
 /// before its tick.
