@@ -326,6 +326,26 @@ mod tests {
             .map(|m| m.count)
     }
 
+    /// Waits (on the tracker's clock) until `n` heartbeats are published.
+    async fn published(
+        t: &mut Tracker,
+        n: u64,
+        within: Duration,
+    ) -> Result<(), tokio::time::error::Elapsed> {
+        tokio::time::timeout(within, async {
+            while heartbeats_published(t) != Some(n) {
+                t.state.changed().await.unwrap();
+            }
+        })
+        .await
+    }
+
+    async fn stop(t: Tracker) {
+        drop(t.links);
+        t.cancel.cancel();
+        t.task.await.unwrap();
+    }
+
     fn heartbeat_run(link: LinkId, n: usize) -> Vec<Tapped> {
         let hb = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
         (0..n)
@@ -351,16 +371,10 @@ mod tests {
             let _drawing = t.history.lock().unwrap();
             t.tap.send_run(&mut heartbeat_run(LinkId(5), TAP_RUN));
         }
-        tokio::time::timeout(Duration::from_secs(5), async {
-            while heartbeats_published(&mut t) != Some(TAP_RUN as u64) {
-                t.state.changed().await.unwrap();
-            }
-        })
-        .await
-        .expect("the tracker took the run long before its hour-long tick");
-        drop(t.links);
-        t.cancel.cancel();
-        t.task.await.unwrap();
+        published(&mut t, TAP_RUN as u64, Duration::from_secs(5))
+            .await
+            .expect("the tracker took the run long before its hour-long tick");
+        stop(t).await;
     }
 
     /// Frames are applied by the thread that routes them when the tracker's state is free: the
@@ -392,15 +406,9 @@ mod tests {
             "published before the tick: something woke the tracker"
         );
         // ...and the run is on the next one.
-        tokio::time::timeout(period, async {
-            while heartbeats_published(&mut t) != Some(TAP_RUN as u64) {
-                t.state.changed().await.unwrap();
-            }
-        })
-        .await
-        .expect("the tick published the frames the router's thread applied");
-        drop(t.links);
-        t.cancel.cancel();
-        t.task.await.unwrap();
+        published(&mut t, TAP_RUN as u64, period)
+            .await
+            .expect("the tick published the frames the router's thread applied");
+        stop(t).await;
     }
 }
