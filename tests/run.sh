@@ -9,38 +9,52 @@ cd "$(dirname "$0")/.."
 # Each stage says when it starts, in seconds since the run began (where the time goes).
 stage() { echo "=== tests/run.sh [${SECONDS} s] $*" >&2; }
 
-# --- system packages -------------------------------------------------------------------------
-if ! command -v socat >/dev/null 2>&1; then
-    export DEBIAN_FRONTEND=noninteractive
-    apt-get update
-    apt-get install -y socat
-fi
-# The terminal UI's end-to-end test runs the binary in a real terminal.
-if ! command -v tmux >/dev/null 2>&1; then
-    export DEBIAN_FRONTEND=noninteractive
-    apt-get update
-    apt-get install -y tmux
-fi
-
-# --- Python venv with the pinned requirements -------------------------------------------------
+# --- what the tests need besides Rust, set up in the background ------------------------------
+# socat (serial pseudo-terminals), tmux (the terminal UI's end-to-end test) and the venv are
+# only needed from `cargo test` on, so they install while fmt and clippy run.
 VENV="${VENV:-.venv}"
 REQ=tests/pymavlink/requirements.txt
-if [ ! -x "$VENV/bin/python" ] || ! cmp -s "$REQ" "$VENV/.requirements.installed"; then
-    if ! python3 -m venv "$VENV"; then
+setup() {
+    if ! command -v socat >/dev/null 2>&1; then
         export DEBIAN_FRONTEND=noninteractive
         apt-get update
-        apt-get install -y python3-venv
-        python3 -m venv "$VENV"
+        apt-get install -y socat
     fi
-    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$REQ"
-    cp "$REQ" "$VENV/.requirements.installed"
-fi
+    # The terminal UI's end-to-end test runs the binary in a real terminal.
+    if ! command -v tmux >/dev/null 2>&1; then
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update
+        apt-get install -y tmux
+    fi
+
+    # The Python venv with the pinned requirements.
+    if [ ! -x "$VENV/bin/python" ] || ! cmp -s "$REQ" "$VENV/.requirements.installed"; then
+        if ! python3 -m venv "$VENV"; then
+            export DEBIAN_FRONTEND=noninteractive
+            apt-get update
+            apt-get install -y python3-venv
+            python3 -m venv "$VENV"
+        fi
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$REQ"
+        cp "$REQ" "$VENV/.requirements.installed"
+    fi
+}
+SETUP_LOG="$(mktemp)"
+setup > "$SETUP_LOG" 2>&1 &
+SETUP_PID=$!
 
 # --- Rust -------------------------------------------------------------------------------------
 stage "cargo fmt"
 cargo fmt --all -- --check
 stage "cargo clippy"
 cargo clippy --workspace --all-targets -- -D warnings
+stage "waiting for socat, tmux and the venv"
+if ! wait "$SETUP_PID"; then
+    cat "$SETUP_LOG" >&2
+    echo "setting up the test tools failed (see above)" >&2
+    exit 1
+fi
+rm -f "$SETUP_LOG"
 stage "cargo test"
 cargo test --workspace
 stage "cargo build"
@@ -70,8 +84,10 @@ fuzz_stream d router tracker signing_verify & FUZZ_PIDS+=($!)
 BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
 export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
+# Four workers, one test file each at a time (module fixtures stay in one worker): the tests
+# mostly wait on the twin's and the daemon's real-time traffic, not on the CPU.
 stage "pytest tests/pymavlink"
-"$VENV/bin/python" -m pytest tests/pymavlink
+"$VENV/bin/python" -m pytest -n 4 --dist loadfile tests/pymavlink
 
 # --- the vtol_twin pytest plugin: installed as a user installs it, then its own tests ---------
 # Reinstalled only when its sources change (flit_core from requirements.txt builds it offline).
