@@ -61,9 +61,10 @@ stage "cargo build"
 cargo build --workspace --bins
 
 # --- fuzzing, in the background while the pymavlink suite runs --------------------------------
-# Every fuzz target runs for 60 s of wall time, in four streams of at most four targets, at the
-# idle scheduling class: they take only the CPU the tests leave, so they add no time to a run
-# and no delay to a test. A crash fails the run and leaves its input in fuzz/regressions/.
+# Every fuzz target runs for 60 s of wall time, in eight streams of at most two targets, at the
+# idle scheduling class: they take only the CPU the tests leave, so they add no delay to a test,
+# and the streams end about half a minute after the pymavlink suite. A crash fails the run and
+# leaves its input in fuzz/regressions/.
 FUZZ_LOGS="$(mktemp -d)"
 FUZZ_PIDS=()
 trap 'kill "${FUZZ_PIDS[@]}" 2>/dev/null || true' EXIT
@@ -75,10 +76,14 @@ fuzz_stream() {
     exec "${sched[@]}" "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run \
         --seconds "${FUZZ_SECONDS:-60}" "$@" > "$FUZZ_LOGS/$name.log" 2>&1
 }
-fuzz_stream a tlog link_url param_file statustext & FUZZ_PIDS+=($!)
-fuzz_stream b twin_endpoint vehicle_source twin_param_file signing_state & FUZZ_PIDS+=($!)
-fuzz_stream c frame_decoder daemon_config mission_file sim_cli_values & FUZZ_PIDS+=($!)
-fuzz_stream d router tracker signing_verify & FUZZ_PIDS+=($!)
+fuzz_stream a tlog link_url & FUZZ_PIDS+=($!)
+fuzz_stream b param_file statustext & FUZZ_PIDS+=($!)
+fuzz_stream c twin_endpoint vehicle_source & FUZZ_PIDS+=($!)
+fuzz_stream d twin_param_file signing_state & FUZZ_PIDS+=($!)
+fuzz_stream e frame_decoder daemon_config & FUZZ_PIDS+=($!)
+fuzz_stream f mission_file sim_cli_values & FUZZ_PIDS+=($!)
+fuzz_stream g router tracker & FUZZ_PIDS+=($!)
+fuzz_stream h signing_verify & FUZZ_PIDS+=($!)
 
 # --- pymavlink / MAVProxy against the real binaries ------------------------------------------
 BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
