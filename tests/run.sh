@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Runs every test: formatting, lints, the Rust tests, then the pymavlink suite with every fuzz
-# target running beside it.
+# Runs every test: formatting, lints, the Rust tests and the pymavlink suite, with every fuzz
+# target running beside the tests.
 # On a fresh machine it installs what it needs itself (socat, tmux, a venv with the pinned Python
 # packages in .venv, the vtol_twin pytest plugin into that venv).
 set -euo pipefail
@@ -8,10 +8,13 @@ cd "$(dirname "$0")/.."
 
 # Each stage says when it starts, in seconds since the run began (where the time goes).
 stage() { echo "=== tests/run.sh [${SECONDS} s] $*" >&2; }
+# What runs in the background (set-up, clippy, fuzz streams) stops with the script.
+BG_PIDS=()
+trap 'kill "${BG_PIDS[@]}" 2>/dev/null || true' EXIT
 
 # --- what the tests need besides Rust, set up in the background ------------------------------
 # socat (serial pseudo-terminals), tmux (the terminal UI's end-to-end test) and the venv are
-# only needed from `cargo test` on, so they install while fmt and clippy run.
+# only needed from `cargo test` on, so they install while fmt, clippy and the test build run.
 VENV="${VENV:-.venv}"
 REQ=tests/pymavlink/requirements.txt
 setup() {
@@ -42,12 +45,35 @@ setup() {
 SETUP_LOG="$(mktemp)"
 setup > "$SETUP_LOG" 2>&1 &
 SETUP_PID=$!
+BG_PIDS+=("$SETUP_PID")
 
 # --- Rust -------------------------------------------------------------------------------------
+# A run builds from scratch or nearly: incremental compilation's bookkeeping would only cost.
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
+TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
 stage "cargo fmt"
 cargo fmt --all -- --check
-stage "cargo clippy"
-cargo clippy --workspace --all-targets -- -D warnings
+# Clippy checks in its own target directory, beside the test build: each leaves one of the two
+# cores idle for part of its time (a long crate that nothing else can overlap), and run together
+# they fill each other's gaps.
+stage "cargo clippy (beside the test build)"
+CLIPPY_LOG="$(mktemp)"
+CARGO_TARGET_DIR="$TARGET/clippy" cargo clippy --workspace --all-targets -- -D warnings \
+    > "$CLIPPY_LOG" 2>&1 &
+CLIPPY_PID=$!
+BG_PIDS+=("$CLIPPY_PID")
+stage "cargo test --no-run"
+cargo test --workspace --no-run
+stage "waiting for cargo clippy"
+if ! wait "$CLIPPY_PID"; then
+    cat "$CLIPPY_LOG" >&2
+    echo "cargo clippy found warnings (see above)" >&2
+    exit 1
+fi
+rm -f "$CLIPPY_LOG"
+# The binaries the pymavlink suite and the fuzz streams run: `cargo test` built them with the
+# same profile and features, so this only confirms they are fresh.
+cargo build --workspace --bins
 stage "waiting for socat, tmux and the venv"
 if ! wait "$SETUP_PID"; then
     cat "$SETUP_LOG" >&2
@@ -55,38 +81,36 @@ if ! wait "$SETUP_PID"; then
     exit 1
 fi
 rm -f "$SETUP_LOG"
-stage "cargo test"
-cargo test --workspace
-stage "cargo build"
-cargo build --workspace --bins
 
-# --- fuzzing, in the background while the pymavlink suite runs --------------------------------
+# --- fuzzing, in the background while the tests run -------------------------------------------
 # Every fuzz target runs for 60 s of wall time, in eight streams of at most two targets, at the
 # idle scheduling class: they take only the CPU the tests leave, so they add no delay to a test,
-# and the streams end about half a minute after the pymavlink suite. A crash fails the run and
-# leaves its input in fuzz/regressions/.
+# and the streams end before the pymavlink suite does. A crash fails the run and leaves its
+# input in fuzz/regressions/.
 FUZZ_LOGS="$(mktemp -d)"
 FUZZ_PIDS=()
-trap 'kill "${FUZZ_PIDS[@]}" 2>/dev/null || true' EXIT
 fuzz_stream() {
     local name="$1"; shift
     local sched=(nice -n 19)
     if command -v chrt >/dev/null 2>&1; then sched=(chrt --idle 0); fi
     # exec: the stream's process is the fuzzer itself, so the trap above can stop it.
-    exec "${sched[@]}" "${CARGO_TARGET_DIR:-$PWD/target}/debug/vtol-fuzz" run \
+    exec "${sched[@]}" "$TARGET/debug/vtol-fuzz" run \
         --seconds "${FUZZ_SECONDS:-60}" "$@" > "$FUZZ_LOGS/$name.log" 2>&1
 }
-fuzz_stream a tlog link_url & FUZZ_PIDS+=($!)
-fuzz_stream b param_file statustext & FUZZ_PIDS+=($!)
-fuzz_stream c twin_endpoint vehicle_source & FUZZ_PIDS+=($!)
-fuzz_stream d twin_param_file signing_state & FUZZ_PIDS+=($!)
-fuzz_stream e frame_decoder daemon_config & FUZZ_PIDS+=($!)
-fuzz_stream f mission_file sim_cli_values & FUZZ_PIDS+=($!)
-fuzz_stream g router tracker & FUZZ_PIDS+=($!)
-fuzz_stream h signing_verify & FUZZ_PIDS+=($!)
+fuzz_stream a tlog link_url & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream b param_file statustext & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream c twin_endpoint vehicle_source & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream d twin_param_file signing_state & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream e frame_decoder daemon_config & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream f mission_file sim_cli_values & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream g router tracker & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fuzz_stream h signing_verify & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+
+stage "cargo test"
+cargo test --workspace
 
 # --- pymavlink / MAVProxy against the real binaries ------------------------------------------
-BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/debug"
+BIN_DIR="$TARGET/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"
 export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
 # Four workers, one test file each at a time (module fixtures stay in one worker): the tests
