@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 
 # Each stage says when it starts, in seconds since the run began (where the time goes).
 stage() { echo "=== tests/run.sh [${SECONDS} s] $*" >&2; }
-# What runs in the background (set-up, clippy, fuzz streams) stops with the script.
+# What runs in the background (set-up, fuzz streams) stops with the script.
 BG_PIDS=()
 trap 'kill "${BG_PIDS[@]}" 2>/dev/null || true' EXIT
 
@@ -48,29 +48,13 @@ SETUP_PID=$!
 BG_PIDS+=("$SETUP_PID")
 
 # --- Rust -------------------------------------------------------------------------------------
-# A run builds from scratch or nearly: incremental compilation's bookkeeping would only cost.
-export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
 stage "cargo fmt"
 cargo fmt --all -- --check
-# Clippy checks in its own target directory, beside the test build: each leaves one of the two
-# cores idle for part of its time (a long crate that nothing else can overlap), and run together
-# they fill each other's gaps.
-stage "cargo clippy (beside the test build)"
-CLIPPY_LOG="$(mktemp)"
-CARGO_TARGET_DIR="$TARGET/clippy" cargo clippy --workspace --all-targets -- -D warnings \
-    > "$CLIPPY_LOG" 2>&1 &
-CLIPPY_PID=$!
-BG_PIDS+=("$CLIPPY_PID")
+stage "cargo clippy"
+cargo clippy --workspace --all-targets -- -D warnings
 stage "cargo test --no-run"
 cargo test --workspace --no-run
-stage "waiting for cargo clippy"
-if ! wait "$CLIPPY_PID"; then
-    cat "$CLIPPY_LOG" >&2
-    echo "cargo clippy found warnings (see above)" >&2
-    exit 1
-fi
-rm -f "$CLIPPY_LOG"
 # The binaries the pymavlink suite and the fuzz streams run: `cargo test` built them with the
 # same profile and features, so this only confirms they are fresh.
 cargo build --workspace --bins
