@@ -24,11 +24,15 @@
 //!   - **vtol-gcs**: the real daemon binary, `vtol-gcs run --vehicle udpin:127.0.0.1:P
 //!     --serve udpout:127.0.0.1:SINK1 … --log-dir TMP --headless`, tlog on.
 //!
-//! Phases per forwarder and client count: saturation (a fixed count sent as fast as the
-//! generator can; delivered/s = frames received by all sinks / (last receive − first send)),
-//! then open-loop paced 1k, 10k and 50k msgs/s (sleep-paced on a fixed schedule, so a late
-//! wake-up sends the frames that are due back to back). Loss = 1 − delivered/(sent × clients).
-//! Latency percentiles are per phase. CPU % is of one core (100 % = one core busy); CPU
+//! Both forwarders run at once with the same sinks, one client count at a time. Phases:
+//! saturation, each forwarder in turn (a fixed count sent as fast as the generator can;
+//! delivered/s = frames received by all sinks / (last receive − first send)), then open-loop
+//! paced 1k, 10k and 50k msgs/s (sleep-paced on a fixed schedule, so a late wake-up sends the
+//! frames that are due back to back), **interleaved**: the forwarders take turns of 1 s of
+//! traffic in alternating order (bare, daemon, daemon, bare, …) until each has had the phase's
+//! time, so both meet the same machine noise instead of meeting it a minute apart; each one's
+//! CPU is counted over the whole phase, its idle turns included. Loss = 1 − delivered/(sent ×
+//! clients). Latency percentiles are per phase (all turns together). CPU % is of one core (100 % = one core busy); CPU
 //! ns/frame is the forwarder's CPU time over the phase divided by the frames it forwarded
 //! (delivered copies / clients); context switches per frame are summed over all of the
 //! forwarder's threads (`/proc/<pid>/task/*/status`, voluntary and non-voluntary); peak RSS is
@@ -328,6 +332,7 @@ fn udp_drops(port: u16) -> u64 {
 }
 
 struct Forwarder {
+    kind: Kind,
     child: Child,
     ingress: SocketAddr,
     last_status: Arc<Mutex<String>>,
@@ -407,6 +412,7 @@ impl Forwarder {
             .expect("forwarder ready in time");
         let ingress = got.or(ingress).unwrap();
         Forwarder {
+            kind,
             child,
             ingress,
             last_status,
@@ -580,13 +586,31 @@ fn generate(sock: &UdpSocket, phase: u32, load: Load) -> (u64, u64, u64) {
     (u64::from(load.count), first, now_ns())
 }
 
-fn run_phase(
+/// What the sinks and the kernel saw of one forwarder over one or more slices of a phase.
+#[derive(Clone, Default)]
+struct Tally {
+    sent: u64,
+    delivered: u64,
+    /// Σ over slices of (last receive − first send), ns.
+    rx_span_ns: u64,
+    /// Σ over slices of (last send − first send), ns.
+    tx_span_ns: u64,
+    /// Σ over slices of the wall time (generate, then settle), s.
+    wall_s: f64,
+    lat_ns: Vec<u32>,
+    ingress_drops: u64,
+    sink_drops: u64,
+}
+
+/// Sends `load` through `fwd` as phase `phase` and adds what arrived to `tally`.
+fn run_slice(
     fwd: &Forwarder,
     gen_sock: &UdpSocket,
     sinks: &Sinks,
     phase: u32,
     load: Load,
-) -> PhaseResult {
+    tally: &mut Tally,
+) {
     let n = sinks.sinks.len() as u64;
     sinks.begin(phase);
     let drops = |fwd: &Forwarder| {
@@ -600,16 +624,12 @@ fn run_phase(
         )
     };
     let (in0, sink0) = drops(fwd);
-    let cpu0 = fwd.cpu();
     let t0 = Instant::now();
     let (sent, first_send, last_send) = generate(gen_sock, phase, load);
     let accs = sinks.settle(sent * n, Duration::from_millis(300));
-    let wall = t0.elapsed().as_secs_f64();
-    let used = fwd.cpu().since(&cpu0);
+    tally.wall_s += t0.elapsed().as_secs_f64();
     let (in1, sink1) = drops(fwd);
     let delivered: u64 = accs.iter().map(|a| a.count).sum();
-    // Frames forwarded to every client (on average): the unit of work of a forwarder.
-    let frames = (delivered as f64 / n as f64).max(1.0);
     let last_rx = accs.iter().map(|a| a.last_ns).max().unwrap_or(first_send);
     if let (Some(dir), Some(rate)) = (latency_dump(), load.rate) {
         use std::fmt::Write as _;
@@ -621,8 +641,24 @@ fn run_phase(
         }
         let _ = std::fs::write(dir.join(format!("phase{phase}-{rate}.txt")), text);
     }
-    let mut lat: Vec<u32> = accs.iter().flat_map(|a| a.lat_ns.iter().copied()).collect();
-    lat.sort_unstable();
+    tally.sent += sent;
+    tally.delivered += delivered;
+    tally.rx_span_ns += last_rx.max(first_send + 1) - first_send;
+    tally.tx_span_ns += last_send.max(first_send + 1) - first_send;
+    tally
+        .lat_ns
+        .extend(accs.iter().flat_map(|a| a.lat_ns.iter().copied()));
+    tally.ingress_drops += in1 - in0;
+    tally.sink_drops += sink1 - sink0;
+}
+
+/// A phase's figures from its tally and the forwarder's use of the CPU over it.
+fn phase_result(mut t: Tally, used: Used, clients: usize) -> PhaseResult {
+    let n = clients as u64;
+    // Frames forwarded to every client (on average): the unit of work of a forwarder.
+    let frames = (t.delivered as f64 / n as f64).max(1.0);
+    t.lat_ns.sort_unstable();
+    let lat = &t.lat_ns;
     let pct = |q: f64| {
         if lat.is_empty() {
             f64::NAN
@@ -631,24 +667,77 @@ fn run_phase(
         }
     };
     PhaseResult {
-        sent,
-        delivered,
-        delivered_per_s: delivered as f64
-            / ((last_rx.max(first_send + 1) - first_send) as f64 / 1e9),
-        offered_per_s: sent as f64 / ((last_send.max(first_send + 1) - first_send) as f64 / 1e9),
-        loss: 1.0 - delivered as f64 / (sent * n) as f64,
+        sent: t.sent,
+        delivered: t.delivered,
+        delivered_per_s: t.delivered as f64 / (t.rx_span_ns.max(1) as f64 / 1e9),
+        offered_per_s: t.sent as f64 / (t.tx_span_ns.max(1) as f64 / 1e9),
+        loss: 1.0 - t.delivered as f64 / (t.sent * n).max(1) as f64,
         p50_us: pct(0.50),
         p99_us: pct(0.99),
         max_us: pct(1.0),
         // The settle wait is part of the window: a forwarder still draining its backlog then
         // is charged for it; an idle one costs (almost) nothing.
-        cpu_pct: 100.0 * used.cpu_s / wall,
+        cpu_pct: 100.0 * used.cpu_s / t.wall_s.max(1e-9),
         cpu_ns_per_frame: used.cpu_s * 1e9 / frames,
         vcsw_per_frame: used.voluntary as f64 / frames,
         ivcsw_per_frame: used.involuntary as f64 / frames,
-        ingress_drops: in1 - in0,
-        sink_drops: sink1 - sink0,
+        ingress_drops: t.ingress_drops,
+        sink_drops: t.sink_drops,
     }
+}
+
+/// One forwarder alone: a warm-up or the saturation phase.
+fn run_phase(
+    fwd: &Forwarder,
+    gen_sock: &UdpSocket,
+    sinks: &Sinks,
+    phase: u32,
+    load: Load,
+) -> PhaseResult {
+    let cpu0 = fwd.cpu();
+    let mut tally = Tally::default();
+    run_slice(fwd, gen_sock, sinks, phase, load, &mut tally);
+    phase_result(tally, fwd.cpu().since(&cpu0), sinks.sinks.len())
+}
+
+/// Length of one forwarder's turn in a paced phase, s.
+const SLICE_S: f64 = 1.0;
+
+/// A paced phase for every forwarder of `fwds` at once: turns of [`SLICE_S`] each, taken in
+/// alternating order (A B, B A, A B…), until each forwarder has had `paced_s` of traffic. So
+/// the forwarders share whatever the machine did during the phase, instead of meeting it a
+/// minute apart. Each forwarder's CPU and context switches are counted over the whole phase,
+/// its idle turns included.
+fn run_interleaved(
+    fwds: &[(&Forwarder, &UdpSocket)],
+    sinks: &Sinks,
+    next_phase: &mut impl FnMut() -> u32,
+    rate: u32,
+    paced_s: f64,
+) -> Vec<PhaseResult> {
+    let turns = (paced_s / SLICE_S).ceil().max(1.0) as u32;
+    let per_turn = (f64::from(rate) * paced_s / f64::from(turns)).round() as u32;
+    let cpu0: Vec<CpuSample> = fwds.iter().map(|(f, _)| f.cpu()).collect();
+    let mut tallies = vec![Tally::default(); fwds.len()];
+    for turn in 0..turns {
+        let mut order: Vec<usize> = (0..fwds.len()).collect();
+        if turn % 2 == 1 {
+            order.reverse();
+        }
+        for k in order {
+            let (fwd, gen_sock) = fwds[k];
+            let load = Load {
+                rate: Some(rate),
+                count: per_turn,
+            };
+            run_slice(fwd, gen_sock, sinks, next_phase(), load, &mut tallies[k]);
+        }
+    }
+    tallies
+        .into_iter()
+        .zip(fwds.iter().zip(&cpu0))
+        .map(|(t, ((f, _), c0))| phase_result(t, f.cpu().since(c0), sinks.sinks.len()))
+        .collect()
 }
 
 struct Scenario {
@@ -663,73 +752,83 @@ struct Scenario {
     last_status: String,
 }
 
-fn run_forwarder(kind: Kind, sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> Scenario {
+/// Every forwarder of `kinds` with the same sinks: each warmed up and saturated in turn, then
+/// the paced phases interleaved ([`run_interleaved`]).
+fn run_scenarios(kinds: &[Kind], sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> Vec<Scenario> {
     let addrs: Vec<SocketAddr> = sinks.sinks.iter().map(|s| s.addr).collect();
-    let fwd = Forwarder::start(kind, &addrs);
-    let gen_sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-    gen_sock.connect(fwd.ingress).unwrap();
     let mut phase = || {
         *next_phase += 1;
         *next_phase
     };
-    // Warm-up: the daemon's udpin creates the vehicle link on the first datagram. Repeat
-    // until a frame gets through (the link comes up within milliseconds).
-    for _ in 0..50 {
-        let r = run_phase(
-            &fwd,
-            &gen_sock,
-            sinks,
-            phase(),
-            Load {
-                rate: Some(1000),
-                count: 20,
-            },
-        );
-        if r.delivered > 0 {
-            break;
-        }
-    }
-    let sat = run_phase(
-        &fwd,
-        &gen_sock,
-        sinks,
-        phase(),
-        Load {
-            rate: None,
-            count: cfg.sat_count,
-        },
-    );
-    let mut paced = Vec::new();
-    for &rate in &cfg.rates {
-        let count = (f64::from(rate) * cfg.paced_s) as u32;
-        paced.push((
-            rate,
-            run_phase(
-                &fwd,
-                &gen_sock,
+    let fwds: Vec<(Forwarder, UdpSocket)> = kinds
+        .iter()
+        .map(|&kind| {
+            let fwd = Forwarder::start(kind, &addrs);
+            let gen_sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+            gen_sock.connect(fwd.ingress).unwrap();
+            (fwd, gen_sock)
+        })
+        .collect();
+    let mut sats = Vec::new();
+    for (fwd, gen_sock) in &fwds {
+        eprintln!("  {}: saturation…", fwd.kind.name());
+        // Warm-up: the daemon's udpin creates the vehicle link on the first datagram. Repeat
+        // until a frame gets through (the link comes up within milliseconds).
+        for _ in 0..50 {
+            let r = run_phase(
+                fwd,
+                gen_sock,
                 sinks,
                 phase(),
                 Load {
-                    rate: Some(rate),
-                    count,
+                    rate: Some(1000),
+                    count: 20,
                 },
-            ),
+            );
+            if r.delivered > 0 {
+                break;
+            }
+        }
+        sats.push(run_phase(
+            fwd,
+            gen_sock,
+            sinks,
+            phase(),
+            Load {
+                rate: None,
+                count: cfg.sat_count,
+            },
         ));
     }
-    let threads = fwd.threads();
-    let peak_rss = fwd.peak_rss();
-    let last_status = fwd.last_status.lock().unwrap().clone();
-    let tlog_bytes = fwd.stop();
-    Scenario {
-        kind,
-        clients: addrs.len(),
-        sat,
-        paced,
-        threads,
-        peak_rss,
-        tlog_bytes,
-        last_status,
+    let pairs: Vec<(&Forwarder, &UdpSocket)> = fwds.iter().map(|(f, g)| (f, g)).collect();
+    let mut paced: Vec<Vec<(u32, PhaseResult)>> = vec![Vec::new(); fwds.len()];
+    for &rate in &cfg.rates {
+        eprintln!("  paced {}/s, interleaved…", kmsg(f64::from(rate)));
+        let rs = run_interleaved(&pairs, sinks, &mut phase, rate, cfg.paced_s);
+        for (k, r) in rs.into_iter().enumerate() {
+            paced[k].push((rate, r));
+        }
     }
+    fwds.into_iter()
+        .zip(sats.into_iter().zip(paced))
+        .map(|((fwd, _), (sat, paced))| {
+            let threads = fwd.threads();
+            let peak_rss = fwd.peak_rss();
+            let last_status = fwd.last_status.lock().unwrap().clone();
+            let kind = fwd.kind;
+            let tlog_bytes = fwd.stop();
+            Scenario {
+                kind,
+                clients: addrs.len(),
+                sat,
+                paced,
+                threads,
+                peak_rss,
+                tlog_bytes,
+                last_status,
+            }
+        })
+        .collect()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -876,7 +975,7 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
         list(&bg, 0)
     );
     println!(
-        "mode: {}; {} run(s), figures are medians over the runs; saturation = {} frames as fast as possible; paced phases {:.1} s each; frame = 40-byte MAVLink 2 ATTITUDE",
+        "mode: {}; {} run(s), figures are medians over the runs; saturation = {} frames as fast as possible; paced phases {:.1} s each per forwarder, interleaved in 1 s turns; frame = 40-byte MAVLink 2 ATTITUDE",
         if cfg.quick {
             "QUICK (smoke run, numbers are not meaningful)"
         } else {
@@ -1104,17 +1203,12 @@ fn main() {
             .filter(|c| only_clients.is_none_or(|o| o == *c))
         {
             let sinks = Sinks::start(clients);
-            for kind in [Kind::Bare, Kind::Daemon]
+            let kinds: Vec<Kind> = [Kind::Bare, Kind::Daemon]
                 .into_iter()
                 .filter(|k| only.is_empty() || only == k.tag())
-            {
-                eprintln!(
-                    "run {}/{n_runs}: {} with {clients} client(s)…",
-                    run + 1,
-                    kind.name()
-                );
-                scenarios.push(run_forwarder(kind, &sinks, &cfg, &mut phase));
-            }
+                .collect();
+            eprintln!("run {}/{n_runs}: {clients} client(s)…", run + 1);
+            scenarios.extend(run_scenarios(&kinds, &sinks, &cfg, &mut phase));
         }
         let (busy1, total1) = machine_jiffies();
         let other = (busy1 - busy0).saturating_sub(own_jiffies() - own0);
