@@ -24,15 +24,15 @@
 //!   - **vtol-gcs**: the real daemon binary, `vtol-gcs run --vehicle udpin:127.0.0.1:P
 //!     --serve udpout:127.0.0.1:SINK1 … --log-dir TMP --headless`, tlog on.
 //!
-//! Both forwarders run at once with the same sinks, one client count at a time. Phases:
-//! saturation, each forwarder in turn (a fixed count sent as fast as the generator can;
-//! delivered/s = frames received by all sinks / (last receive − first send)), then open-loop
-//! paced 1k, 10k and 50k msgs/s (sleep-paced on a fixed schedule, so a late wake-up sends the
-//! frames that are due back to back), **interleaved**: the forwarders take turns of 1 s of
-//! traffic in alternating order (bare, daemon, daemon, bare, …) until each has had the phase's
-//! time, so both meet the same machine noise instead of meeting it a minute apart; each one's
-//! CPU is counted over the whole phase, its idle turns included. Loss = 1 − delivered/(sent ×
-//! clients). Latency percentiles are per phase (all turns together). CPU % is of one core (100 % = one core busy); CPU
+//! Phases per forwarder and client count: saturation (a fixed count sent as fast as the
+//! generator can; delivered/s = frames received by all sinks / (last receive − first send)),
+//! then open-loop paced 1k, 10k and 50k msgs/s (sleep-paced on a fixed schedule, so a late
+//! wake-up sends the frames that are due back to back). Loss = 1 − delivered/(sent × clients).
+//! Latency percentiles are per phase. One forwarder runs at a time. `FORWARDING_INTERLEAVE=1`
+//! (diagnostic) runs both at once instead, and the paced phases in turns of 1 s of traffic in
+//! alternating order (bare, daemon, daemon, bare, …) until each has had the phase's time, so
+//! both meet the same machine noise; each one's CPU is then counted over the whole phase, its
+//! idle turns included, and each turn's first frames meet a forwarder idle for a second. CPU % is of one core (100 % = one core busy); CPU
 //! ns/frame is the forwarder's CPU time over the phase divided by the frames it forwarded
 //! (delivered copies / clients); context switches per frame are summed over all of the
 //! forwarder's threads (`/proc/<pid>/task/*/status`, voluntary and non-voluntary); peak RSS is
@@ -700,22 +700,22 @@ fn run_phase(
     phase_result(tally, fwd.cpu().since(&cpu0), sinks.sinks.len())
 }
 
-/// Length of one forwarder's turn in a paced phase, s.
-const SLICE_S: f64 = 1.0;
+/// Length of one forwarder's turn in an interleaved paced phase (`FORWARDING_INTERLEAVE=1`), s.
+const TURN_S: f64 = 1.0;
 
-/// A paced phase for every forwarder of `fwds` at once: turns of [`SLICE_S`] each, taken in
-/// alternating order (A B, B A, A B…), until each forwarder has had `paced_s` of traffic. So
-/// the forwarders share whatever the machine did during the phase, instead of meeting it a
-/// minute apart. Each forwarder's CPU and context switches are counted over the whole phase,
-/// its idle turns included.
-fn run_interleaved(
+/// A paced phase for every forwarder of `fwds`: turns of `turn_s` each, taken in alternating
+/// order (A B, B A, A B…), until each forwarder has had `paced_s` of traffic. With one
+/// forwarder and `turn_s` = `paced_s`, one plain phase. Each forwarder's CPU and context
+/// switches are counted over the whole phase, its idle turns included.
+fn run_paced(
     fwds: &[(&Forwarder, &UdpSocket)],
     sinks: &Sinks,
     next_phase: &mut impl FnMut() -> u32,
     rate: u32,
     paced_s: f64,
+    turn_s: f64,
 ) -> Vec<PhaseResult> {
-    let turns = (paced_s / SLICE_S).ceil().max(1.0) as u32;
+    let turns = (paced_s / turn_s).round().max(1.0) as u32;
     let per_turn = (f64::from(rate) * paced_s / f64::from(turns)).round() as u32;
     let cpu0: Vec<CpuSample> = fwds.iter().map(|(f, _)| f.cpu()).collect();
     let mut tallies = vec![Tally::default(); fwds.len()];
@@ -753,8 +753,14 @@ struct Scenario {
 }
 
 /// Every forwarder of `kinds` with the same sinks: each warmed up and saturated in turn, then
-/// the paced phases interleaved ([`run_interleaved`]).
-fn run_scenarios(kinds: &[Kind], sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32) -> Vec<Scenario> {
+/// the paced phases in turns of `turn_s` ([`run_paced`]).
+fn run_scenarios(
+    kinds: &[Kind],
+    sinks: &Sinks,
+    cfg: &Cfg,
+    next_phase: &mut u32,
+    turn_s: f64,
+) -> Vec<Scenario> {
     let addrs: Vec<SocketAddr> = sinks.sinks.iter().map(|s| s.addr).collect();
     let mut phase = || {
         *next_phase += 1;
@@ -803,8 +809,8 @@ fn run_scenarios(kinds: &[Kind], sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32)
     let pairs: Vec<(&Forwarder, &UdpSocket)> = fwds.iter().map(|(f, g)| (f, g)).collect();
     let mut paced: Vec<Vec<(u32, PhaseResult)>> = vec![Vec::new(); fwds.len()];
     for &rate in &cfg.rates {
-        eprintln!("  paced {}/s, interleaved…", kmsg(f64::from(rate)));
-        let rs = run_interleaved(&pairs, sinks, &mut phase, rate, cfg.paced_s);
+        eprintln!("  paced {}/s…", kmsg(f64::from(rate)));
+        let rs = run_paced(&pairs, sinks, &mut phase, rate, cfg.paced_s, turn_s);
         for (k, r) in rs.into_iter().enumerate() {
             paced[k].push((rate, r));
         }
@@ -836,6 +842,8 @@ fn run_scenarios(kinds: &[Kind], sinks: &Sinks, cfg: &Cfg, next_phase: &mut u32)
 
 struct Cfg {
     quick: bool,
+    /// `FORWARDING_INTERLEAVE=1`: both forwarders at once, paced phases in 1 s turns.
+    interleave: bool,
     sat_count: u32,
     paced_s: f64,
     /// Paced phases, frames/s.
@@ -975,7 +983,7 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
         list(&bg, 0)
     );
     println!(
-        "mode: {}; {} run(s), figures are medians over the runs; saturation = {} frames as fast as possible; paced phases {:.1} s each per forwarder, interleaved in 1 s turns; frame = 40-byte MAVLink 2 ATTITUDE",
+        "mode: {}; {} run(s), figures are medians over the runs; saturation = {} frames as fast as possible; paced phases {:.1} s each{}; frame = 40-byte MAVLink 2 ATTITUDE",
         if cfg.quick {
             "QUICK (smoke run, numbers are not meaningful)"
         } else {
@@ -983,7 +991,12 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
         },
         runs.len(),
         cfg.sat_count,
-        cfg.paced_s
+        cfg.paced_s,
+        if cfg.interleave {
+            " per forwarder, both running, interleaved in 1 s turns (FORWARDING_INTERLEAVE)"
+        } else {
+            ", one forwarder at a time"
+        }
     );
     println!(
         "per frame = per frame forwarded (delivered copies / clients); csw = context switches of all the forwarder's threads (voluntary + non-voluntary)"
@@ -1165,9 +1178,11 @@ fn main() {
         .map(|v| v.split(',').filter_map(|r| r.trim().parse().ok()).collect())
         .filter(|r: &Vec<u32>| !r.is_empty())
         .unwrap_or_else(|| vec![1_000, 10_000, 50_000]);
+    let interleave = std::env::var_os("FORWARDING_INTERLEAVE").is_some_and(|v| v != "0");
     let cfg = if quick {
         Cfg {
             quick,
+            interleave,
             sat_count: 5_000,
             paced_s: 0.2,
             rates: rates.clone(),
@@ -1175,6 +1190,7 @@ fn main() {
     } else {
         Cfg {
             quick,
+            interleave,
             sat_count: 100_000,
             // 10 s a phase: a p99 at 10k/s then comes from 1 000 frames, not 250 (at 2.5 s the
             // bare loop's own p99 ranged over 87–257 µs from run to run).
@@ -1208,7 +1224,15 @@ fn main() {
                 .filter(|k| only.is_empty() || only == k.tag())
                 .collect();
             eprintln!("run {}/{n_runs}: {clients} client(s)…", run + 1);
-            scenarios.extend(run_scenarios(&kinds, &sinks, &cfg, &mut phase));
+            if cfg.interleave {
+                scenarios.extend(run_scenarios(&kinds, &sinks, &cfg, &mut phase, TURN_S));
+            } else {
+                // One forwarder at a time, each alone on the machine.
+                for kind in kinds {
+                    let one = run_scenarios(&[kind], &sinks, &cfg, &mut phase, cfg.paced_s);
+                    scenarios.extend(one);
+                }
+            }
         }
         let (busy1, total1) = machine_jiffies();
         let other = (busy1 - busy0).saturating_sub(own_jiffies() - own0);
