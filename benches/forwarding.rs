@@ -9,7 +9,8 @@
 //! (`FORWARDING_RUNS=N` sets the number of runs too; `FORWARDING_BARE_TOKIO=1` runs the bare
 //! forwarder on a tokio runtime instead of blocking `std` calls; `FORWARDING_QUICK=1` also
 //! selects the smoke run; so does running without cargo bench's `--bench` argument, which is
-//! how `cargo test` runs a `harness = false` target.)
+//! how `cargo test` runs a `harness = false` target; `FORWARDING_DAEMON=PATH` runs another build
+//! of the daemon instead of this one's, to compare two builds on the same machine.)
 //!
 //! Set-up, all on loopback UDP:
 //! - a load generator (this process, one thread) sends MAVLink 2 ATTITUDE frames from sysid 1
@@ -364,7 +365,10 @@ impl Forwarder {
             Kind::Daemon => {
                 let dir = tempfile::tempdir().unwrap();
                 let port = free_udp_port();
-                let mut cmd = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"));
+                // FORWARDING_DAEMON=PATH: diagnostic, another build of the daemon.
+                let exe = std::env::var_os("FORWARDING_DAEMON")
+                    .unwrap_or_else(|| env!("CARGO_BIN_EXE_vtol-gcs").into());
+                let mut cmd = Command::new(exe);
                 cmd.args(["run", "--vehicle", &format!("udpin:127.0.0.1:{port}")]);
                 for t in &targets {
                     cmd.args(["--serve", &format!("udpout:{t}")]);

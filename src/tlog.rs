@@ -9,7 +9,8 @@
 //! reaches the file at most 100 ms ([`FLUSH_INTERVAL`]) after it arrives, a `kill -9` loses at
 //! most the last 100 ms, and no torn record is left behind (each record is encoded whole into
 //! the buffer, and the buffer is only ever written out whole). An idle log costs no wake-ups;
-//! under load the thread wakes about twice per [`WRITE_DELAY`], whatever the frame rate.
+//! under load the thread writes once per [`WRITE_DELAY`], whatever the frame rate, waking on
+//! its own timer: the producers only wake it after a quiet spell.
 //! SETUP_SIGNING is never logged: it carries the signing key.
 
 use std::fs::{File, OpenOptions};
@@ -353,8 +354,9 @@ impl Drop for TlogHandle {
     }
 }
 
-/// The writer thread: sleeps until the oldest waiting record is [`WRITE_DELAY`] old (or the
-/// log closes), then writes everything waiting at once and flushes.
+/// The writer thread: sleeps until the oldest waiting record is [`WRITE_DELAY`] old, or under
+/// traffic until [`WRITE_DELAY`] after its last write (or the log closes), then writes
+/// everything waiting at once and flushes.
 ///
 /// A batch that fails (a full disk) is cut off the file again, so the file keeps only whole
 /// records, and counted as lost; the error is logged once per failure streak and shown through
@@ -368,21 +370,36 @@ fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
     let mut ok_in_row: u32 = 0;
     // Bytes of whole records in the file: where a failed batch is cut back to.
     let mut good_len = out.stream_position().unwrap_or(0);
+    // While records keep coming: when the next write is due, one WRITE_DELAY after the last.
+    let mut next_write: Option<Instant> = None;
     loop {
         let (records, closed) = {
             let mut p = shared.lock();
+            let now = Instant::now();
             let Some(oldest) = p.oldest else {
                 if p.closed {
                     return;
                 }
+                if let Some(next) = next_write
+                    && now < next
+                {
+                    // Traffic was flowing at the last write: look again when the next is due,
+                    // without asking the producers to wake this thread.
+                    drop(p);
+                    std::thread::park_timeout(next - now);
+                    continue;
+                }
+                next_write = None;
                 p.writer_idle = true;
                 drop(p);
                 // Woken by the next record (or spuriously: the loop looks again).
                 std::thread::park();
                 continue;
             };
-            let due = oldest + WRITE_DELAY;
-            let now = Instant::now();
+            // Under traffic a write every WRITE_DELAY, each taking whatever waits (none of it
+            // older than that); after a quiet spell, WRITE_DELAY after the first record.
+            let due =
+                next_write.map_or(oldest + WRITE_DELAY, |next| next.min(oldest + WRITE_DELAY));
             if now < due && !p.closed {
                 drop(p);
                 std::thread::park_timeout(due - now);
@@ -391,6 +408,7 @@ fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
             std::mem::swap(&mut batch, &mut p.bytes);
             let records = std::mem::take(&mut p.records);
             p.oldest = None;
+            next_write = Some(now + WRITE_DELAY);
             (records, p.closed)
         };
         let written = out.write_all(&batch).and_then(|()| out.flush());

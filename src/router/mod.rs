@@ -22,8 +22,8 @@
 //!   task) is routed under one lock, each egress link gets the run's frames for it in one go
 //!   (one `sendmmsg` for a UDP peer whose queue is empty); then the tlog gets the run's records
 //!   in one hand-off, and the tracker's tap gets the run's copies in one hand-off too, which
-//!   the tracker's state usually takes at once on the same thread, without waking the tracker
-//!   ([`tap`]).
+//!   the tracker's state usually takes on the same thread once a run of them waits, without
+//!   waking the tracker ([`tap`]).
 //! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
 //!   queues.
 
@@ -128,6 +128,8 @@ pub struct Tapped {
     pub side: Side,
     /// The frame.
     pub frame: Frame,
+    /// When the router took it (its run's time, on the router's [`clock`]).
+    pub at: Instant,
 }
 
 /// What the router publishes for others.
@@ -265,14 +267,15 @@ impl Router {
 
     /// [`Router::handle`], a new link getting `policy`.
     pub fn handle_with(&mut self, side: Side, policy: EndpointPolicy, event: LinkEvent) {
-        self.apply(side, policy, event, unix_time_us(), Instant::now());
+        let now = clock();
+        self.apply(side, policy, event, unix_time_us(), now);
         self.end_run();
     }
 
     /// Applies a run of events taken from a queue, in order, and empties `events`.
     fn apply_run(&mut self, side: Side, events: &mut Vec<LinkEvent>) {
         let t_us = unix_time_us();
-        let now = Instant::now();
+        let now = clock();
         for ev in events.drain(..) {
             self.apply(side, EndpointPolicy::default(), ev, t_us, now);
         }
@@ -283,7 +286,7 @@ impl Router {
     fn route_run(&mut self, side: Side, frames: &mut Vec<(LinkId, Frame)>) {
         // One clock read per run: its frames arrived together.
         let t_us = unix_time_us();
-        let now = Instant::now();
+        let now = clock();
         for (id, frame) in frames.drain(..) {
             self.route(id, side, frame, t_us, now);
         }
@@ -508,6 +511,7 @@ impl Router {
                 link: ingress,
                 side,
                 frame: frame.clone(),
+                at: now,
             });
         }
         if self.tlog.is_some() {
@@ -633,6 +637,13 @@ impl LinkEventHandler for SideHandler {
     fn is_closed(&self) -> bool {
         self.router.lock().is_none()
     }
+}
+
+/// The router's clock, read once per run: tokio's, which is the tracker's too, so a test that
+/// pauses tokio's clock moves rate limits, system id ownership and the tracker together. (While
+/// nothing pauses it, it is `std`'s `Instant::now`.)
+fn clock() -> Instant {
+    tokio::time::Instant::now().into_std()
 }
 
 /// Reads what routing needs from a frame without decoding it.

@@ -3,14 +3,15 @@
 //! counted by the router.
 //!
 //! Where the frames are applied:
-//! - **By the router's thread, inline** ([`TapReceiver::drain_inline`]): right after a run is
-//!   handed over, the sender applies everything waiting itself if the reader's state is free
-//!   at that instant ([`Drain::try_apply`] never waits). This is the common case: the frames
-//!   are applied on the CPU that just routed them, in the thread that allocated them, and the
-//!   reader is not woken at all.
-//! - **By the reader, on its tick**: what could not be applied inline (the reader's state was
-//!   busy: being published, or read by the terminal UI) waits in the tap for the reader's next
-//!   tick or for the sender's next run. A tap holding `wake_at` frames wakes its reader before
+//! - **By the router's thread, inline** ([`TapReceiver::drain_inline`]): once a hand-off
+//!   leaves the drain's run of frames waiting (32 for the tracker), the sender applies
+//!   everything waiting itself if the reader's state is free at that instant
+//!   ([`Drain::try_apply`] never waits). This is the common case under traffic: the frames are
+//!   applied on the CPU that just routed them, in the thread that allocated them, a run at a
+//!   time (the state's maps stay warm from one frame to the next), and the reader is not woken.
+//! - **By the reader, on its tick**: what was not applied inline (fewer than a run waited, or
+//!   the reader's state was busy: being published, or read by the terminal UI) waits in the
+//!   tap for the reader's next tick or for the sender's next run. A tap holding `wake_at` frames wakes its reader before
 //!   its tick ([`TapReceiver::filling`]): the reader's work comes in short runs however slow
 //!   its tick (a long run on a small machine holds a CPU that forwarding needs, and shows in
 //!   its latency), and a burst is not dropped.
@@ -37,8 +38,9 @@ struct Queue {
 
 struct Shared {
     queue: Mutex<Queue>,
-    /// Set by the reader: the sender applies the frames itself when it can.
-    drain: OnceLock<Arc<dyn Drain>>,
+    /// Set by the reader: the sender applies the frames itself when it can and at least so
+    /// many wait.
+    drain: OnceLock<(Arc<dyn Drain>, usize)>,
     capacity: usize,
     wake_at: usize,
     /// Signalled once the queue holds `wake_at` frames.
@@ -90,8 +92,8 @@ pub struct TapSender {
 
 impl TapSender {
     /// Hands over `run` (emptied) in order, as much as the tap has room for, then applies
-    /// everything waiting if the reader's [`Drain`] can take it without waiting: returns how
-    /// many frames were dropped for want of room (the newest).
+    /// everything waiting if it is enough for the reader's [`Drain`] and the drain can take it
+    /// without waiting: returns how many frames were dropped for want of room (the newest).
     pub fn send_run(&self, run: &mut Vec<Tapped>) -> usize {
         if run.is_empty() {
             return 0;
@@ -109,7 +111,8 @@ impl TapSender {
         }
         // Under the tap's lock, so frames are applied in the order they were routed whoever
         // applies them (the reader takes the tap only while it holds its own state).
-        if let Some(drain) = self.shared.drain.get()
+        if let Some((drain, at_least)) = self.shared.drain.get()
+            && q.frames.len() >= *at_least
             && drain.try_apply(&mut q.frames)
         {
             q.frames.clear();
@@ -150,11 +153,12 @@ impl TapReceiver {
         !(q.closed && into.is_empty())
     }
 
-    /// Lets the sender apply frames itself through `drain` when it can ([`Drain::try_apply`]).
-    /// The reader must then take the tap only while it holds the state `drain` applies to, so
-    /// that frames are applied in order. A tap has one drain: a second is ignored.
-    pub fn drain_inline(&self, drain: Arc<dyn Drain>) {
-        let _ = self.shared.drain.set(drain);
+    /// Lets the sender apply frames itself through `drain` when it can ([`Drain::try_apply`])
+    /// and at least `at_least` of them wait: fewer wait for a later run or for the reader. The
+    /// reader must then take the tap only while it holds the state `drain` applies to, so that
+    /// frames are applied in order. A tap has one drain: a second is ignored.
+    pub fn drain_inline(&self, drain: Arc<dyn Drain>, at_least: usize) {
+        let _ = self.shared.drain.set((drain, at_least.max(1)));
     }
 
     /// Waits until the tap holds `wake_at` frames (at once if it got there since the last
@@ -175,6 +179,7 @@ mod tests {
             link: LinkId(1),
             side: Side::Vehicle,
             frame: Frame::encode_v2(1, 1, seq, &vtol_link::gcs_heartbeat()),
+            at: std::time::Instant::now(),
         }
     }
 
@@ -251,7 +256,7 @@ mod tests {
     fn the_sender_applies_what_waits_when_the_drain_is_free_and_leaves_it_otherwise() {
         let (tx, rx) = tap(8, 4);
         let gate = Arc::new(Gate::default());
-        rx.drain_inline(Arc::clone(&gate) as Arc<dyn Drain>);
+        rx.drain_inline(Arc::clone(&gate) as Arc<dyn Drain>, 1);
         // Busy: the run waits in the tap.
         tx.send_run(&mut (0..2).map(tapped).collect());
         assert!(gate.took.lock().unwrap().is_empty());

@@ -27,12 +27,16 @@ pub use state::{Reboot, VehicleState, VehicleView};
 pub const UI_PERIOD: Duration = Duration::from_millis(20);
 /// The same for a headless daemon, whose status lines come once a second: each tick is a
 /// wake-up of a runtime thread, so an idle bridge should not take fifty a second. Under
-/// traffic the router's thread applies the frames itself, and when it cannot (the state is
-/// busy) the tap wakes the tracker every [`TAP_RUN`] frames.
+/// traffic the router's thread applies the frames itself, [`INLINE_RUN`] at a time, and when
+/// it cannot (the state is busy) the tap wakes the tracker every [`TAP_RUN`] frames.
 pub const HEADLESS_PERIOD: Duration = Duration::from_millis(100);
 /// Frames applied per lock of the history, and how many waiting in the tap wake the tracker
 /// before its tick.
 pub const TAP_RUN: usize = 256;
+/// The router's thread applies tapped frames itself once this many wait: in runs, so that the
+/// tracker's maps and windows are warm for all but the first frame of a run. Fewer wait for a
+/// later run or for the tracker's tick, which publishes no sooner either way.
+pub const INLINE_RUN: usize = 32;
 
 /// The tracker's clock as a `std` instant: tokio's, so a paused test clock moves it.
 #[must_use]
@@ -70,23 +74,23 @@ impl Drain for Inline {
     }
 }
 
-/// Applies `frames` to the state and the history, at the tracker's time.
+/// Applies `frames` to the state and the history, each at the time the router took it.
 fn apply(core: &mut Core, history: &mut History, frames: &[Tapped]) {
     if frames.is_empty() {
         return;
     }
-    let at = now();
     for t in frames {
-        let msg = core.state.apply(t.link, t.side, &t.frame, at);
-        history.record(&t.frame, msg.as_ref(), at);
+        let msg = core.state.apply(t.link, t.side, &t.frame, t.at);
+        history.record(&t.frame, msg.as_ref(), t.at);
     }
     core.dirty = true;
 }
 
 /// Runs the tracker until the tap closes or `cancel` fires, publishing every `period`
 /// ([`UI_PERIOD`], [`HEADLESS_PERIOD`]) when something changed. The frames are applied by the
-/// router's thread as it routes them, whenever the state is free at that instant, and
-/// otherwise by this task from the tap, on its tick or when [`TAP_RUN`] of them wait. `links`
+/// router's thread in runs of [`INLINE_RUN`] as it routes them, whenever the state is free at
+/// that instant, and otherwise by this task from the tap, on its tick or when [`TAP_RUN`] of
+/// them wait; each at the time the router took it. `links`
 /// is the router's list of live links: a link that leaves it is forgotten, so its health does
 /// not go stale on screen.
 pub async fn run(
@@ -102,10 +106,13 @@ pub async fn run(
         state: VehicleState::new(epoch),
         dirty: false,
     }));
-    tap.drain_inline(Arc::new(Inline {
-        core: Arc::clone(&core),
-        history: Arc::clone(&history),
-    }));
+    tap.drain_inline(
+        Arc::new(Inline {
+            core: Arc::clone(&core),
+            history: Arc::clone(&history),
+        }),
+        INLINE_RUN,
+    );
     // Plain data: a panic elsewhere leaves it usable.
     let lock_core = || core.lock().unwrap_or_else(PoisonError::into_inner);
     let mut last_publish = TokioInstant::now();
@@ -231,6 +238,7 @@ mod tests {
             link: LinkId(7),
             side: Side::Vehicle,
             frame,
+            at: now(),
         }]);
         let wait = |rx: &mut watch::Receiver<VehicleState>, present: bool| {
             let mut rx = rx.clone();
@@ -278,6 +286,7 @@ mod tests {
             link: LinkId(3),
             side: Side::Vehicle,
             frame: vehicle_heartbeat(),
+            at: now(),
         };
         // The state as published once its heartbeat time is later than `after`.
         let heard_after = |rx: &mut watch::Receiver<VehicleState>, after: Option<Instant>| {
@@ -353,6 +362,7 @@ mod tests {
                 link,
                 side: Side::Vehicle,
                 frame: hb.clone(),
+                at: now(),
             })
             .collect()
     }

@@ -8,7 +8,7 @@ use foldhash::{HashMap, HashSet};
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
-use super::window::Window;
+use super::window::{Stamp, Window};
 use crate::router::Side;
 
 const MSG_HEARTBEAT: u32 = 0;
@@ -221,6 +221,8 @@ pub struct VehicleState {
     /// Links that went down: frames of theirs still on the way to the tracker are stale and
     /// must not bring their vehicles back (a link that reconnects under its id leaves the set).
     down: HashSet<LinkId>,
+    /// The time of the last frame applied, with its window bucket: a run's frames share it.
+    stamp: Option<Stamp>,
 }
 
 impl Default for VehicleState {
@@ -254,6 +256,7 @@ impl VehicleState {
             last_seq: HashMap::default(),
             text_chunks: HashMap::default(),
             down: HashSet::default(),
+            stamp: None,
         }
     }
 
@@ -266,17 +269,21 @@ impl VehicleState {
         frame: &Frame,
         now: Instant,
     ) -> Option<MavMessage> {
-        if self.down.contains(&link) {
+        if !self.down.is_empty() && self.down.contains(&link) {
             return None;
         }
-        let lost = self.account(link, side, frame, now);
-        let key = frame.sender();
         let epoch = self.epoch;
+        let stamp = match self.stamp {
+            Some(s) if s.at() == now => s,
+            _ => *self.stamp.insert(Stamp::new(epoch, now)),
+        };
+        let lost = self.account(link, side, frame, &stamp);
+        let key = frame.sender();
         if let Some(v) = self.vehicles.get_mut(&key) {
             v.link = link;
             v.frames += 1;
             v.lost += u64::from(lost);
-            v.window.add(now, 1, lost);
+            v.window.add_stamped(&stamp, 1, lost);
         }
         self.messages
             .entry((key.0, key.1, frame.message_id()))
@@ -284,11 +291,11 @@ impl VehicleState {
                 m.count += 1;
                 m.last = frame.clone();
                 m.last_at = now;
-                m.window.add(now, 1, 0);
+                m.window.add_stamped(&stamp, 1, 0);
             })
             .or_insert_with(|| {
                 let mut window = Window::new(epoch);
-                window.add(now, 1, 0);
+                window.add_stamped(&stamp, 1, 0);
                 MessageStats {
                     count: 1,
                     last: frame.clone(),
@@ -321,7 +328,7 @@ impl VehicleState {
                 lost: 0,
                 window: {
                     let mut w = Window::new(epoch);
-                    w.add(now, 1, 0);
+                    w.add_stamped(&stamp, 1, 0);
                     w
                 },
                 mav_type: hb.mavtype,
@@ -417,8 +424,8 @@ impl VehicleState {
 
     /// Counts a frame in its link's health; returns the frames its sender's sequence says
     /// were lost just before it.
-    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, now: Instant) -> u32 {
-        let epoch = self.epoch;
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> u32 {
+        let (epoch, now) = (self.epoch, stamp.at());
         let h = self.links.entry(link).or_insert_with(|| LinkHealth {
             side,
             frames: 0,
@@ -437,7 +444,7 @@ impl VehicleState {
             lost = u32::from(seq.wrapping_sub(last).wrapping_sub(1));
             h.lost += u64::from(lost);
         }
-        h.window.add(now, 1, lost);
+        h.window.add_stamped(stamp, 1, lost);
         lost
     }
 

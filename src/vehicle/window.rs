@@ -14,7 +14,7 @@ const BUCKETS: usize = 40;
 const RATE_BUCKETS: u64 = 8;
 
 /// Received and lost counts over the last 10 s, bucketed by 250 ms from an epoch.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Window {
     epoch: Instant,
     /// Bucket number (since `epoch`) of `counts[newest % BUCKETS]`.
@@ -22,15 +22,40 @@ pub struct Window {
     /// When the first count arrived, so a young window is not diluted by empty history.
     first: Option<u64>,
     counts: [(u32, u32); BUCKETS],
-    /// The last time counted and its bucket: the tracker counts a tick's frames at one time.
-    last: Option<(Instant, u64)>,
 }
 
-impl PartialEq for Window {
-    /// Equal counts over the same buckets (the time cache aside).
-    fn eq(&self, o: &Self) -> bool {
-        (self.epoch, self.newest, self.first, self.counts) == (o.epoch, o.newest, o.first, o.counts)
+/// A time with its bucket number from an epoch, worked out once for every window counting
+/// from that epoch: the tracker counts each frame in two or three windows at the same time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamp {
+    epoch: Instant,
+    at: Instant,
+    bucket: u64,
+}
+
+impl Stamp {
+    /// `at`, for windows counting from `epoch`.
+    #[must_use]
+    pub fn new(epoch: Instant, at: Instant) -> Self {
+        Self {
+            epoch,
+            at,
+            bucket: bucket_of(epoch, at),
+        }
     }
+
+    /// The time.
+    #[must_use]
+    pub fn at(&self) -> Instant {
+        self.at
+    }
+}
+
+fn bucket_of(epoch: Instant, t: Instant) -> u64 {
+    // In whole milliseconds and u64: the tracker calls this for every frame, and a u128
+    // division of nanoseconds is a library call.
+    let d = t.saturating_duration_since(epoch);
+    (d.as_secs() * 1000 + u64::from(d.subsec_millis())) / BUCKET_MS
 }
 
 impl Window {
@@ -42,15 +67,11 @@ impl Window {
             newest: 0,
             first: None,
             counts: [(0, 0); BUCKETS],
-            last: None,
         }
     }
 
     fn bucket_of(&self, t: Instant) -> u64 {
-        // In whole milliseconds and u64: the tracker calls this for every frame, and a u128
-        // division of nanoseconds is a library call.
-        let d = t.saturating_duration_since(self.epoch);
-        (d.as_secs() * 1000 + u64::from(d.subsec_millis())) / BUCKET_MS
+        bucket_of(self.epoch, t)
     }
 
     /// Moves the window so that `bucket` is the newest, clearing what falls out.
@@ -67,13 +88,15 @@ impl Window {
 
     /// Counts `received` frames and `lost` missing ones at `t`.
     pub fn add(&mut self, t: Instant, received: u32, lost: u32) {
-        let b = match self.last {
-            Some((at, b)) if at == t => b,
-            _ => {
-                let b = self.bucket_of(t);
-                self.last = Some((t, b));
-                b
-            }
+        self.add_stamped(&Stamp::new(self.epoch, t), received, lost);
+    }
+
+    /// [`Window::add`] at a time whose bucket is already worked out.
+    pub fn add_stamped(&mut self, t: &Stamp, received: u32, lost: u32) {
+        let b = if t.epoch == self.epoch {
+            t.bucket
+        } else {
+            self.bucket_of(t.at)
         };
         self.advance(b);
         // A time older than the window (clock skew in a test) counts in the newest bucket.
