@@ -253,6 +253,27 @@ mod tests {
     }
 
     #[test]
+    fn the_sender_applies_nothing_until_a_run_waits() {
+        let (tx, rx) = tap(8, 8);
+        let gate = Arc::new(Gate::default());
+        gate.open.store(true, std::sync::atomic::Ordering::Relaxed);
+        rx.drain_inline(Arc::clone(&gate) as Arc<dyn Drain>, 3);
+        tx.send_run(&mut (0..2).map(tapped).collect());
+        assert!(
+            gate.took.lock().unwrap().is_empty(),
+            "two of a run of three were applied"
+        );
+        // The third makes a run: everything waiting is applied, in order.
+        tx.send_run(&mut vec![tapped(2)]);
+        assert_eq!(*gate.took.lock().unwrap(), vec![0, 1, 2]);
+        // Fewer than a run wait for the reader, who takes them.
+        tx.send_run(&mut vec![tapped(3)]);
+        let mut got = Vec::new();
+        assert!(rx.take(&mut got));
+        assert_eq!(seqs(&got), vec![3]);
+    }
+
+    #[test]
     fn the_sender_applies_what_waits_when_the_drain_is_free_and_leaves_it_otherwise() {
         let (tx, rx) = tap(8, 4);
         let gate = Arc::new(Gate::default());
