@@ -639,10 +639,12 @@ impl LinkEventHandler for SideHandler {
     }
 }
 
-/// The router's clock, read once per run: tokio's, which is the tracker's too, so a test that
-/// pauses tokio's clock moves rate limits, system id ownership and the tracker together. (While
-/// nothing pauses it, it is `std`'s `Instant::now`.)
-fn clock() -> Instant {
+/// The daemon's clock as a `std` instant, read by the router once per run: tokio's, which
+/// the tracker reads too ([`crate::vehicle::now`]), so a test that pauses tokio's clock moves
+/// rate limits, system id ownership and the tracker together. (While nothing pauses it, it is
+/// `std`'s `Instant::now`.)
+#[must_use]
+pub fn clock() -> Instant {
     tokio::time::Instant::now().into_std()
 }
 

@@ -11,10 +11,10 @@
 //!   time (the state's maps stay warm from one frame to the next), and the reader is not woken.
 //! - **By the reader, on its tick**: what was not applied inline (fewer than a run waited, or
 //!   the reader's state was busy: being published, or read by the terminal UI) waits in the
-//!   tap for the reader's next tick or for the sender's next run. A tap holding `wake_at` frames wakes its reader before
-//!   its tick ([`TapReceiver::filling`]): the reader's work comes in short runs however slow
-//!   its tick (a long run on a small machine holds a CPU that forwarding needs, and shows in
-//!   its latency), and a burst is not dropped.
+//!   tap for the reader's next tick or for the sender's next run. A tap holding `wake_at`
+//!   frames wakes its reader before its tick ([`TapReceiver::filling`]): the reader's work
+//!   comes in short runs however slow its tick (a long run on a small machine holds a CPU that
+//!   forwarding needs, and shows in its latency), and a burst is not dropped.
 
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 

@@ -38,10 +38,11 @@ pub const TAP_RUN: usize = 256;
 /// later run or for the tracker's tick, which publishes no sooner either way.
 pub const INLINE_RUN: usize = 32;
 
-/// The tracker's clock as a `std` instant: tokio's, so a paused test clock moves it.
+/// The tracker's clock as a `std` instant: the router's ([`crate::router::clock`]), tokio's,
+/// so a paused test clock moves it.
 #[must_use]
 pub fn now() -> Instant {
-    TokioInstant::now().into_std()
+    crate::router::clock()
 }
 
 /// The tracker's state, shared between its task and the router's thread (which applies
@@ -90,9 +91,8 @@ fn apply(core: &mut Core, history: &mut History, frames: &[Tapped]) {
 /// ([`UI_PERIOD`], [`HEADLESS_PERIOD`]) when something changed. The frames are applied by the
 /// router's thread in runs of [`INLINE_RUN`] as it routes them, whenever the state is free at
 /// that instant, and otherwise by this task from the tap, on its tick or when [`TAP_RUN`] of
-/// them wait; each at the time the router took it. `links`
-/// is the router's list of live links: a link that leaves it is forgotten, so its health does
-/// not go stale on screen.
+/// them wait; each at the time the router took it. `links` is the router's list of live
+/// links: a link that leaves it is forgotten, so its health does not go stale on screen.
 pub async fn run(
     period: Duration,
     tap: TapReceiver,

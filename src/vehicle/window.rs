@@ -180,6 +180,22 @@ mod tests {
     }
 
     #[test]
+    fn a_stamp_counts_in_its_bucket_whatever_epoch_it_was_made_for() {
+        let t0 = Instant::now();
+        let at = t0 + Duration::from_millis(1_100);
+        let mut own = Window::new(t0);
+        own.add_stamped(&Stamp::new(t0, at), 3, 1);
+        // A stamp made for another epoch is worked out again from its time.
+        let mut foreign = Window::new(t0);
+        foreign.add_stamped(&Stamp::new(t0 + Duration::from_millis(600), at), 3, 1);
+        let mut plain = Window::new(t0);
+        plain.add(at, 3, 1);
+        assert_eq!(own, plain);
+        assert_eq!(foreign, plain);
+        assert_eq!(plain.newest, 4, "1.1 s is bucket 4 of 250 ms");
+    }
+
+    #[test]
     fn young_window_is_not_diluted() {
         let t0 = Instant::now();
         let mut w = Window::new(t0);
