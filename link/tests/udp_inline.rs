@@ -220,3 +220,108 @@ fn a_runtime_shut_down_without_cancelling_does_not_wait_for_the_readers() {
         .recv_timeout(WAIT)
         .expect("the runtime's shutdown waited on a blocking reader");
 }
+
+/// The remote addresses of the IPv4 UDP sockets bound to `port`, from `/proc/net/udp`
+/// (`None`: not connected).
+fn remotes_of_port(port: u16) -> Vec<Option<std::net::SocketAddr>> {
+    let table = std::fs::read_to_string("/proc/net/udp").expect("Linux lists its UDP sockets");
+    let hex_addr = |s: &str| {
+        let (ip, port) = s.split_once(':').unwrap();
+        let ip = u32::from_str_radix(ip, 16).unwrap();
+        let port = u16::from_str_radix(port, 16).unwrap();
+        // The address is in the kernel's (network) byte order, printed as a host integer.
+        std::net::SocketAddr::from((std::net::Ipv4Addr::from(ip.swap_bytes()), port))
+    };
+    table
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let mut cols = l.split_whitespace().skip(1);
+            let (local, remote) = (hex_addr(cols.next()?), hex_addr(cols.next()?));
+            (local.port() == port).then_some((remote.port() != 0).then_some(remote))
+        })
+        .collect()
+}
+
+/// Waits until the sockets on `port` have these remote addresses (in any order).
+async fn wait_remotes(port: u16, want: &[Option<std::net::SocketAddr>], what: &str) {
+    let mut want = want.to_vec();
+    want.sort();
+    let fut = async {
+        loop {
+            let mut got = remotes_of_port(port);
+            got.sort();
+            if got == want {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    };
+    timeout(WAIT, fut).await.unwrap_or_else(|_| {
+        panic!(
+            "{what}: sockets on port {port}: {:?}",
+            remotes_of_port(port)
+        )
+    });
+}
+
+#[tokio::test]
+async fn a_udpout_socket_is_connected_while_its_destination_listens_and_hears_every_sender() {
+    // A port nobody listens on yet.
+    let dest = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let (events, mut ev) = inline();
+    let cancel = CancellationToken::new();
+    let ep = spawn_endpoint(
+        &url(&format!("udpout:{dest}")),
+        events,
+        LinkOptions::default(),
+        cancel.clone(),
+    )
+    .await
+    .unwrap();
+    let (id, _, tx) = wait_up(&mut ev).await;
+    let port = ep.local_addr().unwrap().port();
+    // One socket connected to the destination, one for every other sender.
+    wait_remotes(port, &[Some(dest), None], "at the start").await;
+
+    // Nobody listens: the kernel answers each datagram with an ICMP error, which a connected
+    // socket reports. The first one makes the link send with the address instead, and no
+    // datagram is lost to the errors.
+    for seq in 0..50 {
+        tx.try_send(hb(1, seq)).unwrap();
+    }
+    wait_remotes(port, &[None, None], "after a datagram nobody took").await;
+    let stats = tx.stats().snapshot();
+    assert_eq!((stats.tx_frames, stats.tx_errors), (50, 0));
+
+    // A listener comes: it gets the datagrams at once, and its first reply connects the
+    // socket again.
+    let remote = UdpSocket::bind(dest).await.unwrap();
+    tx.try_send(hb(1, 50)).unwrap();
+    let (d, from) = recv_datagram(&remote).await;
+    assert_eq!(d, hb(1, 50).as_bytes());
+    assert_eq!(from.port(), port);
+    remote.send_to(hb(2, 0).as_bytes(), from).await.unwrap();
+    assert_eq!(wait_frame(&mut ev, id).await, hb(2, 0));
+    wait_remotes(port, &[Some(dest), None], "after the destination replied").await;
+    tx.try_send(hb(1, 51)).unwrap();
+    assert_eq!(recv_datagram(&remote).await.0, hb(1, 51).as_bytes());
+    remote.send_to(hb(2, 1).as_bytes(), from).await.unwrap();
+    assert_eq!(wait_frame(&mut ev, id).await, hb(2, 1));
+
+    // Another sender, from another address, is heard on the same link.
+    let other = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    other.send_to(hb(3, 0).as_bytes(), from).await.unwrap();
+    assert_eq!(wait_frame(&mut ev, id).await, hb(3, 0));
+    assert_eq!(tx.stats().snapshot().tx_errors, 0);
+
+    cancel.cancel();
+    assert_eq!(wait_down(&mut ev, id).await, "shutdown");
+    timeout(WAIT, ep.join()).await.unwrap();
+    // The sender held the last reference to the socket.
+    drop(tx);
+    wait_remotes(port, &[], "after the link's end").await;
+}

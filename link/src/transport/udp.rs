@@ -28,6 +28,20 @@
 //! Either way a producer sends straight to a peer whose writer has nothing queued (one
 //! `sendto`, or one `sendmmsg` for a run of frames, never waiting), so the writer task only
 //! wakes when the socket buffer was full.
+//!
+//! An inline owner's **udpout socket is connected to its destination** ([`Connection`]): the
+//! kernel then keeps the route instead of looking it up for every datagram, ~0.7 µs of a
+//! `sendto`'s ~5 µs on the benchmark machine, once per frame and client. A connected socket
+//! hears only its destination, while a udpout link hears whatever arrives on its port
+//! (pymavlink does the same): a second, unconnected socket shares the port
+//! (`SO_REUSEPORT`) and takes the datagrams from any other address, on a task, since they are
+//! rare. With nobody listening at the destination, the kernel reports each datagram's ICMP
+//! "port unreachable" (or "host unreachable") to a connected socket as an error (Linux does
+//! not rate-limit them on loopback): the first one dissolves the connection, the datagram that
+//! met it is sent again with the address, so such a link costs and counts what an unconnected
+//! one does, and a datagram from the destination (a listener that answers) connects it again.
+//! Where any of this cannot be set up (a broadcast address, another OS) the link runs
+//! unconnected, on one socket.
 
 use std::collections::hash_map::Entry;
 use std::io::{self, IoSlice, IoSliceMut};
@@ -88,6 +102,13 @@ impl UdpSock {
         }
     }
 
+    fn fd(&self) -> BorrowedFd<'_> {
+        match self {
+            UdpSock::Async(s) => s.as_fd(),
+            UdpSock::Blocking(s) => s.as_fd(),
+        }
+    }
+
     /// Runs a non-blocking send; on a registered socket a `WouldBlock` also clears the write
     /// readiness, so that [`UdpSock::room`] waits for the next one.
     fn send_io<R>(&self, f: impl FnOnce(BorrowedFd<'_>) -> io::Result<R>) -> io::Result<R> {
@@ -119,21 +140,105 @@ pub(crate) struct DirectUdp {
     dest: SocketAddr,
     /// Frames handed to the writer's queue and not yet sent by it.
     pub(crate) queued: AtomicUsize,
+    /// A udpout socket connected to `dest`: send without an address while it is.
+    connection: Option<Arc<Connection>>,
+}
+
+/// Whether a udpout socket is connected to its destination; see the module's documentation.
+#[derive(Debug)]
+struct Connection {
+    dest: SocketAddr,
+    /// True while the socket is connected: sends go without an address.
+    on: AtomicBool,
+    /// Serialises connecting and dissolving, so that `on` is true only while the socket is
+    /// connected (a send may still meet a connection dissolved since it looked: it then sends
+    /// with the address).
+    change: std::sync::Mutex<()>,
+}
+
+impl Connection {
+    fn is_on(&self) -> bool {
+        self.on.load(Ordering::Relaxed)
+    }
+
+    /// Nobody listens at the destination (the kernel reported an ICMP error): send with the
+    /// address from now on, which the kernel does not answer with errors.
+    fn dissolve(&self, sock: &UdpSock) {
+        let Ok(_guard) = self.change.lock() else {
+            return;
+        };
+        if self.on.swap(false, Ordering::Relaxed) {
+            if let Err(e) = rustix::net::connect_unspec(sock.fd()) {
+                tracing::debug!(dest = %self.dest, "udp disconnect: {e}");
+            }
+            tracing::debug!(dest = %self.dest, "nobody listens: udpout socket unconnected");
+        }
+    }
+
+    /// A datagram came from the destination: connect again.
+    fn reconnect(&self, sock: &UdpSock) {
+        let Ok(_guard) = self.change.lock() else {
+            return;
+        };
+        if !self.is_on() {
+            match rustix::net::connect(sock.fd(), &self.dest) {
+                Ok(()) => {
+                    self.on.store(true, Ordering::Relaxed);
+                    tracing::debug!(dest = %self.dest, "udpout socket connected again");
+                }
+                Err(e) => tracing::debug!(dest = %self.dest, "udp connect: {e}"),
+            }
+        }
+    }
+}
+
+/// The errors the kernel reports to a connected socket from an ICMP message about an earlier
+/// datagram: nobody listens (or can be reached) at the destination.
+fn is_icmp_error(e: &io::Error) -> bool {
+    use rustix::io::Errno;
+    matches!(
+        Errno::from_io_error(e),
+        Some(Errno::CONNREFUSED | Errno::HOSTUNREACH | Errno::NETUNREACH | Errno::HOSTDOWN)
+    )
+}
+
+/// The errors of a send on a socket that is no longer connected.
+fn is_unconnected(e: &io::Error) -> bool {
+    matches!(
+        rustix::io::Errno::from_io_error(e),
+        Some(rustix::io::Errno::DESTADDRREQ | rustix::io::Errno::NOTCONN)
+    )
 }
 
 impl DirectUdp {
+    fn connected(&self) -> Option<&Connection> {
+        self.connection.as_deref().filter(|c| c.is_on())
+    }
+
+    /// One datagram: without the address on a connected socket.
+    fn send_one(&self, bytes: &[u8]) -> io::Result<usize> {
+        let flags = rustix::net::SendFlags::DONTWAIT;
+        if let Some(c) = self.connected() {
+            let sent = self
+                .sock
+                .send_io(|fd| rustix::net::send(fd, bytes, flags).map_err(io::Error::from));
+            match sent {
+                Err(e) if is_icmp_error(&e) => {
+                    // The error belongs to an earlier datagram; this one is still to send.
+                    c.dissolve(&self.sock);
+                }
+                Err(e) if is_unconnected(&e) => {}
+                r => return r,
+            }
+        }
+        self.sock.send_io(|fd| {
+            rustix::net::sendto(fd, bytes, flags, &self.dest).map_err(io::Error::from)
+        })
+    }
+
     /// Sends one datagram now if the socket has room: `None` when it would block.
     pub(crate) fn try_send_now(&self, frame: &Frame, stats: &LinkStats) -> Option<()> {
-        let sent = self.sock.send_io(|fd| {
-            rustix::net::sendto(
-                fd,
-                frame.as_bytes(),
-                rustix::net::SendFlags::DONTWAIT,
-                &self.dest,
-            )
-            .map_err(io::Error::from)
-        });
-        match sent {
+        match self.send_one(frame.as_bytes()) {
             Ok(n) => stats.add_tx(1, n),
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => return None,
             Err(e) => {
@@ -154,6 +259,8 @@ impl DirectUdp {
         }
         let addr = rustix::net::addr::SocketAddrArg::as_any(&self.dest);
         let mut done = 0;
+        // Without addresses while connected, until a send finds the connection gone.
+        let mut connected = self.connected();
         while done < frames.len() {
             let chunk = &frames[done..frames.len().min(done + SEND_BATCH)];
             let iovs: Vec<[IoSlice<'_>; 1]> =
@@ -163,7 +270,13 @@ impl DirectUdp {
             let mut msgs: Vec<rustix::net::MMsgHdr<'_>> = iovs
                 .iter()
                 .zip(no_control.iter_mut())
-                .map(|(iov, control)| rustix::net::MMsgHdr::new_with_addr(&addr, iov, control))
+                .map(|(iov, control)| {
+                    if connected.is_some() {
+                        rustix::net::MMsgHdr::new(iov, control)
+                    } else {
+                        rustix::net::MMsgHdr::new_with_addr(&addr, iov, control)
+                    }
+                })
                 .collect();
             let sent = self.sock.send_io(|fd| {
                 rustix::net::sendmmsg(fd, &mut msgs, rustix::net::SendFlags::DONTWAIT)
@@ -177,6 +290,13 @@ impl DirectUdp {
                     done += n;
                 }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) if connected.is_some() && is_icmp_error(&e) => {
+                    // An earlier datagram's error: nobody listens; these are still to send.
+                    if let Some(c) = connected.take() {
+                        c.dissolve(&self.sock);
+                    }
+                }
+                Err(e) if connected.is_some() && is_unconnected(&e) => connected = None,
                 Err(e) => {
                     // The first datagram of the call failed (ENOBUFS …): lost like any UDP
                     // datagram, counted, and the rest go on.
@@ -408,6 +528,7 @@ async fn udp_writer(
 fn udp_link(
     sock: &Arc<UdpSock>,
     dest: SocketAddr,
+    connection: Option<Arc<Connection>>,
     stats: &Arc<LinkStats>,
     opts: &LinkOptions,
     cancel: CancellationToken,
@@ -420,6 +541,7 @@ fn udp_link(
         sock: sock.clone(),
         dest,
         queued: AtomicUsize::new(0),
+        connection,
     });
     let sender =
         LinkSender::with_direct_udp(tx, stats.clone(), opts.accept.clone(), direct.clone());
@@ -473,8 +595,14 @@ impl Peers {
                 let id = LinkId::next();
                 let stats = Arc::new(LinkStats::default());
                 let writer_cancel = self.cancel.child_token();
-                let (tx, writer) =
-                    udp_link(&self.sock, addr, &stats, &self.opts, writer_cancel.clone());
+                let (tx, writer) = udp_link(
+                    &self.sock,
+                    addr,
+                    None,
+                    &stats,
+                    &self.opts,
+                    writer_cancel.clone(),
+                );
                 self.writers.spawn_on(writer, &self.runtime);
                 tracing::debug!(%id, %addr, "udp peer up");
                 let up = LinkEvent::Up {
@@ -614,12 +742,20 @@ struct Ring {
     stop: CancellationToken,
     wake: Arc<Wakeup>,
     alarm: Option<Alarm>,
+    /// The reader's socket, when the alarm cannot reach it (connected to another address):
+    /// shutting its receiving side down wakes the reader to stop.
+    shut: Option<std::net::UdpSocket>,
 }
 
 impl Ring {
     fn ring(&self) {
         if let Some(a) = &self.alarm {
             a.ring();
+        }
+        if let Some(s) = &self.shut
+            && self.wake.stopped()
+        {
+            let _ = rustix::net::shutdown(s, rustix::net::Shutdown::Read);
         }
     }
 }
@@ -635,11 +771,13 @@ impl Drop for Ring {
 /// Sets up the stop signal and the wake-ups of a blocking reader on `sock`: `cancel`, and also
 /// the end of the runtime (the task holding the [`Ring`] is dropped then), so a runtime shut
 /// down without cancelling never waits on the thread. Returns the stop token (for the
-/// reader's writers) and what the reader looks at.
+/// reader's writers) and what the reader looks at. `connected`: the socket hears only its
+/// destination, so it is woken to stop by shutting its receiving side down.
 fn blocking_wakeup(
     cancel: &CancellationToken,
     sock: &std::net::UdpSocket,
     idle: Option<Duration>,
+    connected: bool,
 ) -> (CancellationToken, Arc<Wakeup>) {
     let stop = cancel.child_token();
     let alarm = sock
@@ -668,8 +806,15 @@ fn blocking_wakeup(
         stop: stop.clone(),
         wake: Arc::clone(&wake),
         alarm: alarm.map(|(_, a)| a),
+        shut: if connected {
+            sock.try_clone()
+                .inspect_err(|e| tracing::debug!("udp reader stop: {e}"))
+                .ok()
+        } else {
+            None
+        },
     };
-    if ring.alarm.is_none() {
+    if ring.alarm.is_none() || (connected && ring.shut.is_none()) {
         let tick = idle.map_or(BLOCKING_TICK, |i| i.min(BLOCKING_TICK));
         if let Err(e) = sock.set_read_timeout(Some(tick)) {
             tracing::debug!("udp reader timeout: {e}");
@@ -726,7 +871,7 @@ pub(super) async fn spawn_udpin(
             let UdpSock::Blocking(s) = &*sock else {
                 unreachable!("an inline owner's socket is blocking")
             };
-            let (stop, wake) = blocking_wakeup(&cancel, s, Some(expiry_period(&opts)));
+            let (stop, wake) = blocking_wakeup(&cancel, s, Some(expiry_period(&opts)), false);
             let peers = Peers::new(sock, opts, stop);
             tokio::task::spawn_blocking(move || udpin_blocking(peers, &wake, &*handler))
         }
@@ -876,20 +1021,57 @@ pub(super) async fn spawn_udpout(
     } else {
         (Ipv6Addr::UNSPECIFIED, 0).into()
     };
-    let sock = bind(url, &[any], &events)?;
-    let local = local_addr(url, &sock)?;
+    // An inline owner's socket is connected, with a second one for the other senders.
+    let pair = match &events {
+        Events::Inline(_) => connected_pair(any, dest)
+            .inspect_err(|e| tracing::debug!(%url, "udpout unconnected: {e}"))
+            .ok(),
+        Events::Queue(_) => None,
+    };
+    let (sock, local, strays) = match pair {
+        Some((main, local, strays)) => {
+            let strays =
+                tokio::net::UdpSocket::from_std(strays).map_err(|source| LinkError::Io {
+                    url: url.to_string(),
+                    source,
+                })?;
+            let connection = Arc::new(Connection {
+                dest,
+                on: AtomicBool::new(true),
+                change: std::sync::Mutex::new(()),
+            });
+            (
+                Arc::new(UdpSock::Blocking(main)),
+                local,
+                Some((strays, connection)),
+            )
+        }
+        None => {
+            let sock = bind(url, &[any], &events)?;
+            let local = local_addr(url, &sock)?;
+            (sock, local, None)
+        }
+    };
+    let connection = strays.as_ref().map(|(_, c)| Arc::clone(c));
     let id = LinkId::next();
-    tracing::info!(%url, %local, %id, "udpout sending to {dest}");
+    tracing::info!(%url, %local, %id, connected = connection.is_some(), "udpout sending to {dest}");
     let stats = Arc::new(LinkStats::default());
     let (cancel, wake) = match (&events, &*sock) {
         (Events::Inline(_), UdpSock::Blocking(s)) => {
-            let (stop, wake) = blocking_wakeup(&cancel, s, None);
+            let (stop, wake) = blocking_wakeup(&cancel, s, None, connection.is_some());
             (stop, Some(wake))
         }
         _ => (cancel, None),
     };
     let writer_cancel = cancel.child_token();
-    let (tx, writer) = udp_link(&sock, dest, &stats, &opts, writer_cancel.clone());
+    let (tx, writer) = udp_link(
+        &sock,
+        dest,
+        connection.clone(),
+        &stats,
+        &opts,
+        writer_cancel.clone(),
+    );
     let writer = tokio::spawn(writer);
     let up = LinkEvent::Up {
         id,
@@ -900,6 +1082,7 @@ pub(super) async fn spawn_udpout(
         id,
         sock,
         wake,
+        connection,
         stats,
         writer,
         writer_cancel,
@@ -910,7 +1093,29 @@ pub(super) async fn spawn_udpout(
             let runtime = tokio::runtime::Handle::current();
             tokio::task::spawn_blocking(move || {
                 let reason = if handler.event(up) {
-                    udpout_blocking(&link, &*handler)
+                    let strays = strays.map(|(sock, connection)| {
+                        let stop = link.cancel.child_token();
+                        let task = runtime.spawn(udpout_strays(
+                            Strays {
+                                sock,
+                                connection,
+                                main: Arc::clone(&link.sock),
+                                alarm: link.wake.as_ref().and_then(|w| w.alarm),
+                                id,
+                                stats: Arc::clone(&link.stats),
+                                handler: Arc::clone(&handler),
+                            },
+                            stop.clone(),
+                        ));
+                        (stop, task)
+                    });
+                    let reason = udpout_blocking(&link, &*handler);
+                    // No frame after the link's end.
+                    if let Some((stop, task)) = strays {
+                        stop.cancel();
+                        let _ = runtime.block_on(task);
+                    }
+                    reason
                 } else {
                     "shutdown".to_string()
                 };
@@ -939,6 +1144,8 @@ struct UdpOut {
     sock: Arc<UdpSock>,
     /// A blocking reader's stop and wake-ups.
     wake: Option<Arc<Wakeup>>,
+    /// The socket is connected to the destination ([`Connection`]).
+    connection: Option<Arc<Connection>>,
     stats: Arc<LinkStats>,
     writer: JoinHandle<()>,
     writer_cancel: CancellationToken,
@@ -965,6 +1172,12 @@ fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
                     if wake.is_alarm(from) {
                         continue;
                     }
+                    if let Some(c) = &link.connection
+                        && from == Some(c.dest)
+                        && !c.is_on()
+                    {
+                        c.reconnect(&link.sock);
+                    }
                     link.stats.add_rx_bytes(data.len());
                     decoder.push_final_with(data, |frame| frames.push((link.id, frame)));
                     link.stats.add_decode(&decoder.take_stats());
@@ -978,15 +1191,110 @@ fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
                     e.kind(),
                     io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
                 ) => {}
+            Err(_) if wake.stopped() => break,
+            Err(e) if is_icmp_error(&e) && link.connection.is_some() => {
+                // Nobody listens at the destination: an error per datagram from now on,
+                // unless the socket sends with the address instead.
+                if let Some(c) = &link.connection {
+                    c.dissolve(&link.sock);
+                }
+            }
             Err(e) => {
-                // Linux reports ECONNREFUSED only on connected sockets, others may report it
-                // here when nobody listens yet: keep going, slowly.
+                // Other systems may report ECONNREFUSED on unconnected sockets too, when
+                // nobody listens yet: keep going, slowly.
                 tracing::debug!(id = %link.id, "udpout receive error: {e}");
                 std::thread::sleep(RECV_ERROR_PAUSE);
             }
         }
     }
     "shutdown".to_string()
+}
+
+/// A socket bound to the port of a socket connected to `dest`, with `SO_REUSEPORT` on both:
+/// the kernel gives the connected one the datagrams from `dest` and this one the others.
+/// Returns the connected socket (blocking, for a reader thread), the port's address as bound
+/// (before the connection made it specific) and the other socket (non-blocking).
+fn connected_pair(
+    any: SocketAddr,
+    dest: SocketAddr,
+) -> io::Result<(std::net::UdpSocket, SocketAddr, std::net::UdpSocket)> {
+    let shared = |addr: SocketAddr| -> io::Result<std::net::UdpSocket> {
+        let family = if addr.is_ipv4() {
+            rustix::net::AddressFamily::INET
+        } else {
+            rustix::net::AddressFamily::INET6
+        };
+        let fd = rustix::net::socket_with(
+            family,
+            rustix::net::SocketType::DGRAM,
+            rustix::net::SocketFlags::CLOEXEC,
+            None,
+        )?;
+        rustix::net::sockopt::set_socket_reuseport(&fd, true)?;
+        rustix::net::bind(&fd, &addr)?;
+        let sock = std::net::UdpSocket::from(fd);
+        grow_recv_buffer(&sock);
+        Ok(sock)
+    };
+    // The connected socket binds the port by number: one bound to port 0 would give it up
+    // when its connection is dissolved, and send from another.
+    let strays = shared(any)?;
+    let local = strays.local_addr()?;
+    let main = shared(local)?;
+    strays.set_nonblocking(true)?;
+    main.connect(dest)?;
+    main.set_read_timeout(Some(BLOCKING_TICK))?;
+    Ok((main, local, strays))
+}
+
+/// What the second socket of a connected udpout link needs ([`udpout_strays`]).
+struct Strays {
+    sock: tokio::net::UdpSocket,
+    connection: Arc<Connection>,
+    /// The connected socket, to connect again when the destination is heard here.
+    main: Arc<UdpSock>,
+    /// The reader's alarm: its datagrams land here, and are not traffic.
+    alarm: Option<SocketAddr>,
+    id: LinkId,
+    stats: Arc<LinkStats>,
+    handler: Arc<dyn LinkEventHandler>,
+}
+
+/// Hears what reaches a connected udpout link's port from other addresses than its
+/// destination, and the destination's own datagrams while the connection is dissolved (the
+/// kernel then shares them between the two sockets). Rare, so a task rather than a thread.
+async fn udpout_strays(s: Strays, stop: CancellationToken) {
+    let mut decoder = FrameDecoder::new();
+    let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
+    let mut frames: Vec<(LinkId, Frame)> = Vec::new();
+    loop {
+        let r = tokio::select! {
+            () = stop.cancelled() => return,
+            r = s.sock.recv_from(&mut buf) => r,
+        };
+        let (n, from) = match r {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::debug!(id = %s.id, "udpout receive error: {e}");
+                if !sleep_or_cancel(RECV_ERROR_PAUSE, &stop).await {
+                    return;
+                }
+                continue;
+            }
+        };
+        if Some(from) == s.alarm {
+            continue;
+        }
+        if from == s.connection.dest {
+            s.connection.reconnect(&s.main);
+        }
+        s.stats.add_rx_bytes(n);
+        decoder.push_final_with(&buf[..n], |frame| frames.push((s.id, frame)));
+        s.stats.add_decode(&decoder.take_stats());
+        if !frames.is_empty() && !s.handler.frames(&mut frames) {
+            return;
+        }
+    }
 }
 
 /// Hears a udpout peer's replies in a task; returns why it stopped.
