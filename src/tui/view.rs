@@ -125,14 +125,13 @@ impl SeriesCache {
             .frames
             .get(&(key.system, key.component, key.message));
         if let Some(frames) = frames {
-            let oldest = frames.front().map_or(0.0, |f| f.t_s);
+            let oldest = frames.oldest_t_s().unwrap_or(0.0);
             entry.1.retain(|(t, _)| *t >= oldest);
-            let seen = entry.0;
-            for TimedFrame { index, t_s, frame } in frames.iter().filter(|f| f.index >= seen) {
+            for TimedFrame { index, t_s, frame } in frames.since(entry.0) {
                 if let Ok(msg) = frame.decode()
                     && let Some(v) = fields::value_at(&msg, &key.path)
                 {
-                    entry.1.push((*t_s, v));
+                    entry.1.push((t_s, v));
                 }
                 entry.0 = index + 1;
             }

@@ -13,6 +13,8 @@ use foldhash::HashMap;
 use vtol_link::Frame;
 use vtol_link::dialect::MavMessage;
 
+use super::window::Stamp;
+
 /// How far back the history reaches (the charts' window can be set up to this).
 pub const KEEP: Duration = Duration::from_secs(120);
 /// Most raw frames kept per message id and sender (82 s of a 50 Hz message).
@@ -48,6 +50,95 @@ pub struct TimedFrame {
     pub frame: Frame,
 }
 
+/// Where one recorded frame's bytes are in its ring.
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    index: u64,
+    t_s: f64,
+    /// Position of the first byte, counted over every byte the ring ever took.
+    start: u64,
+    len: u32,
+}
+
+/// The recorded frames of one message id and sender, oldest first: their bytes back to back in
+/// one ring, not the frames themselves.
+///
+/// A frame kept by reference would keep its allocation alive until it leaves the ring, 4 096
+/// frames later: at 10 000 frames a second the tracker would then release, with an atomic
+/// operation and a `free`, a frame that left every cache long ago, once per frame. Copied, a
+/// frame's allocation is released as soon as routing, the tlog and the tracker are done with
+/// it, and the ring's memory is written in order.
+#[derive(Debug, Clone, Default)]
+pub struct FrameRing {
+    slots: VecDeque<Slot>,
+    bytes: VecDeque<u8>,
+    /// Position of `bytes[0]`, counted as [`Slot::start`] is.
+    first_byte: u64,
+}
+
+impl FrameRing {
+    /// Frames kept.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Whether no frame is kept.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// Time of the oldest frame kept.
+    #[must_use]
+    pub fn oldest_t_s(&self) -> Option<f64> {
+        self.slots.front().map(|s| s.t_s)
+    }
+
+    /// Index of the newest frame kept.
+    #[must_use]
+    pub fn newest_index(&self) -> Option<u64> {
+        self.slots.back().map(|s| s.index)
+    }
+
+    /// The frames kept whose index is `index` or later, oldest first.
+    pub fn since(&self, index: u64) -> impl Iterator<Item = TimedFrame> + '_ {
+        let from = self.slots.partition_point(|s| s.index < index);
+        self.slots.range(from..).filter_map(|s| {
+            // Offsets of a slot kept are inside `bytes`: both rings drop from the front together.
+            let at = usize::try_from(s.start - self.first_byte).ok()?;
+            let bytes: Vec<u8> = self.bytes.range(at..at + s.len as usize).copied().collect();
+            // The bytes were a whole frame when they were routed: this only wraps them again.
+            let frame = Frame::from_bytes(bytes.into()).ok()?;
+            Some(TimedFrame {
+                index: s.index,
+                t_s: s.t_s,
+                frame,
+            })
+        })
+    }
+
+    /// Drops the frames older than `oldest` s and makes room for one more, then keeps `frame`.
+    fn push(&mut self, index: u64, t_s: f64, oldest: f64, frame: &[u8]) {
+        while self.slots.len() >= MAX_FRAMES || self.slots.front().is_some_and(|s| s.t_s < oldest) {
+            let Some(gone) = self.slots.pop_front() else {
+                break;
+            };
+            let n = gone.len as usize;
+            self.bytes.drain(..n);
+            self.first_byte += n as u64;
+        }
+        let len = u32::try_from(frame.len()).expect("a MAVLink frame is under 300 bytes");
+        self.slots.push_back(Slot {
+            index,
+            t_s,
+            start: self.first_byte + self.bytes.len() as u64,
+            len,
+        });
+        self.bytes.extend(frame);
+    }
+}
+
 /// Everything the charts can draw.
 #[derive(Debug, Clone)]
 pub struct History {
@@ -56,7 +147,7 @@ pub struct History {
     /// Typed series per vehicle (system, component).
     pub vehicles: BTreeMap<(vtol_link::SystemId, vtol_link::ComponentId), VehicleHistory>,
     /// Raw frames per (system, component, message id).
-    pub frames: HashMap<(vtol_link::SystemId, vtol_link::ComponentId, u32), VecDeque<TimedFrame>>,
+    pub frames: HashMap<(vtol_link::SystemId, vtol_link::ComponentId, u32), FrameRing>,
     next_index: u64,
     /// The last arrival time recorded and its [`History::t_s`]: a tick's frames share one.
     last_at: Option<(Instant, f64)>,
@@ -100,20 +191,30 @@ impl History {
                 t_s
             }
         };
-        let key = frame.sender();
-        let ring = self
-            .frames
-            .entry((key.0, key.1, frame.message_id()))
-            .or_default();
-        let oldest = t_s - KEEP.as_secs_f64();
-        while ring.len() >= MAX_FRAMES || ring.front().is_some_and(|f| f.t_s < oldest) {
-            ring.pop_front();
+        self.record_t(frame, decoded, t_s);
+    }
+
+    /// [`History::record`] at a time the tracker stamped already (one clock difference a frame
+    /// for both).
+    pub fn record_stamped(&mut self, frame: &Frame, decoded: Option<&MavMessage>, at: &Stamp) {
+        if at.epoch() == self.epoch {
+            self.record_t(frame, decoded, at.since_epoch_s());
+        } else {
+            self.record(frame, decoded, at.at());
         }
-        ring.push_back(TimedFrame {
-            index: self.next_index,
-            t_s,
-            frame: frame.clone(),
-        });
+    }
+
+    fn record_t(&mut self, frame: &Frame, decoded: Option<&MavMessage>, t_s: f64) {
+        let key = frame.sender();
+        self.frames
+            .entry((key.0, key.1, frame.message_id()))
+            .or_default()
+            .push(
+                self.next_index,
+                t_s,
+                t_s - KEEP.as_secs_f64(),
+                frame.as_bytes(),
+            );
         self.next_index += 1;
         let Some(msg) = decoded else { return };
         match msg {
@@ -187,6 +288,54 @@ mod tests {
         assert_eq!(att.back().unwrap().1[0], 9999.0);
         let frames = &h.frames[&(vtol_link::SystemId(1), vtol_link::ComponentId(1), 30)];
         assert_eq!(frames.len(), MAX_FRAMES);
-        assert_eq!(frames.back().unwrap().index, 9999);
+        assert_eq!(frames.newest_index(), Some(9999));
+        // The frames come back as they were recorded, and only from the index asked for.
+        let back: Vec<TimedFrame> = frames.since(9998).collect();
+        assert_eq!(back.len(), 2);
+        assert_eq!(back[0].index, 9998);
+        assert!((back[1].t_s - 199.98).abs() < 1e-9, "{}", back[1].t_s);
+        let sent = Frame::encode_v2(1, 1, (9999 % 256) as u8, &attitude(9999.0));
+        assert_eq!(back[1].frame.as_bytes(), sent.as_bytes());
+        assert_eq!(frames.since(0).count(), MAX_FRAMES);
+    }
+
+    #[test]
+    fn frames_of_any_length_come_back_whole_after_the_oldest_left() {
+        let t0 = Instant::now();
+        let mut h = History::new(t0);
+        let text = |i: usize| {
+            let mut t = [0u8; 50];
+            for (j, c) in t.iter_mut().take(i % 50).enumerate() {
+                *c = b'a' + (j % 26) as u8;
+            }
+            MavMessage::STATUSTEXT(dialect::STATUSTEXT_DATA {
+                severity: dialect::MavSeverity::MAV_SEVERITY_INFO,
+                text: t.into(),
+                ..Default::default()
+            })
+        };
+        // One frame every 50 ms for 300 s: only the last 120 s stay (2 400 frames, under the
+        // count cap), and their lengths differ frame to frame.
+        let sent: Vec<Frame> = (0..6000)
+            .map(|i| Frame::encode_v2(1, 1, (i % 256) as u8, &text(i)))
+            .collect();
+        for (i, f) in sent.iter().enumerate() {
+            h.record(f, None, t0 + Duration::from_millis(i as u64 * 50));
+        }
+        let ring = &h.frames[&(vtol_link::SystemId(1), vtol_link::ComponentId(1), 253)];
+        let kept: Vec<TimedFrame> = ring.since(0).collect();
+        assert_eq!(kept.len(), ring.len());
+        assert!((2399..=2401).contains(&kept.len()), "{}", kept.len());
+        let first = 6000 - kept.len();
+        for (k, f) in kept.iter().enumerate() {
+            assert_eq!(f.index, (first + k) as u64);
+            assert_eq!(
+                f.frame.as_bytes(),
+                sent[first + k].as_bytes(),
+                "frame {}",
+                first + k
+            );
+        }
+        assert!(sent.iter().map(Frame::len).min() < sent.iter().map(Frame::len).max());
     }
 }

@@ -81,8 +81,9 @@ fn apply(core: &mut Core, history: &mut History, frames: &[Tapped]) {
         return;
     }
     for t in frames {
-        let msg = core.state.apply(t.link, t.side, &t.frame, t.at);
-        history.record(&t.frame, msg.as_ref(), t.at);
+        let stamp = core.state.stamp(t.at);
+        let msg = core.state.apply_stamped(t.link, t.side, &t.frame, &stamp);
+        history.record_stamped(&t.frame, msg.as_ref(), &stamp);
     }
     core.dirty = true;
 }
@@ -403,7 +404,7 @@ mod tests {
             .unwrap()
             .frames
             .values()
-            .map(std::collections::VecDeque::len)
+            .map(history::FrameRing::len)
             .sum();
         assert_eq!(
             recorded, TAP_RUN,

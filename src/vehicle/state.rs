@@ -269,14 +269,30 @@ impl VehicleState {
         frame: &Frame,
         now: Instant,
     ) -> Option<MavMessage> {
+        let stamp = self.stamp(now);
+        self.apply_stamped(link, side, frame, &stamp)
+    }
+
+    /// `now` with its window bucket, for [`VehicleState::apply_stamped`] and the history.
+    pub fn stamp(&mut self, now: Instant) -> Stamp {
+        match self.stamp {
+            Some(s) if s.at() == now && s.epoch() == self.epoch => s,
+            _ => *self.stamp.insert(Stamp::new(self.epoch, now)),
+        }
+    }
+
+    /// [`VehicleState::apply`] at a time already stamped.
+    pub fn apply_stamped(
+        &mut self,
+        link: LinkId,
+        side: Side,
+        frame: &Frame,
+        stamp: &Stamp,
+    ) -> Option<MavMessage> {
         if !self.down.is_empty() && self.down.contains(&link) {
             return None;
         }
-        let epoch = self.epoch;
-        let stamp = match self.stamp {
-            Some(s) if s.at() == now => s,
-            _ => *self.stamp.insert(Stamp::new(epoch, now)),
-        };
+        let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
         let lost = self.account(link, side, frame, &stamp);
         let key = frame.sender();
         if let Some(v) = self.vehicles.get_mut(&key) {

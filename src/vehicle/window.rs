@@ -30,6 +30,8 @@ pub struct Window {
 pub struct Stamp {
     epoch: Instant,
     at: Instant,
+    /// `at - epoch` (zero for a time before the epoch).
+    since: Duration,
     bucket: u64,
 }
 
@@ -37,10 +39,12 @@ impl Stamp {
     /// `at`, for windows counting from `epoch`.
     #[must_use]
     pub fn new(epoch: Instant, at: Instant) -> Self {
+        let since = at.saturating_duration_since(epoch);
         Self {
             epoch,
             at,
-            bucket: bucket_of(epoch, at),
+            since,
+            bucket: bucket_since(since),
         }
     }
 
@@ -49,12 +53,27 @@ impl Stamp {
     pub fn at(&self) -> Instant {
         self.at
     }
+
+    /// The epoch the stamp counts from.
+    #[must_use]
+    pub fn epoch(&self) -> Instant {
+        self.epoch
+    }
+
+    /// Seconds from the epoch to the time (0 for a time before the epoch).
+    #[must_use]
+    pub fn since_epoch_s(&self) -> f64 {
+        self.since.as_secs_f64()
+    }
 }
 
 fn bucket_of(epoch: Instant, t: Instant) -> u64 {
+    bucket_since(t.saturating_duration_since(epoch))
+}
+
+fn bucket_since(d: Duration) -> u64 {
     // In whole milliseconds and u64: the tracker calls this for every frame, and a u128
     // division of nanoseconds is a library call.
-    let d = t.saturating_duration_since(epoch);
     (d.as_secs() * 1000 + u64::from(d.subsec_millis())) / BUCKET_MS
 }
 
