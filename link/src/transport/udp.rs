@@ -367,8 +367,16 @@ impl Datagrams {
     /// One `recvfrom` into the first slot.
     fn recv_one(&mut self, sock: &std::net::UdpSocket) -> io::Result<usize> {
         self.got.clear();
-        let (n, addr) = sock.recv_from(&mut self.buf[..MAX_DATAGRAM_BYTES])?;
-        self.got.push((n, Some(addr)));
+        // Not `UdpSocket::recv_from`: a socket whose receiving side was shut down (how a
+        // connected reader is told to stop) returns without a sender address, which the
+        // standard library asserts never happens.
+        let (n, _, addr) = rustix::net::recvfrom(
+            sock,
+            &mut self.buf[..MAX_DATAGRAM_BYTES],
+            rustix::net::RecvFlags::empty(),
+        )?;
+        self.got
+            .push((n, addr.and_then(|a| SocketAddr::try_from(a).ok())));
         Ok(1)
     }
 
@@ -1333,6 +1341,21 @@ async fn udpout_task(link: &UdpOut, events: &Events) -> String {
 mod tests {
     use super::*;
     use rustix::net::sockopt::socket_recv_buffer_size;
+
+    #[test]
+    fn a_reader_shut_down_wakes_with_an_empty_receive_and_no_sender() {
+        // How a connected udpout reader is stopped: its receive returns with nothing, and no
+        // address (which `UdpSocket::recv_from` would panic on).
+        let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        sock.connect(peer.local_addr().unwrap()).unwrap();
+        rustix::net::shutdown(&sock, rustix::net::Shutdown::Read).unwrap();
+        let mut d = Datagrams::new(4);
+        let (n, _) = d.recv(&sock).unwrap();
+        assert_eq!(n, 1);
+        let got: Vec<_> = d.iter().collect();
+        assert_eq!(got, vec![(&[][..], None)]);
+    }
 
     /// What the kernel will grant without privileges: `net.core.rmem_max`, reported doubled.
     fn grantable() -> usize {
