@@ -96,10 +96,19 @@ enum Verdict {
     Skip { bad_crc: bool },
 }
 
+/// Bytes of frame storage taken at a time for frames read straight from datagrams (about 100
+/// ATTITUDE frames). A block is freed when the last frame in it is; a frame kept for long (the
+/// tracker's last frame of a message) keeps its block, so blocks stay small.
+const ARENA_BYTES: usize = 4096;
+
 /// Streaming MAVLink v1/v2 frame parser. See the module documentation for the rules.
 #[derive(Debug, Default)]
 pub struct FrameDecoder {
     buf: BytesMut,
+    /// Where [`FrameDecoder::push_final_with`] copies the frames it reads straight from a
+    /// datagram: one allocation of [`ARENA_BYTES`] holds the next frames, each a [`Bytes`] view
+    /// sharing its reference count, instead of an allocation per frame.
+    arena: BytesMut,
     stats: DecodeStats,
     /// Set while [`FrameDecoder::finish`] drains: no more bytes will come.
     eof: bool,
@@ -154,8 +163,8 @@ impl FrameDecoder {
     /// Decodes one whole datagram (or any input known to end at its last byte): the bytes
     /// buffered so far, then `data`, as if followed by [`FrameDecoder::finish_with`]. With
     /// nothing buffered (always, for a decoder that only ever sees whole datagrams) the frames
-    /// are read straight from `data`, each copied into one allocation of its own, instead of
-    /// through the stream buffer.
+    /// are read straight from `data` and each copied into the decoder's arena, instead of
+    /// going through the stream buffer.
     pub fn push_final_with(&mut self, data: &[u8], mut each: impl FnMut(Frame)) {
         if !self.buf.is_empty() {
             self.push(data);
@@ -176,7 +185,7 @@ impl FrameDecoder {
                     if !verified {
                         self.stats.unknown_id += 1;
                     }
-                    each(Frame::from_checked(frame_bytes(&rest[..len]), verified));
+                    each(Frame::from_checked(self.copy_out(&rest[..len]), verified));
                     len
                 }
                 Verdict::DropFrame { len } => {
@@ -204,6 +213,16 @@ impl FrameDecoder {
             each(frame);
         }
         self.eof = false;
+    }
+
+    /// `frame`'s bytes in the arena.
+    fn copy_out(&mut self, frame: &[u8]) -> Bytes {
+        // The arena is empty between frames: everything written to it was split off.
+        if self.arena.capacity() < frame.len() {
+            self.arena = BytesMut::with_capacity(ARENA_BYTES.max(frame.len()));
+        }
+        self.arena.extend_from_slice(frame);
+        self.arena.split().freeze()
     }
 
     /// The next complete frame, or `None` if more bytes are needed.
@@ -241,40 +260,6 @@ impl FrameDecoder {
                 }
             }
         }
-    }
-}
-
-/// A frame's bytes in one allocation that also holds the reference count: the common small
-/// frames inline, larger ones in a buffer of their own.
-fn frame_bytes(frame: &[u8]) -> Bytes {
-    match SmallFrame::new(frame) {
-        Some(small) => Bytes::from_owner(small),
-        None => Bytes::copy_from_slice(frame),
-    }
-}
-
-/// Bytes of a frame of up to [`SmallFrame::CAP`] bytes (ATTITUDE is 40, a heartbeat 21).
-struct SmallFrame {
-    len: u8,
-    data: [u8; SmallFrame::CAP],
-}
-
-impl SmallFrame {
-    const CAP: usize = 64;
-
-    fn new(frame: &[u8]) -> Option<SmallFrame> {
-        let len = u8::try_from(frame.len())
-            .ok()
-            .filter(|&n| usize::from(n) <= Self::CAP)?;
-        let mut data = [0u8; Self::CAP];
-        data[..frame.len()].copy_from_slice(frame);
-        Some(SmallFrame { len, data })
-    }
-}
-
-impl AsRef<[u8]> for SmallFrame {
-    fn as_ref(&self) -> &[u8] {
-        &self.data[..usize::from(self.len)]
     }
 }
 
@@ -368,6 +353,31 @@ mod tests {
         let id = 0x00_AB_CD;
         assert!(crc_extra(id).is_none());
         Frame::encode_raw_v2(1, 1, seq, id, payload, 0x55).unwrap()
+    }
+
+    #[test]
+    fn datagram_frames_stay_whole_while_the_decoder_moves_on_through_its_arena() {
+        // Frames of 21 to 255+ bytes over many datagrams: many arena blocks, frames kept
+        // from the first blocks to the last.
+        let mut d = FrameDecoder::new();
+        let (mut sent, mut got) = (Vec::new(), Vec::new());
+        for i in 0..2000u32 {
+            let seq = (i % 256) as u8;
+            let payload: Vec<u8> = (0..(i % 200) as u8).map(|b| b ^ seq).collect();
+            let frames = [hb(seq), unknown_frame(seq, &payload)];
+            let dgram: Vec<u8> = frames.iter().flat_map(|f| f.as_bytes().to_vec()).collect();
+            d.push_final_with(&dgram, |f| got.push(f));
+            sent.extend(frames);
+        }
+        assert_eq!(got.len(), sent.len());
+        for (k, (a, b)) in sent.iter().zip(&got).enumerate() {
+            assert_eq!(a.as_bytes(), b.as_bytes(), "frame {k}");
+        }
+        // Dropping most of them frees their blocks; the ones kept stay whole.
+        let kept: Vec<Frame> = got.into_iter().step_by(997).collect();
+        for (k, f) in kept.iter().enumerate() {
+            assert_eq!(f.as_bytes(), sent[k * 997].as_bytes());
+        }
     }
 
     fn decode_all(bytes: &[u8]) -> (Vec<Frame>, DecodeStats) {
