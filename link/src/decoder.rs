@@ -357,7 +357,7 @@ mod tests {
 
     #[test]
     fn datagram_frames_stay_whole_while_the_decoder_moves_on_through_its_arena() {
-        // Frames of 21 to 255+ bytes over many datagrams: many arena blocks, frames kept
+        // Frames of 21 to 213 bytes over many datagrams: many arena blocks, frames kept
         // from the first blocks to the last.
         let mut d = FrameDecoder::new();
         let (mut sent, mut got) = (Vec::new(), Vec::new());
