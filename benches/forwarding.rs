@@ -32,8 +32,11 @@
 //! Latency percentiles are per phase. One forwarder runs at a time. `FORWARDING_INTERLEAVE=1`
 //! (diagnostic) runs both at once instead, and the paced phases in turns of 1 s of traffic in
 //! alternating order (bare, daemon, daemon, bare, …) until each has had the phase's time, so
-//! both meet the same machine noise; each one's CPU is then counted over the whole phase, its
-//! idle turns included, and each turn's first frames meet a forwarder idle for a second. CPU % is of one core (100 % = one core busy); CPU
+//! both meet the same machine noise; each turn follows 0.1 s of uncounted traffic to the same
+//! forwarder (so that it does not meet a forwarder idle for a second), and each one's CPU is
+//! counted over its counted turns. Every phase also reports the host's steal time (`steal` in
+//! /proc/stat): a busy hypervisor stalls CPUs for milliseconds, and the frames waiting on a
+//! stalled CPU make the p99. CPU % is of one core (100 % = one core busy); CPU
 //! ns/frame is the forwarder's CPU time over the phase divided by the frames it forwarded
 //! (delivered copies / clients); context switches per frame are summed over all of the
 //! forwarder's threads (`/proc/<pid>/task/*/status`, voluntary and non-voluntary); peak RSS is
@@ -282,6 +285,14 @@ struct Used {
     cpu_s: f64,
     voluntary: u64,
     involuntary: u64,
+}
+
+impl Used {
+    fn add(&mut self, other: Used) {
+        self.cpu_s += other.cpu_s;
+        self.voluntary += other.voluntary;
+        self.involuntary += other.involuntary;
+    }
 }
 
 impl CpuSample {
@@ -573,6 +584,10 @@ struct PhaseResult {
     /// on it, whichever forwarder runs: the p99 latencies are only comparable when this is
     /// near 0.
     steal_pct: f64,
+    /// Interrupts between the machine's CPUs (rescheduling, function call and TLB shootdown
+    /// IPIs, from /proc/interrupts) per frame forwarded: on a virtual machine, each one to a
+    /// halted CPU waits for the host to run that CPU again.
+    ipi_per_frame: f64,
 }
 
 fn generate(sock: &UdpSocket, phase: u32, load: Load) -> (u64, u64, u64) {
@@ -611,6 +626,8 @@ struct Tally {
     sink_drops: u64,
     /// Σ over slices of the machine's steal jiffies.
     steal_jiffies: u64,
+    /// Σ over slices of the machine's interrupts between CPUs.
+    ipis: u64,
 }
 
 /// Sends `load` through `fwd` as phase `phase` and adds what arrived to `tally`.
@@ -636,11 +653,13 @@ fn run_slice(
     };
     let (in0, sink0) = drops(fwd);
     let steal0 = steal_jiffies();
+    let ipi0 = ipis();
     let t0 = Instant::now();
     let (sent, first_send, last_send) = generate(gen_sock, phase, load);
     let accs = sinks.settle(sent * n, Duration::from_millis(300));
     tally.wall_s += t0.elapsed().as_secs_f64();
     tally.steal_jiffies += steal_jiffies().saturating_sub(steal0);
+    tally.ipis += ipis().saturating_sub(ipi0);
     let (in1, sink1) = drops(fwd);
     let delivered: u64 = accs.iter().map(|a| a.count).sum();
     let last_rx = accs.iter().map(|a| a.last_ns).max().unwrap_or(first_send);
@@ -697,6 +716,7 @@ fn phase_result(mut t: Tally, used: Used, clients: usize) -> PhaseResult {
         ingress_drops: t.ingress_drops,
         sink_drops: t.sink_drops,
         steal_pct: 100.0 * t.steal_jiffies as f64 / (t.wall_s.max(1e-9) * JIFFIES_PER_S * cpus()),
+        ipi_per_frame: t.ipis as f64 / frames,
     }
 }
 
@@ -717,10 +737,15 @@ fn run_phase(
 /// Length of one forwarder's turn in an interleaved paced phase (`FORWARDING_INTERLEAVE=1`), s.
 const TURN_S: f64 = 1.0;
 
+/// Traffic a forwarder gets before each of its turns in an interleaved phase, not counted, s:
+/// the turn then meets a forwarder already woken up and running, as in a plain phase.
+const WARM_S: f64 = 0.1;
+
 /// A paced phase for every forwarder of `fwds`: turns of `turn_s` each, taken in alternating
 /// order (A B, B A, A B…), until each forwarder has had `paced_s` of traffic. With one
-/// forwarder and `turn_s` = `paced_s`, one plain phase. Each forwarder's CPU and context
-/// switches are counted over the whole phase, its idle turns included.
+/// forwarder and `turn_s` = `paced_s`, one plain phase. In turns, each turn follows
+/// [`WARM_S`] of uncounted traffic to the same forwarder, and a forwarder's CPU and context
+/// switches are counted over its counted turns only.
 fn run_paced(
     fwds: &[(&Forwarder, &UdpSocket)],
     sinks: &Sinks,
@@ -731,7 +756,11 @@ fn run_paced(
 ) -> Vec<PhaseResult> {
     let turns = (paced_s / turn_s).round().max(1.0) as u32;
     let per_turn = (f64::from(rate) * paced_s / f64::from(turns)).round() as u32;
-    let cpu0: Vec<CpuSample> = fwds.iter().map(|(f, _)| f.cpu()).collect();
+    let warm = (turns > 1).then(|| Load {
+        rate: Some(rate),
+        count: ((f64::from(rate) * WARM_S).round() as u32).max(10),
+    });
+    let mut used = vec![Used::default(); fwds.len()];
     let mut tallies = vec![Tally::default(); fwds.len()];
     for turn in 0..turns {
         let mut order: Vec<usize> = (0..fwds.len()).collect();
@@ -740,17 +769,23 @@ fn run_paced(
         }
         for k in order {
             let (fwd, gen_sock) = fwds[k];
+            if let Some(warm) = warm {
+                let mut ignored = Tally::default();
+                run_slice(fwd, gen_sock, sinks, next_phase(), warm, &mut ignored);
+            }
             let load = Load {
                 rate: Some(rate),
                 count: per_turn,
             };
+            let cpu0 = fwd.cpu();
             run_slice(fwd, gen_sock, sinks, next_phase(), load, &mut tallies[k]);
+            used[k].add(fwd.cpu().since(&cpu0));
         }
     }
     tallies
         .into_iter()
-        .zip(fwds.iter().zip(&cpu0))
-        .map(|(t, ((f, _), c0))| phase_result(t, f.cpu().since(c0), sinks.sinks.len()))
+        .zip(used)
+        .map(|(t, u)| phase_result(t, u, sinks.sinks.len()))
         .collect()
 }
 
@@ -918,6 +953,18 @@ fn steal_jiffies() -> u64 {
         .unwrap_or(0)
 }
 
+/// Interrupts between CPUs so far, all CPUs: the RES, CAL and TLB lines of /proc/interrupts.
+fn ipis() -> u64 {
+    let text = std::fs::read_to_string("/proc/interrupts").unwrap_or_default();
+    text.lines()
+        .filter_map(|l| {
+            let (name, rest) = l.trim_start().split_once(':')?;
+            ["RES", "CAL", "TLB"].contains(&name).then_some(rest)
+        })
+        .flat_map(|rest| rest.split_whitespace().map_while(|x| x.parse::<u64>().ok()))
+        .sum()
+}
+
 /// CPU jiffies of this process and its reaped children (the forwarders).
 fn own_jiffies() -> u64 {
     let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
@@ -963,6 +1010,7 @@ fn median_phase(rs: &[PhaseResult]) -> PhaseResult {
         ingress_drops: mu(|r| r.ingress_drops),
         sink_drops: mu(|r| r.sink_drops),
         steal_pct: m(|r| r.steal_pct),
+        ipi_per_frame: m(|r| r.ipi_per_frame),
     }
 }
 
@@ -1027,7 +1075,7 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
         cfg.sat_count,
         cfg.paced_s,
         if cfg.interleave {
-            " per forwarder, both running, interleaved in 1 s turns (FORWARDING_INTERLEAVE)"
+            " per forwarder, both running, interleaved in 1 s turns, each after 0.1 s of uncounted traffic (FORWARDING_INTERLEAVE)"
         } else {
             ", one forwarder at a time"
         }
@@ -1037,9 +1085,11 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
     );
     println!();
     println!(
-        "| forwarder | clients | phase | sent | delivered/s (all clients) | per client/s | loss | p50 µs | p99 µs | max µs | CPU % | CPU ns/frame | csw/frame (vol + invol) | ingress drops | sink drops | host steal % |"
+        "| forwarder | clients | phase | sent | delivered/s (all clients) | per client/s | loss | p50 µs | p99 µs | max µs | CPU % | CPU ns/frame | csw/frame (vol + invol) | ingress drops | sink drops | host steal % | IPIs/frame |"
     );
-    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!(
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
     let Some(first) = runs.first() else { return };
     for s in &first.scenarios {
         let same: Vec<&Scenario> = runs
@@ -1048,7 +1098,7 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
             .collect();
         let row = |label: String, r: &PhaseResult| {
             println!(
-                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.2} ({:.2} + {:.2}) | {} | {} | {:.2} |",
+                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.2} ({:.2} + {:.2}) | {} | {} | {:.2} | {:.2} |",
                 s.kind.name(),
                 s.clients,
                 label,
@@ -1066,7 +1116,8 @@ fn print_report(cfg: &Cfg, runs: &[Run]) {
                 r.ivcsw_per_frame,
                 r.ingress_drops,
                 r.sink_drops,
-                r.steal_pct
+                r.steal_pct,
+                r.ipi_per_frame
             );
         };
         let sat: Vec<PhaseResult> = same.iter().map(|x| x.sat).collect();
