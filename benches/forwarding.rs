@@ -535,6 +535,12 @@ fn bare_forwarder(targets: &str) -> ! {
             }
         });
     }
+    // FORWARDING_BARE_WORK_NS=N: the same loop with N ns of busy work after each datagram's
+    // sends, to see what a given CPU cost per frame does to the latency on this machine.
+    let work = std::env::var("FORWARDING_BARE_WORK_NS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map(Duration::from_nanos);
     let mut buf = [0u8; 65_536];
     loop {
         let Ok((n, _)) = sock.recv_from(&mut buf) else {
@@ -542,6 +548,12 @@ fn bare_forwarder(targets: &str) -> ! {
         };
         for c in &clients {
             let _ = sock.send_to(&buf[..n], c);
+        }
+        if let Some(work) = work {
+            let t = Instant::now();
+            while t.elapsed() < work {
+                std::hint::spin_loop();
+            }
         }
     }
 }
