@@ -10,7 +10,9 @@
 //! forwarder on a tokio runtime instead of blocking `std` calls; `FORWARDING_QUICK=1` also
 //! selects the smoke run; so does running without cargo bench's `--bench` argument, which is
 //! how `cargo test` runs a `harness = false` target; `FORWARDING_DAEMON=PATH` runs another build
-//! of the daemon instead of this one's, to compare two builds on the same machine.)
+//! of the daemon instead of this one's, to compare two builds on the same machine;
+//! `FORWARDING_BARE_WORK_NS=N` gives the bare forwarder N ns of busy work after each datagram,
+//! to see what a CPU cost per frame does to the latency on the machine.)
 //!
 //! Set-up, all on loopback UDP:
 //! - a load generator (this process, one thread) sends MAVLink 2 ATTITUDE frames from sysid 1
@@ -506,6 +508,13 @@ impl Drop for Forwarder {
 /// its stdin closes (the bench process died).
 fn bare_forwarder(targets: &str) -> ! {
     let clients: Vec<SocketAddr> = targets.split(',').map(|t| t.parse().unwrap()).collect();
+    // FORWARDING_BARE_WORK_NS=N: the same loop with N ns of busy work after each datagram's
+    // sends, to see what a given CPU cost per frame does to the latency on this machine.
+    let work = std::env::var("FORWARDING_BARE_WORK_NS").ok().map(|v| {
+        Duration::from_nanos(v.parse().unwrap_or_else(|_| {
+            panic!("FORWARDING_BARE_WORK_NS={v:?}: not a whole number of nanoseconds")
+        }))
+    });
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     println!("listening {}", sock.local_addr().unwrap());
     std::io::stdout().flush().unwrap();
@@ -535,12 +544,6 @@ fn bare_forwarder(targets: &str) -> ! {
             }
         });
     }
-    // FORWARDING_BARE_WORK_NS=N: the same loop with N ns of busy work after each datagram's
-    // sends, to see what a given CPU cost per frame does to the latency on this machine.
-    let work = std::env::var("FORWARDING_BARE_WORK_NS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .map(Duration::from_nanos);
     let mut buf = [0u8; 65_536];
     loop {
         let Ok((n, _)) = sock.recv_from(&mut buf) else {
@@ -930,17 +933,22 @@ fn kmsg(x: f64) -> String {
     }
 }
 
-/// Busy and total jiffies of the whole machine, from /proc/stat.
-fn machine_jiffies() -> (u64, u64) {
+/// The whole machine's times, in jiffies: the `cpu` line of /proc/stat (user, nice, system,
+/// idle, iowait, irq, softirq, steal, …).
+fn machine_times() -> Vec<u64> {
     let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
-    let v: Vec<u64> = stat
-        .lines()
+    stat.lines()
         .next()
         .unwrap_or("")
         .split_whitespace()
         .skip(1)
         .filter_map(|x| x.parse().ok())
-        .collect();
+        .collect()
+}
+
+/// Busy and total jiffies of the whole machine, from /proc/stat.
+fn machine_jiffies() -> (u64, u64) {
+    let v = machine_times();
     let total: u64 = v.iter().take(8).sum();
     let idle = v.get(3).copied().unwrap_or(0) + v.get(4).copied().unwrap_or(0);
     (total - idle, total)
@@ -955,14 +963,7 @@ fn cpus() -> f64 {
 
 /// Jiffies the hypervisor took from the machine's CPUs (`steal`, /proc/stat's eighth time).
 fn steal_jiffies() -> u64 {
-    let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
-    stat.lines()
-        .next()
-        .unwrap_or("")
-        .split_whitespace()
-        .nth(8)
-        .and_then(|x| x.parse().ok())
-        .unwrap_or(0)
+    machine_times().get(7).copied().unwrap_or(0)
 }
 
 /// Interrupts between CPUs so far, all CPUs: the RES, CAL and TLB lines of /proc/interrupts.
