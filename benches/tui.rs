@@ -25,11 +25,11 @@ use tokio::io::AsyncWriteExt;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::Config;
-use vtol_gcs::router::Side;
+use vtol_gcs::tap::Side;
+use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
-use vtol_gcs::vehicle::{History, VehicleState};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{Frame, LinkId, LinkUrl};
 

@@ -16,7 +16,7 @@ use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::params::file::{self, ParamFile};
 use vtol_gcs::params::plan::{ParamOutcome, PushReport, PushResult};
 use vtol_gcs::params::{self as params, Format, Param, ParamSet, Rules as _};
-use vtol_gcs::router::signing::{DaemonSigning, default_state_file, system_clock};
+use vtol_gcs::trust::signing::{DaemonSigning, default_state_file, system_clock};
 use vtol_link::{ComponentId, LinkUrl, SigningKey, SystemId};
 
 /// Done.

@@ -8,7 +8,7 @@ use serde::Deserialize;
 use vtol_link::{LinkOptions, SigningKey};
 
 use crate::log::replay::{ReplaySource, ReplayUrlError};
-use crate::router::policy::ServeSpec;
+use crate::trust::policy::ServeSpec;
 
 /// Default client endpoints: a TCP server for scripts and MAVProxy (clear of the twin's 5760 and
 /// SITL's 5760/5762/5763), and a UDP stream to a ground station listening on 14550 (QGC).
@@ -79,8 +79,8 @@ pub struct Config {
     /// Seconds between status lines.
     pub status_interval: Duration,
     /// How often the vehicle tracker takes the routed frames and publishes its state: the
-    /// terminal UI's frame rate ([`crate::vehicle::UI_PERIOD`]); the headless daemon sets
-    /// [`crate::vehicle::HEADLESS_PERIOD`].
+    /// terminal UI's frame rate ([`crate::tracker::UI_PERIOD`]); the headless daemon sets
+    /// [`crate::tracker::HEADLESS_PERIOD`].
     pub tracker_period: Duration,
     /// Download the vehicle's parameters when it is first heard and after each reboot
     /// ([`crate::reboot`]).
@@ -89,7 +89,7 @@ pub struct Config {
     /// verifies the vehicle's.
     pub signing: Option<SigningKey>,
     /// Where the signing timestamp is kept; `None`: the default state file
-    /// ([`crate::router::signing::default_state_file`]).
+    /// ([`crate::trust::signing::default_state_file`]).
     pub signing_state: Option<PathBuf>,
 }
 
@@ -107,7 +107,7 @@ impl Default for Config {
             component_id: 190,
             link: LinkOptions::default(),
             status_interval: Duration::from_secs(1),
-            tracker_period: crate::vehicle::UI_PERIOD,
+            tracker_period: crate::tracker::UI_PERIOD,
             fetch_params: false,
             signing: None,
             signing_state: None,
@@ -459,7 +459,7 @@ mod tests {
         file.apply(&mut c).unwrap();
         assert_eq!(
             c.serve[0].policy.trust,
-            crate::router::policy::Trust::ReadOnly
+            crate::trust::policy::Trust::ReadOnly
         );
         assert_eq!(
             c.signing.as_ref().map(SigningKey::to_hex),

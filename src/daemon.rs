@@ -6,7 +6,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use firmware_sim::serve::{ServeConfig, Twin};
+use firmware_sim::shell::serve::{ServeConfig, Twin};
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
@@ -14,16 +14,17 @@ use vtol_link::{LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_li
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
-use crate::router::policy::{EndpointPolicy, Trust};
-use crate::router::signing::{DaemonSigning, SAVE_EVERY, default_state_file, system_clock};
-use crate::router::{Router, RouterHandle, Side};
+use crate::router::{Router, RouterHandle};
+use crate::tap::Side;
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
-use crate::vehicle::{SharedHistory, VehicleState};
-use crate::{gcs, vehicle};
+use crate::tracker::{SharedHistory, VehicleState};
+use crate::trust::policy::{EndpointPolicy, Trust};
+use crate::trust::signing::{DaemonSigning, SAVE_EVERY, default_state_file, system_clock};
+use crate::{gcs, tracker};
 
 /// Frames buffered for the tracker, which takes them on its tick or every
-/// [`vehicle::TAP_RUN`] frames; a drop only loses a display update.
+/// [`tracker::TAP_RUN`] frames; a drop only loses a display update.
 const TAP_QUEUE: usize = 8192;
 /// Records waiting for the tlog writer thread at most (it writes every 50 ms).
 const TLOG_QUEUE: usize = 65_536;
@@ -169,7 +170,7 @@ pub async fn start(
     let tlog_path = tlog.as_ref().map(|t| t.path.clone());
     let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
 
-    let (tap_tx, tap_rx) = crate::router::tap::tap(TAP_QUEUE, vehicle::TAP_RUN);
+    let (tap_tx, tap_rx) = crate::tap::tap(TAP_QUEUE, tracker::TAP_RUN);
     let (state_tx, state_rx) = watch::channel(VehicleState::default());
 
     // The hot path: each link task routes what it receives itself (no router task, no queue
@@ -202,9 +203,9 @@ pub async fn start(
         });
     }
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
-        crate::vehicle::History::new(crate::vehicle::now()),
+        crate::tracker::History::new(crate::tracker::now()),
     ));
-    tasks.spawn(vehicle::run(
+    tasks.spawn(tracker::run(
         config.tracker_period,
         tap_rx,
         router_handle.links.clone(),

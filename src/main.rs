@@ -12,7 +12,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, FileConfig, VehicleSource};
-use vtol_gcs::router::policy::ServeSpec;
+use vtol_gcs::trust::policy::ServeSpec;
 use vtol_link::LinkUrl;
 
 mod log_cli;
@@ -289,7 +289,7 @@ fn run_config(config: Config) -> anyhow::Result<()> {
 /// The headless daemon: start-up lines, then a status line per interval.
 async fn run_daemon(mut config: Config, cancel: CancellationToken) -> anyhow::Result<()> {
     // No screen to refresh fifty times a second.
-    config.tracker_period = vtol_gcs::vehicle::HEADLESS_PERIOD;
+    config.tracker_period = vtol_gcs::tracker::HEADLESS_PERIOD;
     let mut tasks = tokio::task::JoinSet::new();
     let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
     let mut out = StatusOut::default();
@@ -371,13 +371,13 @@ async fn print_status_lines(
                     running.tlog_stats.as_deref(),
                     &running.param_fetches.status(),
                     unroutable,
-                    vtol_gcs::vehicle::now(),
+                    vtol_gcs::tracker::now(),
                 );
                 line.push_str(&vtol_gcs::status::policy_part(&links, signing.as_ref()));
                 line.push_str(&vtol_gcs::status::fleet_part(
                     &state,
                     &running.router.conflicts.borrow(),
-                    vtol_gcs::vehicle::now(),
+                    vtol_gcs::tracker::now(),
                 ));
                 out.line(&line);
                 if !out.open {

@@ -1,5 +1,5 @@
 //! What the daemon does when the vehicle restarts. The tracker sees a reboot as ATTITUDE's
-//! `time_boot_ms` going back ([`crate::vehicle::VehicleView::reboots`]); a reboot command, a
+//! `time_boot_ms` going back ([`crate::tracker::VehicleView::reboots`]); a reboot command, a
 //! power cycle and a new twin process on the same port all look alike. After one, parameters
 //! the daemon knew may no longer hold (a vehicle re-reads its table at boot, and some values
 //! only take effect then), so with `fetch_params` on the daemon's own client downloads the
@@ -17,7 +17,7 @@ use tokio_util::sync::CancellationToken;
 use vtol_link::{ComponentId, SystemId};
 
 use crate::client::ClientHandle;
-use crate::vehicle::VehicleState;
+use crate::tracker::VehicleState;
 
 /// The daemon's parameter downloads, as the status line shows them.
 #[derive(Debug, Default)]

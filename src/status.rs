@@ -6,10 +6,10 @@ use std::fmt::Write;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-use crate::router::policy::EndpointPolicy;
-use crate::router::signing::SigningSnapshot;
-use crate::router::{LinkInfo, Side};
-use crate::vehicle::VehicleState;
+use crate::tap::{LinkInfo, Side};
+use crate::tracker::VehicleState;
+use crate::trust::policy::EndpointPolicy;
+use crate::trust::signing::SigningSnapshot;
 
 /// Formats the status line for the first vehicle (or says none is heard yet).
 #[must_use]
@@ -151,7 +151,7 @@ pub fn policy_part(links: &[LinkInfo], signing: Option<&SigningSnapshot>) -> Str
 #[must_use]
 pub fn fleet_part(
     state: &VehicleState,
-    conflicts: &[crate::router::SysidConflict],
+    conflicts: &[crate::tap::SysidConflict],
     now: Instant,
 ) -> String {
     let mut s = String::new();
@@ -191,7 +191,7 @@ mod tests {
     use vtol_link::{Frame, LinkId, SystemId};
 
     use super::*;
-    use crate::router::SysidConflict;
+    use crate::tap::SysidConflict;
 
     fn heartbeat(armed: bool) -> MavMessage {
         let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;

@@ -6,8 +6,8 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use firmware_sim::clock::ClockMode;
-use firmware_sim::serve::{Impairment, ServeConfig, Twin};
+use firmware_sim::shell::clock::ClockMode;
+use firmware_sim::shell::serve::{Impairment, ServeConfig, Twin};
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::params::plan::{ParamOutcome, PushResult};
@@ -53,7 +53,7 @@ async fn rig(loss: f64, seed: u64, speed: f64) -> Rig {
 }
 
 fn defaults() -> BTreeMap<&'static str, f32> {
-    firmware_sim::params::TABLE
+    firmware_sim::nav::params::TABLE
         .iter()
         .map(|d| (d.name, d.ty.cast(d.default) as f32))
         .collect()
@@ -86,7 +86,7 @@ const LOW_LATERAL: [(&str, f32); 4] = [
 async fn push_scenarios(r: &Rig) {
     let c = &r.client;
     let table = c.params_pull(None).await.expect("pull");
-    assert_eq!(table.len(), firmware_sim::params::TABLE.len());
+    assert_eq!(table.len(), firmware_sim::nav::params::TABLE.len());
     for (name, v) in defaults() {
         assert_eq!(table[name].value.to_bits(), v.to_bits(), "{name}");
     }

@@ -1,4 +1,4 @@
-//! Several vehicles in one daemon: a fleet of three real twins (`firmware_sim::fleet`) behind
+//! Several vehicles in one daemon: a fleet of three real twins (`firmware_sim::shell::fleet`) behind
 //! one TCP link into the daemon, the terminal UI switching between them and commanding only
 //! the selected one; the tracker keeping them apart; a system id claimed by two vehicle links
 //! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
@@ -13,11 +13,12 @@ use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
-use vtol_gcs::router::{Router, Side, SysidConflict};
+use vtol_gcs::router::Router;
+use vtol_gcs::tap::{Side, SysidConflict};
+use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
-use vtol_gcs::vehicle::{History, VehicleState};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{
     ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, SystemId, spawn_stream_link,
@@ -362,13 +363,13 @@ fn a_fleet_wider_than_the_screen_wraps_and_scrolls_to_the_selected_vehicle() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn three_twins_one_daemon_the_ui_commands_the_selected_vehicle() {
     let cancel = CancellationToken::new();
-    let mut fleet_config = firmware_sim::serve::ServeConfig {
+    let mut fleet_config = firmware_sim::shell::serve::ServeConfig {
         listen: vec!["tcpin:127.0.0.1:0".parse().unwrap()],
         ..Default::default()
     };
     // Ready to arm at once, as `firmware-sim serve` starts.
     fleet_config.endpoint.vehicle.calibrated = true;
-    let fleet = firmware_sim::fleet::Fleet::start(fleet_config, 3, cancel.clone())
+    let fleet = firmware_sim::shell::fleet::Fleet::start(fleet_config, 3, cancel.clone())
         .await
         .expect("fleet starts");
     let port = fleet.bound()[0].local_addr.expect("bound").port();

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use firmware_sim::airframe::ModelMode;
-use firmware_sim::simulate::{self, SimulateConfig};
+use firmware_sim::model::airframe::ModelMode;
+use firmware_sim::shell::simulate::{self, SimulateConfig};
 use vtol_gcs::log::plot::{self, Kind, PlotOptions};
 use vtol_gcs::tlog::{Direction, Record, TlogWriter};
 use vtol_link::Frame;

@@ -18,9 +18,10 @@ use std::time::{Duration, SystemTime};
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::policy::{EndpointPolicy, Trust};
-use vtol_gcs::router::signing::{DaemonSigning, WallClock};
-use vtol_gcs::router::{InlineRouter, Router, Side};
+use vtol_gcs::router::{InlineRouter, Router};
+use vtol_gcs::tap::Side;
+use vtol_gcs::trust::policy::{EndpointPolicy, Trust};
+use vtol_gcs::trust::signing::{DaemonSigning, WallClock};
 use vtol_link::dialect::{self, MavMessage};
 use vtol_link::signing::{Accepted, Signing};
 use vtol_link::{Frame, FrameDecoder, LinkOptions, SigningKey, spawn_stream_link};

@@ -9,10 +9,10 @@ use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::Config;
 use vtol_gcs::daemon::{self, Running};
+use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::Control;
 use vtol_gcs::tui::app::{App, Confirm, Outcome, ParamStatus, Request, View};
 use vtol_gcs::tui::exec::ClientControl;
-use vtol_gcs::vehicle::VehicleState;
 use vtol_link::dialect::MavState;
 
 fn key(c: KeyCode) -> KeyEvent {

@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use vtol_gcs::router::Side;
+use vtol_gcs::tap::Side;
+use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
-use vtol_gcs::vehicle::{History, VehicleState};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{Frame, LinkId, LinkStatsSnapshot};
 

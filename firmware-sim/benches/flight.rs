@@ -13,9 +13,9 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{Criterion, criterion_group};
-use firmware_sim::control::ActuatorCommand;
-use firmware_sim::plant::{self, PlantInput, PlantState};
-use firmware_sim::vehicle::InitialState;
+use firmware_sim::model::control::ActuatorCommand;
+use firmware_sim::model::plant::{self, PlantInput, PlantState};
+use firmware_sim::model::vehicle::InitialState;
 use firmware_sim::{Airframe, Euler, FlightMode, ModelMode, Vehicle, VehicleConfig};
 use nalgebra::Vector3;
 
@@ -73,7 +73,7 @@ fn bench(c: &mut Criterion) {
         })
     });
     {
-        use firmware_sim::control::{ControlInput, Controller, Gains};
+        use firmware_sim::model::control::{ControlInput, Controller, Gains};
         let mut ctl = Controller::new(Airframe::default(), ModelMode::Physical);
         let gains = Gains::default();
         let inp = ControlInput {
@@ -89,8 +89,8 @@ fn bench(c: &mut Criterion) {
         c.bench_function("controller_update", |b| {
             b.iter(|| ctl.update(black_box(&inp), &gains))
         });
-        let mut s = firmware_sim::sensors::Sensors::new(false, 1, 0.01);
-        let mut est = firmware_sim::estimator::Estimator::new(Euler::default(), 0.01, 9.8);
+        let mut s = firmware_sim::model::sensors::Sensors::new(false, 1, 0.01);
+        let mut est = firmware_sim::model::estimator::Estimator::new(Euler::default(), 0.01, 9.8);
         est.skip_calibration();
         c.bench_function("sensors_estimator", |b| {
             b.iter(|| {

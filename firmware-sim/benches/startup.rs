@@ -349,7 +349,7 @@ fn fast_flood() {
         },
     ));
     let t0 = Instant::now();
-    let count = firmware_sim::params::TABLE.len();
+    let count = firmware_sim::nav::params::TABLE.len();
     let mut seen = vec![false; count];
     while seen.iter().any(|s| !s) {
         let i = c.wait(|m| match m {

@@ -2,32 +2,28 @@
 //! Lozano (CDC 2006) — the paper's nonlinear hover model, the prototype's embedded hardware, the
 //! attitude estimator and the nested-saturation controller — and the MAVLink vehicle that flies
 //! it.
+//!
+//! The crate is built in layers; each reaches only the layers above it in this list:
+//!
+//! - [`model`]: the pure core (airframe, plant, sensors, estimator, controller, the vehicle that
+//!   steps them). No I/O, no clock, no tokio, no MAVLink transport.
+//! - [`nav`]: the onboard navigator and configuration (geodesy, missions, navigation, the
+//!   parameter table).
+//! - [`endpoint`]: the MAVLink vehicle: what the twin says and answers, as a pure state machine fed
+//!   frames and the simulation time.
+//! - [`shell`]: the processes around it: sockets, clocks, fleets, the test harness, signing
+//!   state, tlogs, the offline `simulate` runner.
+//!
+//! `tests/layers.rs` holds these rules.
 
-pub mod airframe;
 pub mod atomic_file;
-pub mod clock;
-pub mod control;
 pub mod endpoint;
-pub mod estimator;
-pub mod fleet;
-pub mod frames;
-pub mod globe;
-pub mod harness;
-pub mod integrator;
-pub mod mission;
-pub mod mode;
-pub mod navigation;
-pub mod params;
-pub mod plant;
-pub mod sensors;
-pub mod serve;
-pub mod signing;
-pub mod simulate;
-pub mod tlog;
-pub mod vehicle;
+pub mod model;
+pub mod nav;
+pub mod shell;
 
-pub use airframe::{Airframe, ModelMode};
-pub use control::{Controller, Gains};
-pub use frames::Euler;
-pub use mode::FlightMode;
-pub use vehicle::{Vehicle, VehicleConfig};
+pub use model::airframe::{Airframe, ModelMode};
+pub use model::control::{Controller, Gains};
+pub use model::frames::Euler;
+pub use model::mode::FlightMode;
+pub use model::vehicle::{Vehicle, VehicleConfig};

@@ -7,12 +7,12 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
-use firmware_sim::clock::ClockMode;
 use firmware_sim::endpoint::EndpointConfig;
-use firmware_sim::fleet::{Fleet, FleetError};
-use firmware_sim::params::Params;
-use firmware_sim::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError};
-use firmware_sim::simulate::{self, InitialArg, Push, SimulateConfig};
+use firmware_sim::nav::params::Params;
+use firmware_sim::shell::clock::ClockMode;
+use firmware_sim::shell::fleet::{Fleet, FleetError};
+use firmware_sim::shell::serve::{DEFAULT_LISTEN, Impairment, ServeConfig, ServeError};
+use firmware_sim::shell::simulate::{self, InitialArg, Push, SimulateConfig};
 use firmware_sim::{FlightMode, ModelMode};
 use nalgebra::Vector3;
 use tokio_util::sync::CancellationToken;
@@ -291,7 +291,7 @@ impl ServeArgs {
                     ideal_sensors: self.ideal_sensors,
                     perfect_state: self.ideal_sensors,
                     seed: self.seed,
-                    initial: firmware_sim::vehicle::InitialState {
+                    initial: firmware_sim::model::vehicle::InitialState {
                         pos_m: self.initial.pos_m,
                         euler: self.initial.euler,
                     },
@@ -302,7 +302,7 @@ impl ServeArgs {
                 params: Params::new(),
                 param_file: self.param_file.clone(),
                 sysid: self.sysid,
-                mission: firmware_sim::mission::Mission::default(),
+                mission: firmware_sim::nav::mission::Mission::default(),
             },
             link_options: LinkOptions::default(),
             impairment: Impairment {

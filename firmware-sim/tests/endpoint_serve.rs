@@ -4,9 +4,9 @@
 
 use std::time::Duration;
 
-use firmware_sim::clock::ClockMode;
-use firmware_sim::harness::HarnessError;
-use firmware_sim::serve::{ServeConfig, Twin};
+use firmware_sim::shell::clock::ClockMode;
+use firmware_sim::shell::harness::HarnessError;
+use firmware_sim::shell::serve::{ServeConfig, Twin};
 use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -156,7 +156,7 @@ async fn serve_over_tcp_heartbeat_params_commands() {
         },
     ))
     .await;
-    let count = firmware_sim::params::TABLE.len();
+    let count = firmware_sim::nav::params::TABLE.len();
     let mut seen = vec![false; count];
     while seen.iter().any(|s| !s) {
         let v = gcs
@@ -503,7 +503,7 @@ async fn replies_are_never_lost_behind_telemetry() {
     // A second of the (paused) clock passes with nothing read: 200 batches of telemetry and
     // the whole list meet a full queue.
     tokio::time::sleep(Duration::from_secs(1)).await;
-    let count = firmware_sim::params::TABLE.len();
+    let count = firmware_sim::nav::params::TABLE.len();
     let mut seen = vec![false; count];
     while seen.iter().any(|s| !s) {
         let v = gcs

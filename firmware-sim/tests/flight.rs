@@ -1,7 +1,7 @@
 //! Closed-loop flights of the whole twin (plant, sensors, estimator, controller) and the
 //! `simulate` command line. Seeded and in fast time: no sleeps.
 
-use firmware_sim::vehicle::{InitialState, PHYSICS_DT_S, SystemState, Telemetry};
+use firmware_sim::model::vehicle::{InitialState, PHYSICS_DT_S, SystemState, Telemetry};
 use firmware_sim::{Euler, FlightMode, ModelMode, Vehicle, VehicleConfig};
 use nalgebra::Vector3;
 
@@ -98,7 +98,7 @@ fn paper_mode_is_continuous_time_halving_the_step_moves_it_less_than_a_millimetr
 
 #[test]
 fn paper_mode_first_row_carries_the_controllers_output_at_t0() {
-    use firmware_sim::control::{ControlInput, Controller, Gains};
+    use firmware_sim::model::control::{ControlInput, Controller, Gains};
     let v = flying(ModelMode::Paper, 1);
     let t = v.telemetry();
     let mut c = Controller::new(firmware_sim::Airframe::default(), ModelMode::Paper);

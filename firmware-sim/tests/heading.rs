@@ -2,7 +2,7 @@
 //! heading fused, holds altitude with the heading sensor off, and its position chains hold with
 //! a constant heading error. Seeded, fast time, no sleeps.
 
-use firmware_sim::vehicle::InitialState;
+use firmware_sim::model::vehicle::InitialState;
 use firmware_sim::{Euler, FlightMode, ModelMode, Vehicle, VehicleConfig};
 use nalgebra::Vector3;
 

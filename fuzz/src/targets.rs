@@ -13,8 +13,8 @@ use std::time::{Duration, Instant, UNIX_EPOCH};
 
 use bytes::Bytes;
 use firmware_sim::endpoint::{Endpoint, EndpointConfig, LinkKey};
-use vtol_gcs::router::Side;
-use vtol_gcs::vehicle::VehicleState;
+use vtol_gcs::tap::Side;
+use vtol_gcs::tracker::VehicleState;
 use vtol_link::dialect::{MavMessage, STATUSTEXT_DATA};
 use vtol_link::frame::{crc_extra, known_message_ids};
 use vtol_link::{Frame, FrameDecoder, LinkId, LinkUrl};
@@ -172,7 +172,7 @@ pub fn param_file(data: &[u8]) {
 
 /// The twin's parameter file, round trip.
 pub fn twin_param_file(data: &[u8]) {
-    use firmware_sim::params::Params;
+    use firmware_sim::nav::params::Params;
     match Params::from_parm_str(&text(data), Path::new(PATH)) {
         Ok(p) => {
             let written = p.to_parm_string();
@@ -186,7 +186,7 @@ pub fn twin_param_file(data: &[u8]) {
 
 /// The twin's mission file, round trip.
 pub fn mission_file(data: &[u8]) {
-    use firmware_sim::mission::Mission;
+    use firmware_sim::nav::mission::Mission;
     match Mission::from_wpl_str(&text(data), Path::new(PATH)) {
         Ok(m) => {
             let written = m.to_wpl_string();
@@ -228,7 +228,7 @@ pub fn signing_state(data: &[u8]) {
 
 /// `firmware-sim simulate` values; the first byte picks the flag.
 pub fn sim_cli_values(data: &[u8]) {
-    use firmware_sim::simulate::{parse_initial, parse_param, parse_push, parse_setpoint};
+    use firmware_sim::shell::simulate::{parse_initial, parse_param, parse_push, parse_setpoint};
     let Some((which, rest)) = data.split_first() else {
         return;
     };

@@ -129,7 +129,7 @@ proptest! {
     /// `simulate --push` values round-trip their numbers.
     #[test]
     fn push_values(axis in prop::sample::select(vec!["roll", "pitch", "yaw"]), torque in -10.0f64..10.0, at in 0.0f64..100.0, ms in 1u32..5000) {
-        let p = firmware_sim::simulate::parse_push(&format!("{axis}={torque}@{at}:{ms}")).unwrap();
+        let p = firmware_sim::shell::simulate::parse_push(&format!("{axis}={torque}@{at}:{ms}")).unwrap();
         prop_assert_eq!(p.torque_nm, torque);
         prop_assert_eq!(p.at_s, at);
         prop_assert_eq!(p.duration_ms, f64::from(ms));

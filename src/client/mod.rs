@@ -146,7 +146,7 @@ impl ClientHandle {
     fn spawn(
         config: ClientConfig,
         links_rx: mpsc::Receiver<vtol_link::LinkEvent>,
-        signing: Option<crate::router::signing::DaemonSigning>,
+        signing: Option<crate::trust::signing::DaemonSigning>,
         cancel: CancellationToken,
     ) -> Self {
         let me = (config.system_id, config.component_id);
@@ -204,7 +204,7 @@ impl ClientHandle {
     pub async fn connect_signed(
         url: &LinkUrl,
         config: ClientConfig,
-        signing: Option<crate::router::signing::DaemonSigning>,
+        signing: Option<crate::trust::signing::DaemonSigning>,
         cancel: CancellationToken,
     ) -> Result<Self, ClientError> {
         let (tx, rx) = mpsc::channel(INBOUND_QUEUE);

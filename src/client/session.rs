@@ -21,7 +21,7 @@ use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
 use vtol_link::{ComponentId, Frame, LinkEvent, LinkId, LinkSender, SystemId};
 
 use super::machine::Inbound;
-use crate::router::signing::DaemonSigning;
+use crate::trust::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
 const WANTED: [u32; 6] = [

@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use firmware_sim::endpoint::streams::CONTROLLER_OUTPUT_NAMES;
-use firmware_sim::frames::Euler;
-use firmware_sim::frames::{euler_to_ned_rpy, ned_to_paper};
+use firmware_sim::model::frames::Euler;
+use firmware_sim::model::frames::{euler_to_ned_rpy, ned_to_paper};
 use nalgebra::Vector3;
 use plotters::prelude::*;
 use plotters::style::FontStyle;

@@ -373,8 +373,8 @@ mod shipped_gains {
         let f = ParamFile::load(&path).expect("config/gains.param parses");
         assert_eq!(f.params.len(), 12);
         for (name, p) in &f.params {
-            let i = firmware_sim::params::Params::index_of(name).expect("a twin parameter");
-            let d = firmware_sim::params::TABLE[i];
+            let i = firmware_sim::nav::params::Params::index_of(name).expect("a twin parameter");
+            let d = firmware_sim::nav::params::TABLE[i];
             assert_eq!(p.value, d.default as f32, "{name}");
         }
     }

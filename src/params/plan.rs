@@ -22,14 +22,14 @@ pub trait Rules: Sync {
     fn refusal(&self, state: &ParamSet, name: &str, value: f32) -> Option<String>;
 }
 
-/// The twin's own validation (`firmware_sim::params`): the same code path the vehicle runs.
+/// The twin's own validation (`firmware_sim::nav::params`): the same code path the vehicle runs.
 /// Names the twin does not have are accepted by the model (a different vehicle decides).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct TwinRules;
 
 impl Rules for TwinRules {
     fn refusal(&self, state: &ParamSet, name: &str, value: f32) -> Option<String> {
-        use firmware_sim::params::Params;
+        use firmware_sim::nav::params::Params;
         Params::index_of(name)?;
         let mut table = Params::new();
         for (n, p) in state {
@@ -495,7 +495,7 @@ mod tests {
     const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
 
     fn twin_table() -> ParamSet {
-        firmware_sim::params::TABLE
+        firmware_sim::nav::params::TABLE
             .iter()
             .map(|d| {
                 (

@@ -27,10 +27,7 @@
 //! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
 //!   queues.
 
-pub mod policy;
-pub mod signing;
 pub mod table;
-pub mod tap;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -40,47 +37,20 @@ use std::time::Instant;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use vtol_link::{
-    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, LinkStats, SendSummary,
-    SystemId,
+    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, SendSummary, SystemId,
 };
 
+use crate::tap::{LinkInfo, Side, SysidConflict, TapSender, Tapped, clock};
 use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
-use policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
-use signing::{DaemonSigning, SigningCounters};
+use crate::trust::policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
+use crate::trust::signing::{DaemonSigning, SigningCounters};
 use table::{Addressing, Route, RoutingTable};
-use tap::TapSender;
 
 const MSG_ID_COMMAND_ACK: u32 = 77;
 /// Events taken from a queue per wake-up ([`Router::run`]): under load a run of frames is
 /// routed together; at low rates a run is one frame and nothing waits.
 const BATCH: usize = 64;
 const MSG_ID_SETUP_SIGNING: u32 = 256;
-
-/// Which side of the daemon a link is on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Side {
-    /// The vehicle link.
-    Vehicle,
-    /// A client: script, ground station, or the daemon itself.
-    Client,
-}
-
-/// One live link, as the status line and the TUI show it.
-#[derive(Debug, Clone)]
-pub struct LinkInfo {
-    /// The link.
-    pub id: LinkId,
-    /// Vehicle or client side.
-    pub side: Side,
-    /// Peer description.
-    pub peer: String,
-    /// Its counters (rx/tx frames and bytes, queue-full drops, decode errors).
-    pub stats: Arc<LinkStats>,
-    /// Its endpoint's policy.
-    pub policy: EndpointPolicy,
-    /// What the policy did to its traffic (rate-limit drops, read-only refusals, signed).
-    pub policy_counters: Arc<PolicyCounters>,
-}
 
 /// Router-wide counters (per-link ones live in each link's [`LinkStats`]).
 #[derive(Debug, Default)]
@@ -105,31 +75,6 @@ pub struct RouterStats {
     pub unsignable: AtomicU64,
     /// Vehicle frames whose system id another vehicle link owns: not routed, logged or tracked.
     pub sysid_conflicts: AtomicU64,
-}
-
-/// A system id claimed by two vehicle links: the owner keeps it, the claimant's frames under
-/// that id go nowhere while both are up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub struct SysidConflict {
-    /// The disputed system id.
-    pub system: SystemId,
-    /// The vehicle link that had it first.
-    pub owner: LinkId,
-    /// The other vehicle link sending as that system.
-    pub claimant: LinkId,
-}
-
-/// A frame as the taps see it.
-#[derive(Debug, Clone)]
-pub struct Tapped {
-    /// Ingress link.
-    pub link: LinkId,
-    /// Its side.
-    pub side: Side,
-    /// The frame.
-    pub frame: Frame,
-    /// When the router took it (its run's time, on the router's [`clock`]).
-    pub at: Instant,
 }
 
 /// What the router publishes for others.
@@ -577,7 +522,7 @@ impl InlineRouter {
         Events::Inline(handler)
     }
 
-    /// Saves the signing state now (the daemon calls it every [`signing::SAVE_EVERY`]).
+    /// Saves the signing state now (the daemon calls it every [`crate::trust::signing::SAVE_EVERY`]).
     pub fn save_signing(&self) {
         // The state is taken under the lock; the file is written outside it.
         let job = self
@@ -637,15 +582,6 @@ impl LinkEventHandler for SideHandler {
     fn is_closed(&self) -> bool {
         self.router.lock().is_none()
     }
-}
-
-/// The daemon's clock as a `std` instant, read by the router once per run: tokio's, which
-/// the tracker reads too ([`crate::vehicle::now`]), so a test that pauses tokio's clock moves
-/// rate limits, system id ownership and the tracker together. (While nothing pauses it, it is
-/// `std`'s `Instant::now`.)
-#[must_use]
-pub fn clock() -> Instant {
-    tokio::time::Instant::now().into_std()
 }
 
 /// Reads what routing needs from a frame without decoding it.

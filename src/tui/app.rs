@@ -10,7 +10,7 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 
 use vtol_link::{ComponentId, SystemId};
 
-use crate::vehicle::{VehicleState, VehicleView};
+use crate::tracker::{VehicleState, VehicleView};
 
 /// Step of the QLOITER position target per arrow key, m.
 pub const TARGET_STEP_M: f32 = 0.5;

@@ -22,7 +22,7 @@ use tokio_util::sync::CancellationToken;
 use vtol_link::{ComponentId, SystemId};
 
 use crate::daemon::{OWN_TRAFFIC_PEER, Running, describe};
-use crate::router::policy::EndpointPolicy;
+use crate::trust::policy::EndpointPolicy;
 use app::{App, Outcome, Request};
 use view::{LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
 
@@ -52,7 +52,7 @@ pub trait Control: Clone + Send + Sync + 'static {
 /// listed). True when the client had to change vehicle.
 fn sync_selection<C: Control>(
     app: &mut App,
-    state: &crate::vehicle::VehicleState,
+    state: &crate::tracker::VehicleState,
     control: &C,
     sent: &mut Option<(SystemId, ComponentId)>,
 ) -> bool {
@@ -239,7 +239,7 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
-                        let reqs = app.on_key(k, &state, crate::vehicle::now());
+                        let reqs = app.on_key(k, &state, crate::tracker::now());
                         sync_selection(&mut app, &state, &control, &mut selected);
                         for req in reqs {
                             let c = control.clone();
@@ -311,7 +311,7 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 &mut app,
                 running,
                 &mut cache,
-                crate::vehicle::now(),
+                crate::tracker::now(),
             )?;
             last_draw = Instant::now();
             dirty = false;

@@ -20,9 +20,9 @@ use vtol_link::{ComponentId, SystemId};
 
 use super::app::{App, Confirm, Level, ParamStatus, SeriesKey, View};
 use super::fields;
-use crate::router::Side;
-use crate::vehicle::history::{History, TimedFrame};
-use crate::vehicle::state::{LINK_TIMEOUT, VehicleState, VehicleView};
+use crate::tap::Side;
+use crate::tracker::history::{History, TimedFrame};
+use crate::tracker::state::{LINK_TIMEOUT, VehicleState, VehicleView};
 
 /// Smallest terminal the views are laid out for.
 pub const MIN_SIZE: (u16, u16) = (80, 24);
@@ -44,8 +44,8 @@ pub struct LinkRow {
     pub stats: vtol_link::LinkStatsSnapshot,
     /// A client endpoint's policy when it is not the default, and what it did.
     pub policy: Option<(
-        crate::router::policy::EndpointPolicy,
-        crate::router::policy::PolicyCountersSnapshot,
+        crate::trust::policy::EndpointPolicy,
+        crate::trust::policy::PolicyCountersSnapshot,
     )>,
 }
 
@@ -69,7 +69,7 @@ pub struct RouterCounters {
     /// Vehicle frames refused because another vehicle link owns their system id.
     pub sysid_conflicts: u64,
     /// A system id two vehicle links claim now (the first, if several).
-    pub conflict: Option<crate::router::SysidConflict>,
+    pub conflict: Option<crate::tap::SysidConflict>,
 }
 
 /// The tlog as shown.

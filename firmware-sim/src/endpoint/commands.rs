@@ -16,8 +16,8 @@ use mavlink::dialects::ardupilotmega as apm;
 use vtol_link::{Frame, RawCommand, RawCommandKind};
 
 use super::{Endpoint, LinkKey, streams};
-use crate::mode::FlightMode;
-use crate::vehicle::ArmError;
+use crate::model::mode::FlightMode;
+use crate::model::vehicle::ArmError;
 
 /// `MAV_RESULT` values.
 pub mod result {

@@ -1,4 +1,4 @@
-//! GUIDED, AUTO and QRTL at the wire: the navigator ([`crate::navigation`]) run in sim time,
+//! GUIDED, AUTO and QRTL at the wire: the navigator ([`crate::nav::navigation`]) run in sim time,
 //! its events turned into messages, home, and the commands and targets that steer it.
 //!
 //! - Every [`NAV_PERIOD_US`] the navigator chooses what GUIDED, AUTO and QRTL fly; reached
@@ -23,11 +23,11 @@ use nalgebra::Vector3;
 use super::commands::Command;
 use super::commands::result;
 use super::{Endpoint, LinkKey, position};
-use crate::frames::paper_to_ned;
-use crate::globe::{deg_to_e7, valid_lat_lon};
-use crate::mission::{Limits, frame};
-use crate::mode::FlightMode;
-use crate::navigation::{NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused};
+use crate::model::frames::paper_to_ned;
+use crate::model::mode::FlightMode;
+use crate::nav::globe::{deg_to_e7, valid_lat_lon};
+use crate::nav::mission::{Limits, frame};
+use crate::nav::navigation::{NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused};
 
 /// Home moves (and is announced) only by more than this, m.
 const HOME_MOVE_M: f64 = 0.01;

@@ -7,8 +7,8 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::{Endpoint, Frame};
-use crate::mode::FlightMode;
-use crate::vehicle::SystemState;
+use crate::model::mode::FlightMode;
+use crate::model::vehicle::SystemState;
 
 /// GCS-failsafe state. The timer is armed only by a first heartbeat from `SYSID_MYGCS`
 /// (ArduPlane's rule), so plain scripts that never send heartbeats cannot trigger it.

@@ -10,8 +10,8 @@ use mavlink::dialects::ardupilotmega as apm;
 use nalgebra::Vector3;
 
 use super::{Endpoint, Frame};
-use crate::frames::ned_to_paper;
-use crate::vehicle::Vehicle;
+use crate::model::frames::ned_to_paper;
+use crate::model::vehicle::Vehicle;
 
 /// Override lifetime without refresh, µs.
 pub const OVERRIDE_TIMEOUT_US: u64 = 3_000_000;
@@ -115,7 +115,7 @@ impl Endpoint {
             return;
         }
         let ned = Vector3::new(f64::from(t.x), f64::from(t.y), f64::from(t.z));
-        if self.vehicle.telemetry().mode == crate::mode::FlightMode::Guided {
+        if self.vehicle.telemetry().mode == crate::model::mode::FlightMode::Guided {
             self.guided_target(link, ned);
         } else if ned.iter().all(|v| v.is_finite()) {
             self.vehicle.set_position_setpoint(ned_to_paper(&ned));

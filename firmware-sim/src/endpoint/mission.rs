@@ -2,7 +2,7 @@
 //!
 //! - **Upload**: MISSION_COUNT → MISSION_REQUEST(0), MISSION_ITEM_INT(0) → MISSION_REQUEST(1) …
 //!   → MISSION_ACK (requests as ArduPilot sends them, see `request_item`). Each item is checked
-//!   as it arrives ([`crate::mission::check_item`]); the first refused one ends the upload with
+//!   as it arrives ([`crate::nav::mission::check_item`]); the first refused one ends the upload with
 //!   its `MAV_MISSION_RESULT` and a STATUSTEXT saying why, and the stored mission stays as it
 //!   was. Only a complete, accepted upload replaces it (and is saved beside the parameter file).
 //!   Requests are repeated after [`RETRY_US`] of silence and the upload is cancelled after
@@ -25,7 +25,9 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::{Endpoint, Frame, LinkKey};
-use crate::mission::{MAX_ITEMS, Mission, MissionItem, check_item, xy_from_float, xy_to_float};
+use crate::nav::mission::{
+    MAX_ITEMS, Mission, MissionItem, check_item, xy_from_float, xy_to_float,
+};
 
 /// Silence after which the next item is requested again, µs of stream time.
 pub const RETRY_US: u64 = 1_000_000;
@@ -478,7 +480,7 @@ impl Endpoint {
 
     /// MISSION_CURRENT as it stands.
     pub(super) fn mission_current(&self) -> apm::MavMessage {
-        use crate::navigation::MissionState as S;
+        use crate::nav::navigation::MissionState as S;
         let count = self.mission.count();
         let state = match self.navigator.mission_state(count) {
             S::NoMission => apm::MissionState::MISSION_STATE_NO_MISSION,
@@ -492,7 +494,9 @@ impl Endpoint {
             // Items after the home slot; UINT16_MAX = no mission (common.xml).
             total: count.checked_sub(1).unwrap_or(u16::MAX),
             mission_state: state,
-            mission_mode: u8::from(self.vehicle.telemetry().mode == crate::mode::FlightMode::Auto),
+            mission_mode: u8::from(
+                self.vehicle.telemetry().mode == crate::model::mode::FlightMode::Auto,
+            ),
             mission_id: 0,
             fence_id: 0,
             rally_points_id: 0,

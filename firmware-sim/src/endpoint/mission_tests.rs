@@ -5,9 +5,9 @@ use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
 use super::*;
-use crate::globe::GeoPoint;
-use crate::mission::{MissionItem, cmd as mcmd, frame};
-use crate::mode::FlightMode;
+use crate::model::mode::FlightMode;
+use crate::nav::globe::GeoPoint;
+use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
 
 const GCS: LinkKey = LinkKey(1);
 const OTHER: LinkKey = LinkKey(2);
@@ -395,7 +395,7 @@ fn mission_is_saved_beside_the_param_file() {
     let parm = dir.path().join("twin.parm");
     let mut ep = endpoint_with(Some(parm.clone()));
     upload(&mut ep, &flight_plan());
-    let saved = crate::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
+    let saved = crate::nav::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
     assert_eq!(&saved, ep.mission());
     let clear = apm::MavMessage::MISSION_CLEAR_ALL(apm::MISSION_CLEAR_ALL_DATA {
         target_system: 1,
@@ -406,7 +406,7 @@ fn mission_is_saved_beside_the_param_file() {
         mission_acks(&ep.handle(GCS, &v2(&clear))),
         vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
     );
-    let saved = crate::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
+    let saved = crate::nav::mission::Mission::load(&dir.path().join("twin.waypoints")).unwrap();
     assert!(saved.is_empty());
 }
 

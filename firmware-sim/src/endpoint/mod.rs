@@ -1,7 +1,7 @@
 //! The vehicle side of MAVLink (`PROTOCOL.md` (A)) as a synchronous state machine with no I/O:
 //! [`Endpoint::handle`] takes one received frame and returns the replies; [`Endpoint::tick`]
 //! advances the twin to a sim time and returns the telemetry that became due. The serve loop
-//! ([`crate::serve`]) owns sockets and clocks; tests drive the endpoint directly.
+//! ([`crate::shell::serve`]) owns sockets and clocks; tests drive the endpoint directly.
 //!
 //! Identity: system id `SYSID_THISMAV` (or `--sysid`), component id 1. Output is always
 //! MAVLink 2, from the first frame; input may be v1 or v2. A message is processed when its
@@ -36,11 +36,11 @@ use std::path::PathBuf;
 use mavlink::dialects::ardupilotmega as apm;
 use vtol_link::Frame;
 
-use crate::globe::Origin;
-use crate::mission::Mission;
-use crate::navigation::Navigator;
-use crate::params::Params;
-use crate::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
+use crate::model::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
+use crate::nav::globe::Origin;
+use crate::nav::mission::Mission;
+use crate::nav::navigation::Navigator;
+use crate::nav::params::Params;
 
 /// Our component id (MAV_COMP_ID_AUTOPILOT1): pymavlink reads params of `(sysid, 1)`.
 pub const COMPID: u8 = 1;
@@ -73,7 +73,7 @@ pub struct EndpointConfig {
     /// Parameter values at start (defaults, or loaded from `param_file`).
     pub params: Params,
     /// Where accepted parameter changes are saved (atomically), if anywhere. The mission is
-    /// saved beside it ([`crate::mission::file_beside`]).
+    /// saved beside it ([`crate::nav::mission::file_beside`]).
     pub param_file: Option<PathBuf>,
     /// System id override (`--sysid`); None = `SYSID_THISMAV`.
     pub sysid: Option<u8>,
@@ -164,14 +164,14 @@ impl Endpoint {
         vehicle.gains = params.gains();
         vehicle.control_rate_hz = params.value("CTRL_RATE_HZ");
         vehicle.battery = params.battery();
-        let mission_file = param_file.as_deref().map(crate::mission::file_beside);
+        let mission_file = param_file.as_deref().map(crate::nav::mission::file_beside);
         let origin = params.origin();
         let sysid_override = sysid;
         let sysid = sysid.unwrap_or(params.value("SYSID_THISMAV") as u8);
         let vehicle = Vehicle::new(vehicle);
         let last_armed = vehicle.telemetry().armed;
         let last_state = vehicle.telemetry().state;
-        let home_ned_m = crate::frames::paper_to_ned(&vehicle.telemetry().pos_m);
+        let home_ned_m = crate::model::frames::paper_to_ned(&vehicle.telemetry().pos_m);
         let mut ep = Self {
             sysid,
             vehicle,
@@ -291,9 +291,9 @@ impl Endpoint {
     pub(crate) fn reboot(&mut self) {
         let mut config = self.vehicle.config().clone();
         let here = self.vehicle.telemetry().pos_m;
-        config.initial = crate::vehicle::InitialState {
+        config.initial = crate::model::vehicle::InitialState {
             pos_m: nalgebra::Vector3::new(here.x, here.y, 0.0),
-            euler: crate::frames::Euler::new(self.vehicle.telemetry().euler.psi, 0.0, 0.0),
+            euler: crate::model::frames::Euler::new(self.vehicle.telemetry().euler.psi, 0.0, 0.0),
         };
         config.armed = false;
         // A reboot calibrates the gyros again, at rest.
@@ -305,7 +305,7 @@ impl Endpoint {
         config.battery = self.params.battery();
         self.vehicle = Vehicle::new(config);
         self.origin = self.params.origin();
-        self.home_ned_m = crate::frames::paper_to_ned(&self.vehicle.telemetry().pos_m);
+        self.home_ned_m = crate::model::frames::paper_to_ned(&self.vehicle.telemetry().pos_m);
         self.navigator = Navigator::new();
         self.upload = None;
         self.finished = None;
@@ -579,7 +579,7 @@ impl Endpoint {
             self.last_armed = t.armed;
             if t.armed {
                 // Home is where the vehicle was armed (ArduPlane).
-                self.set_home(crate::frames::paper_to_ned(&t.pos_m));
+                self.set_home(crate::model::frames::paper_to_ned(&t.pos_m));
             }
             let text = if t.armed {
                 "Arming motors"

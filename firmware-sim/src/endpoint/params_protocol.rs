@@ -7,8 +7,8 @@ use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
 use super::{Endpoint, Frame, LinkKey, streams};
-use crate::frames::body_rates_to_frd;
-use crate::params::{Access, ParamError, ParamType, Params};
+use crate::model::frames::body_rates_to_frd;
+use crate::nav::params::{Access, ParamError, ParamType, Params};
 
 /// PARAM_VALUEs sent per link per tick during a list transfer. The serve loop ticks every 5 ms,
 /// so this is about 2000 per second: the whole table in a few ticks without flooding a
@@ -167,7 +167,7 @@ impl Endpoint {
     /// The refusal reason; nothing changes then.
     pub fn set_param(&mut self, name: &str, value: f64) -> Result<usize, ParamError> {
         let accepted = self.params.set(name, value)?;
-        let def = crate::params::TABLE[accepted.index];
+        let def = crate::nav::params::TABLE[accepted.index];
         self.apply_param_effect(def.name, accepted.new);
         if def.access == Access::ReadWrite {
             self.persist();

@@ -10,10 +10,10 @@
 use mavlink::dialects::ardupilotmega as apm;
 use nalgebra::Vector3;
 
-use crate::frames::{euler_to_ned_rpy, paper_to_ned};
-use crate::globe::{Origin, bearing_deg, horizontal_distance_m};
-use crate::plant::battery::{BatteryState, CELLS};
-use crate::vehicle::{SystemState, Telemetry};
+use crate::model::frames::{euler_to_ned_rpy, paper_to_ned};
+use crate::model::plant::battery::{BatteryState, CELLS};
+use crate::model::vehicle::{SystemState, Telemetry};
+use crate::nav::globe::{Origin, bearing_deg, horizontal_distance_m};
 
 /// GLOBAL_POSITION_INT.
 pub const GLOBAL_POSITION_INT: u32 = 33;
@@ -272,7 +272,7 @@ pub fn builds(msgid: u32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frames::Euler;
+    use crate::model::frames::Euler;
 
     fn view(t: &Telemetry) -> GlobeView<'_> {
         GlobeView {
@@ -299,7 +299,7 @@ mod tests {
         let Some(apm::MavMessage::GLOBAL_POSITION_INT(g)) = v.build(GLOBAL_POSITION_INT) else {
             panic!()
         };
-        let back = v.origin.to_local_ned(&crate::globe::GeoPoint {
+        let back = v.origin.to_local_ned(&crate::nav::globe::GeoPoint {
             lat_e7: g.lat,
             lon_e7: g.lon,
             alt_amsl_m: f64::from(g.alt) / 1000.0,

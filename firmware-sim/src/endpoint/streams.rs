@@ -1,5 +1,5 @@
 //! Telemetry: which messages the twin can produce, how each is built from a [`Telemetry`]
-//! snapshot (NED/FRD at the wire, converted here through [`crate::frames`]), and the per-link
+//! snapshot (NED/FRD at the wire, converted here through [`crate::model::frames`]), and the per-link
 //! schedule of rates.
 //!
 //! A message's rate on a link is, in order of precedence: a `SET_MESSAGE_INTERVAL` for that
@@ -12,8 +12,8 @@ use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
-use crate::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
-use crate::vehicle::Telemetry;
+use crate::model::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
+use crate::model::vehicle::Telemetry;
 
 /// Message ids the twin produces.
 pub mod id {
@@ -413,7 +413,7 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
             // ArduPilot's convention: a bit is healthy unless something is wrong, so the
             // geofence (which the twin does not have) is healthy, not breached.
             let mut health = present | S::MAV_SYS_STATUS_GEOFENCE;
-            if t.state == crate::vehicle::SystemState::Calibrating {
+            if t.state == crate::model::vehicle::SystemState::Calibrating {
                 // No navigation solution yet: no fix, estimator settling.
                 health.remove(S::MAV_SYS_STATUS_SENSOR_GPS | S::MAV_SYS_STATUS_AHRS);
             }

@@ -4,7 +4,7 @@ use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
 
 use super::*;
-use crate::params::TABLE;
+use crate::nav::params::TABLE;
 use vtol_link::{FrameDecoder, MavlinkVersion};
 
 const GCS: LinkKey = LinkKey(1);
@@ -403,11 +403,12 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
         )
     };
     assert_eq!(acks(&ep.handle(GCS, &v2(&mode(18.0, 0)))), vec![(176, 0)]);
-    ep.vehicle.set_mode(crate::mode::FlightMode::QStabilize);
+    ep.vehicle
+        .set_mode(crate::model::mode::FlightMode::QStabilize);
     assert_eq!(acks(&ep.handle(GCS, &v2(&mode(18.0, 1)))), vec![(176, 0)]);
     assert_eq!(
         ep.vehicle().telemetry().mode,
-        crate::mode::FlightMode::QStabilize,
+        crate::model::mode::FlightMode::QStabilize,
         "not redone"
     );
     // Unknown mode number.
@@ -587,7 +588,7 @@ fn gcs_failsafe_switches_to_qland_when_enabled() {
     );
     assert_eq!(
         ep.vehicle().telemetry().mode,
-        crate::mode::FlightMode::QLand
+        crate::model::mode::FlightMode::QLand
     );
     let hb = heartbeat_of(&msgs);
     assert_eq!(hb.system_status, apm::MavState::MAV_STATE_CRITICAL);
@@ -655,7 +656,7 @@ fn legacy_set_mode_and_request_data_stream() {
     assert_eq!(acks(&ep.handle(GCS, &v2(&set_mode))), vec![(11, 0)]);
     assert_eq!(
         ep.vehicle().telemetry().mode,
-        crate::mode::FlightMode::QLoiter
+        crate::model::mode::FlightMode::QLoiter
     );
 
     // ALL at 2 Hz: ATTITUDE drops from 20 Hz to 2 Hz; the heartbeat stays at 1 Hz.
@@ -750,7 +751,7 @@ fn controller_outputs_stream_as_named_value_float() {
             0,
         )),
     );
-    ep.vehicle.set_mode(crate::mode::FlightMode::QHover);
+    ep.vehicle.set_mode(crate::model::mode::FlightMode::QHover);
     let mut seen: std::collections::BTreeMap<String, (u32, f32)> = Default::default();
     for k in 1..=200 {
         let msgs = decode(&ep.tick(k * 10_000));

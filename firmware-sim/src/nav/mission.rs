@@ -1,0 +1,771 @@
+//! The stored mission: its items, which of them the twin can fly, where each one goes, and the
+//! mission file beside the parameter file.
+//!
+//! Items are kept exactly as a ground station sent them in MISSION_ITEM_INT (every field but
+//! the sequence number, the target and the mission type), so a download returns the bytes of
+//! the upload. As on ArduPilot, item 0 is the home slot: it is stored and returned but never
+//! flown, and AUTO starts at item 1.
+//!
+//! The twin flies NAV_VTOL_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_TIME, NAV_VTOL_LAND and
+//! NAV_RETURN_TO_LAUNCH, and NAV_TAKEOFF/NAV_LAND as their VTOL forms (it cannot fly as a
+//! plane), in the global frames (altitude above mean sea level or above home). Anything else is
+//! refused at upload ([`check_item`]) with the `MAV_MISSION_RESULT` a ground station shows and a
+//! sentence saying why; the stored mission is then left as it was.
+//!
+//! # Mission file
+//!
+//! The QGroundControl `QGC WPL 110` text format that MAVProxy's `wp load`/`wp save` use: a header
+//! line, then one tab-separated line per item: `seq current frame command p1 p2 p3 p4 x y z
+//! autocontinue`. Latitudes and longitudes are written with exactly seven decimals from their
+//! 1e-7 degree integers and the floats in their shortest exact form, so a mission survives a
+//! restart bit for bit. The file is rewritten atomically (temporary file, then rename); a file
+//! that cannot be read is an error at start, never silently replaced.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use mavlink::dialects::ardupilotmega::MavMissionResult;
+use nalgebra::{Vector2, Vector3};
+
+use crate::nav::globe::{GeoPoint, Origin, valid_lat_lon};
+
+/// Most items a mission may hold (ArduPilot's limit on boards with little storage is of the same
+/// order); an upload announcing more is refused with `MAV_MISSION_NO_SPACE`.
+pub const MAX_ITEMS: u16 = 1000;
+
+/// `MAV_CMD` numbers of the items the twin flies.
+pub mod cmd {
+    /// MAV_CMD_NAV_WAYPOINT: fly to a point, hold `param1` seconds.
+    pub const NAV_WAYPOINT: u16 = 16;
+    /// MAV_CMD_NAV_LOITER_TIME: fly to a point, hold `param1` seconds.
+    pub const NAV_LOITER_TIME: u16 = 19;
+    /// MAV_CMD_NAV_RETURN_TO_LAUNCH: fly home and land.
+    pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
+    /// MAV_CMD_NAV_LAND: flown as NAV_VTOL_LAND.
+    pub const NAV_LAND: u16 = 21;
+    /// MAV_CMD_NAV_TAKEOFF: flown as NAV_VTOL_TAKEOFF.
+    pub const NAV_TAKEOFF: u16 = 22;
+    /// MAV_CMD_NAV_VTOL_TAKEOFF: climb straight up to the altitude.
+    pub const NAV_VTOL_TAKEOFF: u16 = 84;
+    /// MAV_CMD_NAV_VTOL_LAND: fly to the point (or stay) and land.
+    pub const NAV_VTOL_LAND: u16 = 85;
+}
+
+/// `MAV_FRAME` numbers.
+pub mod frame {
+    /// Global, altitude above mean sea level (degrees as floats in MISSION_ITEM).
+    pub const GLOBAL: u8 = 0;
+    /// Local NED.
+    pub const LOCAL_NED: u8 = 1;
+    /// No position (the item's parameters say everything).
+    pub const MISSION: u8 = 2;
+    /// Global, altitude above home.
+    pub const GLOBAL_RELATIVE_ALT: u8 = 3;
+    /// Local ENU.
+    pub const LOCAL_ENU: u8 = 4;
+    /// Global, altitude AMSL (1e-7 degree integers).
+    pub const GLOBAL_INT: u8 = 5;
+    /// Global, altitude above home (1e-7 degree integers).
+    pub const GLOBAL_RELATIVE_ALT_INT: u8 = 6;
+    /// Local offset from the vehicle.
+    pub const LOCAL_OFFSET_NED: u8 = 7;
+
+    /// Latitude/longitude frames.
+    #[must_use]
+    pub const fn is_global(f: u8) -> bool {
+        matches!(
+            f,
+            GLOBAL | GLOBAL_RELATIVE_ALT | GLOBAL_INT | GLOBAL_RELATIVE_ALT_INT
+        )
+    }
+
+    /// Frames whose altitude is relative to home.
+    #[must_use]
+    pub const fn is_relative(f: u8) -> bool {
+        matches!(f, GLOBAL_RELATIVE_ALT | GLOBAL_RELATIVE_ALT_INT)
+    }
+
+    /// Local metric frames (x, y travel as metres × 1e4 in the integer messages).
+    #[must_use]
+    pub const fn is_local(f: u8) -> bool {
+        matches!(f, LOCAL_NED | LOCAL_ENU | LOCAL_OFFSET_NED) || matches!(f, 8 | 9 | 20..=22)
+    }
+}
+
+/// One mission item as MISSION_ITEM_INT carries it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MissionItem {
+    /// param1..param4.
+    pub params: [f32; 4],
+    /// Latitude (1e-7 degree) in global frames, metres × 1e4 in local ones.
+    pub x: i32,
+    /// Longitude (1e-7 degree) in global frames, metres × 1e4 in local ones.
+    pub y: i32,
+    /// Altitude, m (meaning set by `frame`).
+    pub z: f32,
+    /// `MAV_CMD`.
+    pub command: u16,
+    /// `MAV_FRAME`.
+    pub frame: u8,
+    /// The `current` flag as sent.
+    pub current: u8,
+    /// The `autocontinue` flag as sent.
+    pub autocontinue: u8,
+}
+
+impl PartialEq for MissionItem {
+    /// Bit equality: a NaN parameter equals the same NaN (what a round trip must preserve).
+    fn eq(&self, o: &Self) -> bool {
+        self.params.map(f32::to_bits) == o.params.map(f32::to_bits)
+            && (self.x, self.y, self.z.to_bits()) == (o.x, o.y, o.z.to_bits())
+            && (self.command, self.frame, self.current, self.autocontinue)
+                == (o.command, o.frame, o.current, o.autocontinue)
+    }
+}
+
+/// Decimal places of x and y in MISSION_ITEM (floats) and in the mission file, by frame.
+fn xy_decimals(frame: u8) -> u32 {
+    if frame::is_global(frame) {
+        7
+    } else if frame::is_local(frame) {
+        4
+    } else {
+        0
+    }
+}
+
+/// x or y as MISSION_ITEM's float (degrees or metres) from the integer form.
+#[must_use]
+pub fn xy_to_float(frame: u8, v: i32) -> f64 {
+    f64::from(v) / 10f64.powi(xy_decimals(frame) as i32)
+}
+
+/// x or y in the integer form from MISSION_ITEM's float (rounded; NaN → 0, clamped).
+#[must_use]
+pub fn xy_from_float(frame: u8, v: f64) -> i32 {
+    let scaled = (v * 10f64.powi(xy_decimals(frame) as i32)).round();
+    if scaled.is_nan() {
+        0
+    } else {
+        scaled.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+    }
+}
+
+/// An integer with `decimals` implied decimal places, written exactly (`-353632610`, 7 →
+/// `-35.3632610`).
+fn fixed_point(v: i32, decimals: u32) -> String {
+    if decimals == 0 {
+        return v.to_string();
+    }
+    let scale = 10i64.pow(decimals);
+    let a = i64::from(v).abs();
+    let sign = if v < 0 { "-" } else { "" };
+    format!(
+        "{sign}{}.{:0width$}",
+        a / scale,
+        a % scale,
+        width = decimals as usize
+    )
+}
+
+/// Parses what [`fixed_point`] writes, and any other decimal number (rounded).
+fn parse_fixed_point(s: &str, decimals: u32) -> Option<i32> {
+    let v: f64 = s.parse().ok()?;
+    if !v.is_finite() {
+        return None;
+    }
+    let scaled = (v * 10f64.powi(decimals as i32)).round();
+    (f64::from(i32::MIN)..=f64::from(i32::MAX))
+        .contains(&scaled)
+        .then_some(scaled as i32)
+}
+
+/// Why an item (or a whole upload) is refused: the code MISSION_ACK carries and a sentence for
+/// STATUSTEXT.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refusal {
+    /// `MAV_MISSION_RESULT`.
+    pub result: MavMissionResult,
+    /// What is wrong, for the operator.
+    pub reason: String,
+}
+
+impl Refusal {
+    fn new(result: MavMissionResult, reason: String) -> Self {
+        Self { result, reason }
+    }
+}
+
+/// The flight envelope items and guided targets must stay in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// The motion-capture frame's place on the globe.
+    pub origin: Origin,
+    /// Home, local NED, m (altitudes "relative" are above it).
+    pub home_ned_m: Vector3<f64>,
+    /// Largest horizontal distance from home, m (`NAV_RADIUS_MAX`).
+    pub radius_max_m: f64,
+    /// Highest altitude above home, m (`NAV_ALT_MAX`).
+    pub alt_max_m: f64,
+}
+
+impl Limits {
+    /// Local NED of a global point in an item's altitude frame (z: altitude → down).
+    #[must_use]
+    pub fn local_ned(&self, frame_no: u8, lat_e7: i32, lon_e7: i32, alt_m: f64) -> Vector3<f64> {
+        let alt_amsl_m = if frame::is_relative(frame_no) {
+            self.origin.ground_amsl_m() - self.home_ned_m.z + alt_m
+        } else {
+            alt_m
+        };
+        self.origin.to_local_ned(&GeoPoint {
+            lat_e7,
+            lon_e7,
+            alt_amsl_m,
+        })
+    }
+
+    /// Checks a target (local NED) against the envelope; the reason names the limit.
+    ///
+    /// # Errors
+    /// Which bound the target breaks, with the parameter that sets it: the horizontal distance
+    /// ([`MavMissionResult::MAV_MISSION_INVALID_PARAM5_X`]) or the altitude
+    /// ([`MavMissionResult::MAV_MISSION_INVALID_PARAM7`]).
+    pub fn check(&self, what: &str, ned_m: &Vector3<f64>) -> Result<(), Refusal> {
+        let dist = crate::nav::globe::horizontal_distance_m(ned_m, &self.home_ned_m);
+        // NaN (a target that is not a number) fails too.
+        if dist.is_nan() || dist > self.radius_max_m {
+            return Err(Refusal::new(
+                MavMissionResult::MAV_MISSION_INVALID_PARAM5_X,
+                format!(
+                    "{what} is {dist:.1} m from home, beyond NAV_RADIUS_MAX {} m",
+                    self.radius_max_m
+                ),
+            ));
+        }
+        let alt = self.home_ned_m.z - ned_m.z;
+        if !(0.0..=self.alt_max_m).contains(&alt) {
+            return Err(Refusal::new(
+                MavMissionResult::MAV_MISSION_INVALID_PARAM7,
+                format!(
+                    "{what} altitude {alt:.1} m is outside 0..NAV_ALT_MAX {} m above home",
+                    self.alt_max_m
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Where an item sends the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ItemTarget {
+    /// Horizontal target (local NED north, east), m; `None` = where the vehicle is when the item
+    /// starts (latitude and longitude both 0, ArduPilot's convention).
+    pub xy_ned_m: Option<Vector2<f64>>,
+    /// Altitude as local NED z (down), m.
+    pub z_ned_m: f64,
+}
+
+/// The name a ground station shows for a command, for refusal sentences.
+fn command_name(c: u16) -> String {
+    use num_traits::FromPrimitive as _;
+    mavlink::dialects::ardupilotmega::MavCmd::from_u16(c).map_or_else(
+        || format!("command {c}"),
+        |m| format!("{m:?}").trim_start_matches("MAV_CMD_").to_owned(),
+    )
+}
+
+impl MissionItem {
+    /// Whether the item moves the vehicle to a position it names.
+    #[must_use]
+    pub const fn has_position(&self) -> bool {
+        matches!(
+            self.command,
+            cmd::NAV_WAYPOINT
+                | cmd::NAV_LOITER_TIME
+                | cmd::NAV_LAND
+                | cmd::NAV_VTOL_LAND
+                | cmd::NAV_TAKEOFF
+                | cmd::NAV_VTOL_TAKEOFF
+        )
+    }
+
+    /// Where the item goes, in the local frame (global frames only; [`check_item`] refuses the
+    /// rest).
+    #[must_use]
+    pub fn target(&self, limits: &Limits) -> ItemTarget {
+        let ned = limits.local_ned(self.frame, self.x, self.y, f64::from(self.z));
+        ItemTarget {
+            xy_ned_m: (self.x != 0 || self.y != 0).then(|| ned.xy()),
+            z_ned_m: ned.z,
+        }
+    }
+}
+
+/// Checks that the twin can fly an item (`seq` ≥ 1; the home slot is not checked).
+///
+/// # Errors
+/// A [`Refusal`]: `MAV_MISSION_UNSUPPORTED` for a command the twin cannot fly,
+/// `MAV_MISSION_UNSUPPORTED_FRAME`, `MAV_MISSION_INVALID_PARAM*` for a bad value or a point
+/// outside the envelope.
+pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), Refusal> {
+    use MavMissionResult as R;
+    let c = item.command;
+    let supported = matches!(
+        c,
+        cmd::NAV_WAYPOINT
+            | cmd::NAV_LOITER_TIME
+            | cmd::NAV_RETURN_TO_LAUNCH
+            | cmd::NAV_LAND
+            | cmd::NAV_TAKEOFF
+            | cmd::NAV_VTOL_TAKEOFF
+            | cmd::NAV_VTOL_LAND
+    );
+    if !supported {
+        return Err(Refusal::new(
+            R::MAV_MISSION_UNSUPPORTED,
+            format!("Mission item {seq}: {} is not supported", command_name(c)),
+        ));
+    }
+    if !item.has_position() {
+        return Ok(());
+    }
+    if !frame::is_global(item.frame) {
+        return Err(Refusal::new(
+            R::MAV_MISSION_UNSUPPORTED_FRAME,
+            format!("Mission item {seq}: frame {} is not supported", item.frame),
+        ));
+    }
+    let hold = item.params[0];
+    if matches!(c, cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME) && !(0.0..=3600.0).contains(&hold) {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM1,
+            format!("Mission item {seq}: hold time {hold} s outside 0..3600"),
+        ));
+    }
+    if c == cmd::NAV_WAYPOINT && item.params[1] < 0.0 {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM2,
+            format!("Mission item {seq}: negative acceptance radius"),
+        ));
+    }
+    if !valid_lat_lon(item.x, item.y) {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM5_X,
+            format!("Mission item {seq}: latitude/longitude out of range"),
+        ));
+    }
+    if !item.z.is_finite() {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM7,
+            format!("Mission item {seq}: altitude is not a number"),
+        ));
+    }
+    let t = item.target(limits);
+    let ned = Vector3::new(
+        t.xy_ned_m.map_or(limits.home_ned_m.x, |v| v.x),
+        t.xy_ned_m.map_or(limits.home_ned_m.y, |v| v.y),
+        t.z_ned_m,
+    );
+    let takeoff = matches!(c, cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF);
+    let land = matches!(c, cmd::NAV_LAND | cmd::NAV_VTOL_LAND);
+    // A landing's altitude is not flown (it descends to the ground); check only its position.
+    let checked = if land {
+        Vector3::new(ned.x, ned.y, limits.home_ned_m.z)
+    } else {
+        ned
+    };
+    limits
+        .check(&format!("Mission item {seq}"), &checked)
+        .map_err(|mut r| {
+            if r.result == R::MAV_MISSION_INVALID_PARAM5_X && t.xy_ned_m.is_none() {
+                r.result = R::MAV_MISSION_INVALID_PARAM7;
+            }
+            r
+        })?;
+    if takeoff && limits.home_ned_m.z - ned.z <= 0.0 {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM7,
+            format!("Mission item {seq}: take-off altitude must be above home"),
+        ));
+    }
+    Ok(())
+}
+
+/// A mission file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum MissionFileError {
+    /// Reading or writing failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A line is not a mission item.
+    #[error("{path}:{line}: {reason}")]
+    Line {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// The header of the `QGC WPL 110` format.
+pub const WPL_HEADER: &str = "QGC WPL 110";
+
+/// The stored mission (item 0 is the home slot).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mission {
+    items: Vec<MissionItem>,
+}
+
+impl Mission {
+    /// A mission of these items (item 0 first).
+    #[must_use]
+    pub fn new(items: Vec<MissionItem>) -> Self {
+        Self { items }
+    }
+
+    /// Number of items, the home slot included (what MISSION_COUNT says).
+    #[must_use]
+    pub fn count(&self) -> u16 {
+        self.items.len() as u16
+    }
+
+    /// Whether no item is stored.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    /// Item `seq`.
+    #[must_use]
+    pub fn get(&self, seq: u16) -> Option<&MissionItem> {
+        self.items.get(usize::from(seq))
+    }
+
+    /// Every item.
+    #[must_use]
+    pub fn items(&self) -> &[MissionItem] {
+        &self.items
+    }
+
+    /// The mission as `QGC WPL 110` text.
+    #[must_use]
+    pub fn to_wpl_string(&self) -> String {
+        let mut out = format!("{WPL_HEADER}\n");
+        for (seq, it) in self.items.iter().enumerate() {
+            let d = xy_decimals(it.frame);
+            let [p1, p2, p3, p4] = it.params;
+            // Writing into a String cannot fail.
+            let _ = writeln!(
+                out,
+                "{seq}\t{}\t{}\t{}\t{p1:?}\t{p2:?}\t{p3:?}\t{p4:?}\t{}\t{}\t{:?}\t{}",
+                it.current,
+                it.frame,
+                it.command,
+                fixed_point(it.x, d),
+                fixed_point(it.y, d),
+                it.z,
+                it.autocontinue,
+            );
+        }
+        out
+    }
+
+    /// Parses `QGC WPL 110` text (what MAVProxy and QGroundControl write too). Items must be
+    /// numbered 0, 1, 2… in order.
+    ///
+    /// # Errors
+    /// [`MissionFileError::Line`] naming the first bad line.
+    pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
+        let err = |line: usize, reason: String| MissionFileError::Line {
+            path: path.to_owned(),
+            line,
+            reason,
+        };
+        let mut lines = text.lines().enumerate();
+        match lines.next() {
+            Some((_, h)) if h.trim().starts_with("QGC WPL") => {}
+            _ => return Err(err(1, format!("expected a '{WPL_HEADER}' header"))),
+        }
+        let mut items = Vec::new();
+        for (n, raw) in lines {
+            let line_no = n + 1;
+            if raw.trim().is_empty() {
+                continue;
+            }
+            let f: Vec<&str> = raw.split_whitespace().collect();
+            let [
+                seq,
+                current,
+                frame_s,
+                command,
+                p1,
+                p2,
+                p3,
+                p4,
+                x,
+                y,
+                z,
+                auto,
+            ] = f[..]
+            else {
+                return Err(err(line_no, format!("expected 12 fields, got {}", f.len())));
+            };
+            let int = |s: &str, what: &str| -> Result<u64, MissionFileError> {
+                s.parse::<u64>()
+                    .map_err(|_| err(line_no, format!("bad {what} {s:?}")))
+            };
+            let small = |s: &str, what: &str, max: u64| -> Result<u64, MissionFileError> {
+                let v = int(s, what)?;
+                if v > max {
+                    return Err(err(line_no, format!("{what} {v} out of range")));
+                }
+                Ok(v)
+            };
+            if int(seq, "sequence number")? != items.len() as u64 {
+                return Err(err(
+                    line_no,
+                    format!("item {seq} out of order (expected {})", items.len()),
+                ));
+            }
+            if items.len() >= usize::from(MAX_ITEMS) {
+                return Err(err(line_no, format!("more than {MAX_ITEMS} items")));
+            }
+            let float = |s: &str, what: &str| -> Result<f32, MissionFileError> {
+                s.parse::<f32>()
+                    .map_err(|_| err(line_no, format!("bad {what} {s:?}")))
+            };
+            let frame_no = small(frame_s, "frame", 255)? as u8;
+            let d = xy_decimals(frame_no);
+            let coord = |s: &str, what: &str| {
+                parse_fixed_point(s, d).ok_or_else(|| err(line_no, format!("bad {what} {s:?}")))
+            };
+            items.push(MissionItem {
+                params: [
+                    float(p1, "param1")?,
+                    float(p2, "param2")?,
+                    float(p3, "param3")?,
+                    float(p4, "param4")?,
+                ],
+                x: coord(x, "x")?,
+                y: coord(y, "y")?,
+                z: float(z, "z")?,
+                command: small(command, "command", u64::from(u16::MAX))? as u16,
+                frame: frame_no,
+                current: small(current, "current", 255)? as u8,
+                autocontinue: small(auto, "autocontinue", 255)? as u8,
+            });
+        }
+        Ok(Self { items })
+    }
+
+    /// Loads a mission file.
+    ///
+    /// # Errors
+    /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
+    pub fn load(path: &Path) -> Result<Self, MissionFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| MissionFileError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_wpl_str(&text, path)
+    }
+
+    /// Writes the mission atomically (a temporary file in the same directory, flushed, renamed).
+    ///
+    /// # Errors
+    /// [`MissionFileError::Io`].
+    pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
+        crate::atomic_file::write(path, self.to_wpl_string().as_bytes()).map_err(|source| {
+            MissionFileError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        })
+    }
+}
+
+/// Where the mission is kept beside a parameter file: the same name with the `.waypoints`
+/// extension (`twin.parm` → `twin.waypoints`).
+#[must_use]
+pub fn file_beside(param_file: &Path) -> PathBuf {
+    let p = param_file.with_extension("waypoints");
+    if p == param_file {
+        let mut s = param_file.as_os_str().to_owned();
+        s.push(".mission.waypoints");
+        PathBuf::from(s)
+    } else {
+        p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> Limits {
+        Limits {
+            origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
+            home_ned_m: Vector3::zeros(),
+            radius_max_m: 100.0,
+            alt_max_m: 50.0,
+        }
+    }
+
+    fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
+        MissionItem {
+            params: [0.0, 0.0, 0.0, f32::NAN],
+            x: lat_e7,
+            y: lon_e7,
+            z: alt,
+            command,
+            frame: frame::GLOBAL_RELATIVE_ALT_INT,
+            current: 0,
+            autocontinue: 1,
+        }
+    }
+
+    #[test]
+    fn supported_items_pass_and_others_are_refused() {
+        let l = limits();
+        let (lat, lon) = (-353_632_610 + 450, 1_491_652_300);
+        for c in [
+            cmd::NAV_WAYPOINT,
+            cmd::NAV_LOITER_TIME,
+            cmd::NAV_VTOL_TAKEOFF,
+            cmd::NAV_VTOL_LAND,
+            cmd::NAV_TAKEOFF,
+            cmd::NAV_LAND,
+        ] {
+            check_item(1, &wp(c, lat, lon, 3.0), &l).unwrap();
+        }
+        let rtl = MissionItem {
+            command: cmd::NAV_RETURN_TO_LAUNCH,
+            frame: frame::MISSION,
+            ..wp(0, 0, 0, 0.0)
+        };
+        check_item(4, &rtl, &l).unwrap();
+        // DO_SET_SERVO and an id the dialect does not know.
+        let e = check_item(2, &wp(183, lat, lon, 3.0), &l).unwrap_err();
+        assert_eq!(e.result, MavMissionResult::MAV_MISSION_UNSUPPORTED);
+        assert_eq!(e.reason, "Mission item 2: DO_SET_SERVO is not supported");
+        let e = check_item(2, &wp(65000, lat, lon, 3.0), &l).unwrap_err();
+        assert_eq!(e.reason, "Mission item 2: command 65000 is not supported");
+        let local = MissionItem {
+            frame: frame::LOCAL_NED,
+            ..wp(cmd::NAV_WAYPOINT, 10, 10, 3.0)
+        };
+        assert_eq!(
+            check_item(1, &local, &l).unwrap_err().result,
+            MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME
+        );
+    }
+
+    #[test]
+    fn envelope_and_values() {
+        let l = limits();
+        // 0.001 degree of latitude is 111 m: beyond the 100 m radius.
+        let far = wp(cmd::NAV_WAYPOINT, -353_632_610 + 10_000, 1_491_652_300, 3.0);
+        let e = check_item(1, &far, &l).unwrap_err();
+        assert_eq!(e.result, MavMissionResult::MAV_MISSION_INVALID_PARAM5_X);
+        assert!(e.reason.contains("NAV_RADIUS_MAX"), "{}", e.reason);
+        let high = wp(cmd::NAV_WAYPOINT, 0, 0, 60.0);
+        let e = check_item(1, &high, &l).unwrap_err();
+        assert_eq!(e.result, MavMissionResult::MAV_MISSION_INVALID_PARAM7);
+        let nan = wp(cmd::NAV_WAYPOINT, 0, 0, f32::NAN);
+        assert!(check_item(1, &nan, &l).is_err());
+        let ground_takeoff = wp(cmd::NAV_VTOL_TAKEOFF, 0, 0, 0.0);
+        assert!(check_item(1, &ground_takeoff, &l).is_err());
+        let mut neg_hold = wp(cmd::NAV_LOITER_TIME, 0, 0, 2.0);
+        neg_hold.params[0] = -1.0;
+        assert_eq!(
+            check_item(1, &neg_hold, &l).unwrap_err().result,
+            MavMissionResult::MAV_MISSION_INVALID_PARAM1
+        );
+        // AMSL altitude: 587 m is 3 m above the 584 m ground.
+        let amsl = MissionItem {
+            frame: frame::GLOBAL_INT,
+            ..wp(cmd::NAV_WAYPOINT, 0, 0, 587.0)
+        };
+        check_item(1, &amsl, &l).unwrap();
+        assert!((amsl.target(&l).z_ned_m + 3.0).abs() < 1e-9);
+        assert_eq!(amsl.target(&l).xy_ned_m, None);
+    }
+
+    #[test]
+    fn wpl_round_trip_is_exact() {
+        let mut items = vec![
+            MissionItem {
+                frame: frame::GLOBAL,
+                ..wp(cmd::NAV_WAYPOINT, -353_632_610, 1_491_652_300, 584.0)
+            },
+            wp(cmd::NAV_VTOL_TAKEOFF, 0, 0, 2.5),
+            wp(cmd::NAV_WAYPOINT, -353_632_161, 1_491_651_234, 3.333_333_3),
+            wp(cmd::NAV_LOITER_TIME, 5, -7, 0.1),
+        ];
+        items[2].params = [1.5, 0.25, f32::MIN_POSITIVE, -0.0];
+        items[3].current = 1;
+        let m = Mission::new(items);
+        let text = m.to_wpl_string();
+        assert!(text.starts_with("QGC WPL 110\n0\t0\t0\t16\t"), "{text}");
+        assert!(text.contains("\t-35.3632161\t149.1651234\t"), "{text}");
+        let back = Mission::from_wpl_str(&text, Path::new("m.waypoints")).unwrap();
+        assert_eq!(back, m);
+        // MAVProxy's spelling (spaces, fewer decimals) reads too.
+        let mp = "QGC WPL 110\n0 1 0 16 0 0 0 0 -35.363261 149.165230 584.000000 1\n";
+        let m2 = Mission::from_wpl_str(mp, Path::new("x")).unwrap();
+        assert_eq!(m2.get(0).unwrap().x, -353_632_610);
+    }
+
+    #[test]
+    fn bad_files_are_errors() {
+        let p = Path::new("bad.waypoints");
+        for (text, needle) in [
+            ("", "header"),
+            ("hello\n", "header"),
+            ("QGC WPL 110\n0 0 0 16 0 0 0 0 1 2 3\n", "12 fields"),
+            ("QGC WPL 110\n1 0 0 16 0 0 0 0 1 2 3 1\n", "out of order"),
+            ("QGC WPL 110\n0 0 0 16 x 0 0 0 1 2 3 1\n", "param1"),
+            ("QGC WPL 110\n0 0 0 70000 0 0 0 0 1 2 3 1\n", "command"),
+            ("QGC WPL 110\n0 0 0 16 0 0 0 0 1e30 2 3 1\n", "bad x"),
+        ] {
+            let e = Mission::from_wpl_str(text, p).unwrap_err();
+            assert!(e.to_string().contains(needle), "{text:?}: {e}");
+            assert!(e.to_string().starts_with("bad.waypoints:"), "{e}");
+        }
+    }
+
+    #[test]
+    fn save_and_load_beside_the_param_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let parm = dir.path().join("twin.parm");
+        let path = file_beside(&parm);
+        assert_eq!(path, dir.path().join("twin.waypoints"));
+        let m = Mission::new(vec![wp(cmd::NAV_WAYPOINT, 1, 2, 3.0)]);
+        m.save(&path).unwrap();
+        assert_eq!(Mission::load(&path).unwrap(), m);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let odd = dir.path().join("a.waypoints");
+        assert_eq!(
+            file_beside(&odd),
+            dir.path().join("a.waypoints.mission.waypoints")
+        );
+    }
+
+    #[test]
+    fn float_xy_conversions() {
+        assert_eq!(xy_from_float(frame::GLOBAL, -35.363_261), -353_632_610);
+        assert_eq!(xy_from_float(frame::LOCAL_NED, 1.5), 15_000);
+        assert_eq!(xy_from_float(frame::MISSION, 3.0), 3);
+        assert_eq!(xy_from_float(frame::GLOBAL, f64::NAN), 0);
+        assert!((xy_to_float(frame::GLOBAL, -353_632_610) + 35.363_261).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,864 @@
+//! The navigator of the autonomous modes: GUIDED (take-off, reposition, position targets), AUTO
+//! (the stored mission) and QRTL (home, then land). It decides, every [`NAV_PERIOD_US`] of sim
+//! time, what the vehicle flies ([`Guidance`]: QLOITER's law to a point, QLAND's law, or idle on
+//! the ground), and reports what a ground station must hear (an item reached, the current item,
+//! a mode change at the end of the mission).
+//!
+//! It is a plain state machine: no I/O, no clock; the endpoint feeds it the vehicle's state and
+//! the mission and applies what it returns. Frames: local NED (the motion-capture frame, z
+//! down), m; the endpoint converts to and from the globe.
+//!
+//! Behaviour follows ArduPlane's quadplane in VTOL flight, where it has one:
+//! - GUIDED on the ground waits for NAV_TAKEOFF, which climbs straight up to the altitude above
+//!   where the vehicle stands; then it holds, and a reposition or a position target moves the
+//!   point it holds. Entering GUIDED in the air holds where the vehicle is.
+//! - AUTO flies the mission from the current item (item 1 after an upload; item 0 is home).
+//!   VTOL_TAKEOFF climbs straight up; WAYPOINT and LOITER_TIME fly to their point and hold
+//!   `param1` seconds there; VTOL_LAND flies to its point and lands; RETURN_TO_LAUNCH flies home
+//!   and lands. An item is reached within `WP_RADIUS` (or a waypoint's `param2`) of its point, a
+//!   take-off at its altitude, a landing when the vehicle has touched down and disarmed. When
+//!   the last item is done in the air, the mode changes to QRTL ("Mission complete"), as
+//!   ArduPlane changes to RTL and, with `Q_RTL_MODE` set to QRTL, on to QRTL.
+//! - QRTL flies home at its altitude, then lands and disarms. RTL requests become QRTL (the twin
+//!   cannot fly as a plane).
+//!
+//! Altitude changes are flown at `WP_SPEED_UP`/`WP_SPEED_DN`: the altitude the controller holds
+//! moves towards the target at that rate, so a take-off does not overshoot the way a step in the
+//! altitude law (37) would. Horizontal moves are steps: the nested saturations bound the tilt,
+//! and so the speed, by design.
+
+use nalgebra::{Vector2, Vector3};
+
+use crate::model::frames::ned_to_paper;
+use crate::model::mode::{FlightMode, Guidance};
+use crate::nav::globe::horizontal_distance_m;
+use crate::nav::mission::{Limits, Mission, cmd};
+
+/// Navigation period, µs of sim time (50 Hz).
+pub const NAV_PERIOD_US: u64 = 20_000;
+
+/// A take-off is complete within this of its altitude, m.
+pub const TAKEOFF_ALT_TOLERANCE_M: f64 = 0.1;
+
+/// A landing descends on QLOITER's law over its point (so it lands there) down to this height,
+/// then on QLAND's law to touch down (ArduPlane's `Q_LAND_FINAL_ALT`, scaled to the twin), m.
+/// The ground is the motion-capture frame's floor, z = 0.
+pub const LAND_FINAL_ALT_M: f64 = 0.5;
+
+/// What the navigator needs to know about the vehicle and its settings.
+#[derive(Debug, Clone, Copy)]
+pub struct NavInput<'a> {
+    /// Sim time, µs.
+    pub now_us: u64,
+    /// Current flight mode.
+    pub mode: FlightMode,
+    /// Armed.
+    pub armed: bool,
+    /// On the ground.
+    pub landed: bool,
+    /// Where the vehicle is (local NED), m.
+    pub pos_ned_m: Vector3<f64>,
+    /// The stored mission.
+    pub mission: &'a Mission,
+    /// The globe, home and the flight envelope.
+    pub limits: &'a Limits,
+    /// `WP_RADIUS`, m.
+    pub wp_radius_m: f64,
+    /// `WP_SPEED_UP`, m/s.
+    pub speed_up_m_s: f64,
+    /// `WP_SPEED_DN`, m/s.
+    pub speed_dn_m_s: f64,
+}
+
+/// What the endpoint must tell the ground stations or do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NavEvent {
+    /// MISSION_ITEM_REACHED for this item.
+    Reached(u16),
+    /// The current mission item changed (MISSION_CURRENT).
+    Current(u16),
+    /// Change the flight mode (the end of a mission).
+    SetMode(FlightMode),
+    /// An information text (STATUSTEXT, severity INFO).
+    Info(String),
+}
+
+/// Why a GUIDED request is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refused {
+    /// Not possible in the vehicle's state (mode, armed, flying).
+    #[error("{0}")]
+    NotNow(String),
+    /// The target is outside the flight envelope or not a valid value.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Where a mission stands (`MISSION_STATE`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissionState {
+    /// No item to fly (nothing stored, or only the home slot).
+    NoMission,
+    /// Not started since the upload, the last reset or the last completion.
+    NotStarted,
+    /// Being flown (AUTO).
+    Active,
+    /// Started, but the vehicle left AUTO.
+    Paused,
+    /// Every item done.
+    Complete,
+}
+
+/// What the vehicle is doing towards the current target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Leg {
+    /// Armed or not, on the ground, nothing to fly: motors idle.
+    Idle,
+    /// Climb straight up at this point to the altitude (NED z), then the follow-up.
+    Takeoff { xy: Vector2<f64>, z: f64 },
+    /// Fly to the point and stay there.
+    Goto { xy: Vector2<f64>, z: f64 },
+    /// Fly to the point at the current altitude, then land.
+    LandAt { xy: Vector2<f64>, z: f64 },
+    /// Descending over the point to touch down (`last`: below [`LAND_FINAL_ALT_M`], on QLAND's law).
+    Landing { xy: Vector2<f64>, last: bool },
+}
+
+/// The navigator (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    mode: Option<FlightMode>,
+    armed: bool,
+    leg: Leg,
+    /// The altitude the controller holds (NED z), moving towards the leg's at the climb rate.
+    z_cmd: f64,
+    /// The mission item in progress or next (≥ 1 when the mission has items).
+    current: u16,
+    state: MissionState,
+    /// AUTO: when the hold at the current item's point ends, µs (None: not there yet).
+    hold_until_us: Option<u64>,
+    /// Sim time of the last step, µs (the climb rate's time base).
+    last_step_us: Option<u64>,
+}
+
+impl Default for Navigator {
+    fn default() -> Self {
+        Self {
+            mode: None,
+            armed: false,
+            leg: Leg::Idle,
+            z_cmd: 0.0,
+            current: 1,
+            state: MissionState::NotStarted,
+            hold_until_us: None,
+            last_step_us: None,
+        }
+    }
+}
+
+impl Navigator {
+    /// A navigator with nothing to do.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The current mission item (what MISSION_CURRENT reports).
+    #[must_use]
+    pub fn current(&self) -> u16 {
+        self.current
+    }
+
+    /// Where the mission stands, for a mission of `count` items (home slot included).
+    #[must_use]
+    pub fn mission_state(&self, count: u16) -> MissionState {
+        if count <= 1 {
+            MissionState::NoMission
+        } else {
+            self.state
+        }
+    }
+
+    /// The point the vehicle is heading to (local NED), if it flies to one.
+    #[must_use]
+    pub fn target_ned_m(&self) -> Option<Vector3<f64>> {
+        match self.leg {
+            Leg::Takeoff { xy, z } | Leg::Goto { xy, z } | Leg::LandAt { xy, z } => {
+                Some(Vector3::new(xy.x, xy.y, z))
+            }
+            Leg::Landing { xy, .. } => Some(Vector3::new(xy.x, xy.y, 0.0)),
+            Leg::Idle => None,
+        }
+    }
+
+    /// Takes note of mode changes, arming and disarming since the last call, starting what
+    /// the new mode does. Every command that acts on the navigator calls this first, so it sees
+    /// a mode change made by the previous frame even before the next navigation step.
+    pub fn sync(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        let entered = self.mode != Some(inp.mode);
+        let armed_now = inp.armed && !self.armed;
+        let disarmed_now = !inp.armed && self.armed;
+        if entered && self.mode == Some(FlightMode::Auto) && self.state == MissionState::Active {
+            self.state = MissionState::Paused;
+        }
+        self.mode = Some(inp.mode);
+        self.armed = inp.armed;
+        if !inp.mode.is_autonomous() {
+            self.leg = Leg::Idle;
+            return;
+        }
+        if disarmed_now {
+            // QLAND's law disarms on the ground: a landing item is then done.
+            self.landing_done(inp, events);
+            self.leg = Leg::Idle;
+            return;
+        }
+        if !(entered || armed_now) || !inp.armed {
+            if entered {
+                self.leg = Leg::Idle;
+            }
+            return;
+        }
+        // The vehicle starts from where it is.
+        self.z_cmd = inp.pos_ned_m.z;
+        self.hold_until_us = None;
+        let here = inp.pos_ned_m;
+        match inp.mode {
+            FlightMode::Guided => {
+                self.leg = if inp.landed {
+                    Leg::Idle
+                } else {
+                    Leg::Goto {
+                        xy: here.xy(),
+                        z: here.z,
+                    }
+                };
+            }
+            FlightMode::QRtl => self.start_return(inp),
+            FlightMode::Auto => {
+                // Resume where the mission was; a completed one starts over (ArduPilot).
+                let seq = if self.state == MissionState::Complete {
+                    1
+                } else {
+                    self.current.max(1)
+                };
+                self.state = MissionState::Active;
+                self.start_item(seq, inp, events);
+            }
+            _ => {}
+        }
+    }
+
+    /// Takes note of a mode the navigator does not fly (the pilot and hover modes), as
+    /// [`Navigator::sync`] would, without the vehicle's state: the endpoint's cheap path for the
+    /// modes where there is nothing to navigate.
+    pub fn note_pilot_mode(&mut self, mode: FlightMode, armed: bool) {
+        if self.mode != Some(mode)
+            && self.mode == Some(FlightMode::Auto)
+            && self.state == MissionState::Active
+        {
+            self.state = MissionState::Paused;
+        }
+        self.mode = Some(mode);
+        self.armed = armed;
+        self.leg = Leg::Idle;
+        self.last_step_us = None;
+    }
+
+    fn start_return(&mut self, inp: &NavInput<'_>) {
+        let here = inp.pos_ned_m;
+        self.leg = if inp.landed {
+            landing_here(&here)
+        } else {
+            Leg::LandAt {
+                xy: inp.limits.home_ned_m.xy(),
+                z: here.z.min(self.z_cmd),
+            }
+        };
+    }
+
+    /// Starts mission item `seq` (AUTO). Past the end: the mission is complete.
+    fn start_item(&mut self, seq: u16, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        self.hold_until_us = None;
+        let item = match inp.mission.get(seq) {
+            Some(i) if seq >= 1 => *i,
+            _ => {
+                self.complete_mission(inp, events);
+                return;
+            }
+        };
+        if seq != self.current {
+            self.current = seq;
+            events.push(NavEvent::Current(seq));
+        }
+        let here = inp.pos_ned_m;
+        let t = item.target(inp.limits);
+        let xy = t.xy_ned_m.unwrap_or_else(|| here.xy());
+        self.leg = match item.command {
+            cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF => Leg::Takeoff {
+                xy: here.xy(),
+                z: t.z_ned_m,
+            },
+            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => Leg::Goto { xy, z: t.z_ned_m },
+            cmd::NAV_LAND | cmd::NAV_VTOL_LAND => {
+                if inp.landed {
+                    landing_here(&here)
+                } else {
+                    Leg::LandAt { xy, z: here.z }
+                }
+            }
+            cmd::NAV_RETURN_TO_LAUNCH => {
+                if inp.landed {
+                    landing_here(&here)
+                } else {
+                    Leg::LandAt {
+                        xy: inp.limits.home_ned_m.xy(),
+                        z: here.z.min(self.z_cmd),
+                    }
+                }
+            }
+            // Refused at upload; an unknown item is skipped rather than flown.
+            _ => {
+                self.item_done(inp, events, "Skipped");
+                return;
+            }
+        };
+    }
+
+    fn complete_mission(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        self.state = MissionState::Complete;
+        if inp.armed && !inp.landed {
+            events.push(NavEvent::Info(
+                "Mission complete, changing mode to QRTL".into(),
+            ));
+            events.push(NavEvent::SetMode(FlightMode::QRtl));
+        } else {
+            events.push(NavEvent::Info("Mission complete".into()));
+            self.leg = Leg::Idle;
+        }
+    }
+
+    /// The current item is done: report it and start the next.
+    fn item_done(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>, what: &str) {
+        let seq = self.current;
+        let dist = self
+            .target_ned_m()
+            .map_or(0.0, |t| (t - inp.pos_ned_m).norm());
+        events.push(NavEvent::Reached(seq));
+        events.push(NavEvent::Info(format!("{what} #{seq} dist {dist:.1}m")));
+        self.start_item(seq.saturating_add(1), inp, events);
+    }
+
+    /// One navigation step: what to fly now, and what happened.
+    pub fn step(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) -> Guidance {
+        self.sync(inp, events);
+        let dt_s = self
+            .last_step_us
+            .map_or(0.0, |t| inp.now_us.saturating_sub(t) as f64 * 1e-6)
+            .min(1.0);
+        self.last_step_us = Some(inp.now_us);
+        if !inp.mode.is_autonomous() || !inp.armed {
+            return Guidance::Idle;
+        }
+        let here = inp.pos_ned_m;
+        let radius = self.item_radius(inp);
+        match self.leg {
+            Leg::Idle => {}
+            Leg::Takeoff { xy, z } => {
+                if here.z <= z + TAKEOFF_ALT_TOLERANCE_M {
+                    // At altitude: hold there.
+                    self.leg = Leg::Goto { xy, z };
+                    if inp.mode == FlightMode::Auto {
+                        self.item_done(inp, events, "Takeoff complete");
+                    } else {
+                        events.push(NavEvent::Info(format!(
+                            "Takeoff complete at {:.1}m",
+                            inp.limits.home_ned_m.z - here.z
+                        )));
+                    }
+                }
+            }
+            Leg::Goto { xy, z } => {
+                if inp.mode == FlightMode::Auto {
+                    let arrived = (Vector3::new(xy.x, xy.y, z) - here).norm() <= radius;
+                    if arrived && self.hold_until_us.is_none() {
+                        let hold_s = self.item_hold_s(inp);
+                        self.hold_until_us = Some(inp.now_us + (hold_s * 1e6) as u64);
+                    }
+                    if self.hold_until_us.is_some_and(|t| inp.now_us >= t) {
+                        self.item_done(inp, events, "Reached waypoint");
+                    }
+                }
+            }
+            Leg::LandAt { xy, .. } => {
+                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
+                if close <= radius {
+                    self.leg = Leg::Landing { xy, last: false };
+                }
+            }
+            Leg::Landing { xy, last: false } => {
+                if inp.landed || here.z >= -LAND_FINAL_ALT_M {
+                    self.leg = Leg::Landing { xy, last: true };
+                }
+            }
+            Leg::Landing { last: true, .. } => {}
+        }
+        // In AUTO a landing item is reached at touchdown (the vehicle then disarms itself).
+        if inp.landed {
+            self.landing_done(inp, events);
+        }
+        self.guidance(dt_s, inp)
+    }
+
+    /// AUTO: the landing the current item asked for is over (touchdown or disarm).
+    fn landing_done(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        let landing_item = matches!(
+            inp.mission.get(self.current).map(|i| i.command),
+            Some(cmd::NAV_LAND | cmd::NAV_VTOL_LAND | cmd::NAV_RETURN_TO_LAUNCH)
+        );
+        if matches!(self.leg, Leg::Landing { .. })
+            && inp.mode == FlightMode::Auto
+            && self.state == MissionState::Active
+            && landing_item
+        {
+            events.push(NavEvent::Reached(self.current));
+            events.push(NavEvent::Info(format!("Landed #{}", self.current)));
+            self.state = MissionState::Complete;
+            events.push(NavEvent::Info("Mission complete".into()));
+        }
+    }
+
+    fn item_radius(&self, inp: &NavInput<'_>) -> f64 {
+        if inp.mode != FlightMode::Auto {
+            return inp.wp_radius_m;
+        }
+        match inp.mission.get(self.current) {
+            Some(i) if i.command == cmd::NAV_WAYPOINT && i.params[1] > 0.0 => {
+                f64::from(i.params[1])
+            }
+            _ => inp.wp_radius_m,
+        }
+    }
+
+    fn item_hold_s(&self, inp: &NavInput<'_>) -> f64 {
+        match inp.mission.get(self.current) {
+            Some(i) if matches!(i.command, cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME) => {
+                f64::from(i.params[0]).clamp(0.0, 3600.0)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// The guidance for the current leg, moving the held altitude at the climb rates.
+    fn guidance(&mut self, dt_s: f64, inp: &NavInput<'_>) -> Guidance {
+        let (xy, z) = match self.leg {
+            Leg::Idle => return Guidance::Idle,
+            Leg::Landing { last: true, .. } => return Guidance::Land,
+            // Down to the final height over the point, at the descent rate.
+            Leg::Landing { xy, last: false } => (xy, 0.0),
+            Leg::Takeoff { xy, z } | Leg::Goto { xy, z } | Leg::LandAt { xy, z } => (xy, z),
+        };
+        let dz = z - self.z_cmd;
+        // NED: a negative dz is a climb.
+        let max = if dz < 0.0 {
+            inp.speed_up_m_s
+        } else {
+            inp.speed_dn_m_s
+        } * dt_s;
+        self.z_cmd += dz.clamp(-max, max);
+        let ned = Vector3::new(xy.x, xy.y, self.z_cmd);
+        Guidance::Position(ned_to_paper(&ned))
+    }
+
+    /// NAV_TAKEOFF in GUIDED: climb `alt_m` above where the vehicle stands.
+    ///
+    /// # Errors
+    /// Why not: [`Refused::NotNow`] (not GUIDED, not armed, already flying) or
+    /// [`Refused::Invalid`] (altitude not positive or above the envelope).
+    pub fn takeoff(
+        &mut self,
+        alt_m: f64,
+        inp: &NavInput<'_>,
+        events: &mut Vec<NavEvent>,
+    ) -> Result<(), Refused> {
+        self.sync(inp, events);
+        if inp.mode != FlightMode::Guided {
+            return Err(Refused::NotNow("Takeoff: only in GUIDED mode".into()));
+        }
+        if !inp.armed {
+            return Err(Refused::NotNow("Takeoff: must be armed".into()));
+        }
+        if !inp.landed || !matches!(self.leg, Leg::Idle) {
+            return Err(Refused::NotNow("Takeoff: already flying".into()));
+        }
+        if !(alt_m.is_finite() && alt_m > 0.0) {
+            return Err(Refused::Invalid(format!("Takeoff: bad altitude {alt_m} m")));
+        }
+        let here = inp.pos_ned_m;
+        let target = Vector3::new(here.x, here.y, here.z - alt_m);
+        inp.limits
+            .check("Takeoff target", &target)
+            .map_err(|r| Refused::Invalid(r.reason))?;
+        self.z_cmd = here.z;
+        self.leg = Leg::Takeoff {
+            xy: here.xy(),
+            z: target.z,
+        };
+        Ok(())
+    }
+
+    /// A new point to hold in GUIDED (DO_REPOSITION, SET_POSITION_TARGET_*), local NED.
+    ///
+    /// # Errors
+    /// Why not: [`Refused::NotNow`] (not GUIDED, not flying) or [`Refused::Invalid`] (outside
+    /// the envelope).
+    pub fn reposition(
+        &mut self,
+        target_ned_m: Vector3<f64>,
+        inp: &NavInput<'_>,
+        events: &mut Vec<NavEvent>,
+    ) -> Result<(), Refused> {
+        self.sync(inp, events);
+        if inp.mode != FlightMode::Guided {
+            return Err(Refused::NotNow("Reposition: only in GUIDED mode".into()));
+        }
+        if !inp.armed || matches!(self.leg, Leg::Idle) {
+            return Err(Refused::NotNow(
+                "Reposition: not flying, take off first".into(),
+            ));
+        }
+        if !target_ned_m.iter().all(|v| v.is_finite()) {
+            return Err(Refused::Invalid(
+                "Reposition: target is not a number".into(),
+            ));
+        }
+        inp.limits
+            .check("Reposition target", &target_ned_m)
+            .map_err(|r| {
+                Refused::Invalid(format!("Reposition refused: {}", strip_what(&r.reason)))
+            })?;
+        self.leg = Leg::Goto {
+            xy: target_ned_m.xy(),
+            z: target_ned_m.z,
+        };
+        Ok(())
+    }
+
+    /// The point a GUIDED reposition without a position keeps (the current target, or here).
+    #[must_use]
+    pub fn hold_point(&self, here: &Vector3<f64>) -> Vector3<f64> {
+        self.target_ned_m().unwrap_or(*here)
+    }
+
+    /// MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the item AUTO flies next (0 means 1, as
+    /// the home slot is never flown). In AUTO and armed the vehicle turns to it at once.
+    ///
+    /// # Errors
+    /// The sequence number is past the end of the mission.
+    pub fn set_current(
+        &mut self,
+        seq: u16,
+        inp: &NavInput<'_>,
+        events: &mut Vec<NavEvent>,
+    ) -> Result<(), String> {
+        self.sync(inp, events);
+        let count = inp.mission.count();
+        let seq = seq.max(1);
+        if seq >= count {
+            return Err(format!("Mission item {seq} does not exist ({count} items)"));
+        }
+        if inp.mode == FlightMode::Auto && inp.armed {
+            self.state = MissionState::Active;
+            self.start_item(seq, inp, events);
+        } else {
+            if self.state == MissionState::Complete {
+                self.state = MissionState::NotStarted;
+            }
+            if seq != self.current {
+                self.current = seq;
+                events.push(NavEvent::Current(seq));
+            }
+        }
+        Ok(())
+    }
+
+    /// The stored mission was replaced or cleared: the mission starts over at item 1 (and AUTO,
+    /// if flying it, turns to the new item 1).
+    pub fn mission_changed(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        self.sync(inp, events);
+        self.state = MissionState::NotStarted;
+        if inp.mode == FlightMode::Auto && inp.armed {
+            self.state = MissionState::Active;
+            self.current = 0;
+            self.start_item(1, inp, events);
+        } else if self.current != 1 {
+            self.current = 1;
+            events.push(NavEvent::Current(1));
+        }
+    }
+}
+
+/// A landing where the vehicle stands (already on the ground, or told to land here).
+fn landing_here(here: &Vector3<f64>) -> Leg {
+    Leg::Landing {
+        xy: here.xy(),
+        last: true,
+    }
+}
+
+/// "Reposition target is 150.0 m from home…" → "150.0 m from home…": the refusal sentence
+/// names the target once.
+fn strip_what(reason: &str) -> &str {
+    reason
+        .strip_prefix("Reposition target is ")
+        .or_else(|| reason.strip_prefix("Reposition target "))
+        .unwrap_or(reason)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nav::globe::Origin;
+    use crate::nav::mission::{MissionItem, frame};
+
+    fn limits() -> Limits {
+        Limits {
+            origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
+            home_ned_m: Vector3::zeros(),
+            radius_max_m: 100.0,
+            alt_max_m: 50.0,
+        }
+    }
+
+    struct World {
+        nav: Navigator,
+        mission: Mission,
+        limits: Limits,
+        mode: FlightMode,
+        armed: bool,
+        pos: Vector3<f64>,
+        now_us: u64,
+        events: Vec<NavEvent>,
+    }
+
+    impl World {
+        fn new(mission: Mission) -> Self {
+            Self {
+                nav: Navigator::new(),
+                mission,
+                limits: limits(),
+                mode: FlightMode::QStabilize,
+                armed: false,
+                pos: Vector3::zeros(),
+                now_us: 0,
+                events: Vec::new(),
+            }
+        }
+
+        fn input(&self) -> NavInput<'_> {
+            NavInput {
+                now_us: self.now_us,
+                mode: self.mode,
+                armed: self.armed,
+                landed: self.pos.z >= 0.0,
+                pos_ned_m: self.pos,
+                mission: &self.mission,
+                limits: &self.limits,
+                wp_radius_m: 0.3,
+                speed_up_m_s: 1.0,
+                speed_dn_m_s: 0.5,
+            }
+        }
+
+        /// Flies `seconds` with a perfect vehicle: it is wherever the guidance says (a landing
+        /// sinks at 0.5 m/s and disarms on touchdown, as the vehicle's QLAND does).
+        fn fly(&mut self, seconds: f64) -> Vec<Guidance> {
+            let mut out = Vec::new();
+            let steps = (seconds * 1e6 / NAV_PERIOD_US as f64) as usize;
+            for _ in 0..steps {
+                self.now_us += NAV_PERIOD_US;
+                let mut ev = Vec::new();
+                let inp = self.input();
+                let mut nav = self.nav.clone();
+                let g = nav.step(&inp, &mut ev);
+                self.nav = nav;
+                for e in &ev {
+                    if let NavEvent::SetMode(m) = e {
+                        self.mode = *m;
+                    }
+                }
+                self.events.extend(ev);
+                match g {
+                    Guidance::Position(p) => self.pos = crate::model::frames::paper_to_ned(&p),
+                    Guidance::Land => {
+                        self.pos.z = (self.pos.z + 0.5 * NAV_PERIOD_US as f64 * 1e-6).min(0.0);
+                        if self.pos.z >= 0.0 {
+                            self.armed = false;
+                        }
+                    }
+                    Guidance::Idle => {}
+                }
+                out.push(g);
+            }
+            out
+        }
+
+        /// Calls the navigator as the endpoint does (a command between steps).
+        fn call<R>(
+            &mut self,
+            f: impl FnOnce(&mut Navigator, &NavInput<'_>, &mut Vec<NavEvent>) -> R,
+        ) -> R {
+            let mut nav = self.nav.clone();
+            let mut ev = Vec::new();
+            let r = f(&mut nav, &self.input(), &mut ev);
+            self.nav = nav;
+            self.events.extend(ev);
+            r
+        }
+
+        fn reached(&self) -> Vec<u16> {
+            self.events
+                .iter()
+                .filter_map(|e| match e {
+                    NavEvent::Reached(s) => Some(*s),
+                    _ => None,
+                })
+                .collect()
+        }
+    }
+
+    fn item(command: u16, north_m: f64, alt: f32, hold: f32) -> MissionItem {
+        let l = limits();
+        let p = l.origin.to_global(&Vector3::new(north_m, 0.0, 0.0));
+        MissionItem {
+            params: [hold, 0.0, 0.0, 0.0],
+            x: if north_m == 0.0 { 0 } else { p.lat_e7 },
+            y: if north_m == 0.0 { 0 } else { p.lon_e7 },
+            z: alt,
+            command,
+            frame: frame::GLOBAL_RELATIVE_ALT_INT,
+            current: 0,
+            autocontinue: 1,
+        }
+    }
+
+    #[test]
+    fn guided_takeoff_climbs_at_the_climb_rate_then_holds() {
+        let mut w = World::new(Mission::default());
+        w.mode = FlightMode::Guided;
+        let e = w.call(|n, i, e| n.takeoff(2.0, i, e)).unwrap_err();
+        assert_eq!(e, Refused::NotNow("Takeoff: must be armed".into()));
+        w.armed = true;
+        assert_eq!(w.fly(0.1), vec![Guidance::Idle; 5], "idle until take-off");
+        let e = w.call(|n, i, e| n.takeoff(60.0, i, e)).unwrap_err();
+        assert!(
+            matches!(&e, Refused::Invalid(t) if t.contains("NAV_ALT_MAX")),
+            "{e}"
+        );
+        w.call(|n, i, e| n.takeoff(2.0, i, e)).unwrap();
+        w.fly(1.0);
+        assert!((w.pos.z + 1.0).abs() < 0.03, "1 m/s climb: {}", w.pos.z);
+        w.fly(1.5);
+        assert!((w.pos.z + 2.0).abs() < 1e-9, "{}", w.pos.z);
+        assert!(
+            w.events
+                .iter()
+                .any(|e| matches!(e, NavEvent::Info(t) if t.starts_with("Takeoff complete")))
+        );
+        let flying = w.call(|n, i, e| n.takeoff(2.0, i, e));
+        assert!(flying.is_err(), "already flying");
+        // Reposition 5 m north, then a refused one 150 m away.
+        w.call(|n, i, e| n.reposition(Vector3::new(5.0, 0.0, -2.0), i, e))
+            .unwrap();
+        w.fly(0.1);
+        assert_eq!(w.pos, Vector3::new(5.0, 0.0, -2.0));
+        let e = w
+            .call(|n, i, e| n.reposition(Vector3::new(150.0, 0.0, -2.0), i, e))
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "Reposition refused: 150.0 m from home, beyond NAV_RADIUS_MAX 100 m"
+        );
+        assert!(e.to_string().len() > 60);
+    }
+
+    #[test]
+    fn auto_flies_each_item_then_qrtl_lands_home() {
+        let m = Mission::new(vec![
+            item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0), // home slot
+            item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+            item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+            item(cmd::NAV_LOITER_TIME, 8.0, 2.0, 2.0),
+            item(cmd::NAV_WAYPOINT, 6.0, 2.5, 0.0),
+        ]);
+        let mut w = World::new(m);
+        w.mode = FlightMode::Auto;
+        w.fly(0.5);
+        assert!(w.reached().is_empty(), "nothing happens disarmed");
+        w.armed = true;
+        w.fly(4.0);
+        assert_eq!(w.reached(), vec![1, 2], "take-off, then the first waypoint");
+        w.fly(1.0);
+        assert_eq!(w.reached(), vec![1, 2], "holding 2 s at the loiter point");
+        w.fly(1.5);
+        assert_eq!(w.reached(), vec![1, 2, 3, 4]);
+        assert_eq!(w.mode, FlightMode::QRtl, "mission complete in the air");
+        assert!(w.events.contains(&NavEvent::Info(
+            "Mission complete, changing mode to QRTL".into()
+        )));
+        w.fly(10.0);
+        assert!(!w.armed, "landed and disarmed");
+        assert!(w.pos.xy().norm() < 1e-9, "at home: {}", w.pos);
+        assert_eq!(
+            w.nav.mission_state(w.mission.count()),
+            MissionState::Complete
+        );
+    }
+
+    #[test]
+    fn landing_items_and_current_item() {
+        let m = Mission::new(vec![
+            item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+            item(cmd::NAV_VTOL_TAKEOFF, 0.0, 2.0, 0.0),
+            item(cmd::NAV_WAYPOINT, 3.0, 2.0, 0.0),
+            item(cmd::NAV_VTOL_LAND, 5.0, 0.0, 0.0),
+        ]);
+        let mut w = World::new(m);
+        assert!(w.call(|n, i, e| n.set_current(9, i, e)).is_err());
+        w.call(|n, i, e| n.set_current(2, i, e)).unwrap();
+        assert_eq!(w.events, vec![NavEvent::Current(2)]);
+        w.mode = FlightMode::Auto;
+        w.armed = true;
+        w.fly(20.0);
+        assert_eq!(
+            w.reached(),
+            vec![2, 3],
+            "started at item 2, landed at item 3"
+        );
+        assert!(!w.armed);
+        assert!(
+            (w.pos.x - 5.0).abs() < 0.02,
+            "landed at the item's point: {}",
+            w.pos
+        );
+        assert_eq!(w.mode, FlightMode::Auto, "a landed mission stays in AUTO");
+    }
+
+    #[test]
+    fn guided_entered_in_flight_holds_and_empty_auto_returns() {
+        let mut w = World::new(Mission::default());
+        w.armed = true;
+        w.pos = Vector3::new(1.0, 2.0, -3.0);
+        w.mode = FlightMode::Guided;
+        let g = w.fly(0.04);
+        assert_eq!(
+            g.last(),
+            Some(&Guidance::Position(ned_to_paper(&Vector3::new(
+                1.0, 2.0, -3.0
+            ))))
+        );
+        w.mode = FlightMode::Auto;
+        w.fly(0.04);
+        assert_eq!(w.mode, FlightMode::QRtl, "nothing to fly: home");
+    }
+}

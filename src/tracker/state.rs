@@ -1,0 +1,666 @@
+//! What the daemon knows about each vehicle and each link, built by applying frames one at a
+//! time. Pure: `apply` takes the frame and the time it arrived, so it tests without sockets.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::{Duration, Instant};
+
+use foldhash::{HashMap, HashSet};
+use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::{ComponentId, Frame, LinkId, SystemId};
+
+use super::window::{Stamp, Window};
+use crate::tap::Side;
+
+const MSG_HEARTBEAT: u32 = 0;
+/// ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT: the messages the view holds.
+const TRACKED: [u32; 4] = [30, 32, 36, 253];
+
+/// How many status texts a vehicle keeps.
+pub const STATUS_TEXTS_KEPT: usize = 32;
+/// A link with no traffic for this long is shown as lost (MAVProxy's default timeout).
+pub const LINK_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Attitude in NED, radians and rad/s.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Attitude {
+    /// Roll, pitch, yaw.
+    pub rpy_rad: [f32; 3],
+    /// Body rates.
+    pub rates_rad_s: [f32; 3],
+    /// Vehicle boot time of the sample.
+    pub time_boot_ms: u32,
+}
+
+/// Local position in NED, m and m/s.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LocalPosition {
+    /// x, y, z (z down).
+    pub pos_ned_m: [f32; 3],
+    /// vx, vy, vz.
+    pub vel_ned_m_s: [f32; 3],
+}
+
+/// One vehicle's latest state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleView {
+    /// System id.
+    pub system_id: SystemId,
+    /// Component id.
+    pub component_id: ComponentId,
+    /// The link it was last heard on.
+    pub link: LinkId,
+    /// Its frames received (all message types, this vehicle only).
+    pub frames: u64,
+    /// Its frames missing by sequence gaps.
+    pub lost: u64,
+    /// Its frames received and lost over the last seconds: this vehicle's link health, apart
+    /// from other vehicles sharing the link.
+    pub window: Window,
+    /// MAV_TYPE.
+    pub mav_type: MavType,
+    /// MAV_AUTOPILOT.
+    pub autopilot: MavAutopilot,
+    /// custom_mode.
+    pub custom_mode: u32,
+    /// Armed bit of the last heartbeat.
+    pub armed: bool,
+    /// system_status.
+    pub system_status: MavState,
+    /// Latest attitude.
+    pub attitude: Option<Attitude>,
+    /// Latest local position.
+    pub position: Option<LocalPosition>,
+    /// servo1..16 of SERVO_OUTPUT_RAW, µs (0 = unused).
+    pub servo_us: [u16; 16],
+    /// Last status texts, oldest first: (severity, text).
+    pub status_texts: VecDeque<(u8, String)>,
+    /// When the last heartbeat arrived.
+    pub last_heartbeat: Instant,
+    /// The link of its last heartbeat went down (and no heartbeat came since): lost at once,
+    /// not after [`LINK_TIMEOUT`].
+    pub link_down: bool,
+    /// When the vehicle was last seen to arm (None while disarmed): the flight time's start.
+    pub armed_since: Option<Instant>,
+    /// Reboots seen: ATTITUDE's `time_boot_ms` went back (the vehicle's clock restarted).
+    pub reboots: u32,
+    /// The last reboot: `time_boot_ms` before and after it, and when it was seen.
+    pub last_reboot: Option<Reboot>,
+}
+
+/// A vehicle reboot, seen as its boot clock going back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reboot {
+    /// The last `time_boot_ms` before the reboot.
+    pub before_ms: u32,
+    /// The first `time_boot_ms` after it.
+    pub after_ms: u32,
+    /// When the tracker saw it.
+    pub at: Instant,
+}
+
+impl VehicleView {
+    /// Whether no heartbeat came for [`LINK_TIMEOUT`], or the link it came on went down.
+    #[must_use]
+    pub fn is_lost(&self, now: Instant) -> bool {
+        self.link_down || now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
+    }
+
+    /// Its frames per second over the last 2 s.
+    #[must_use]
+    pub fn rate_hz(&self, now: Instant) -> f64 {
+        self.window.rate_hz(now)
+    }
+
+    /// Its loss in percent over the last 10 s, from its sequence gaps.
+    #[must_use]
+    pub fn loss_pct(&self, now: Instant) -> f64 {
+        self.window.loss_pct(now)
+    }
+
+    /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
+    #[must_use]
+    pub fn mode_name(&self) -> String {
+        plane_mode_name(self.custom_mode)
+            .map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
+    }
+}
+
+/// Names of ArduPlane's mode numbers (what pymavlink's `mode_mapping_apm` holds).
+#[must_use]
+pub fn plane_mode_name(mode: u32) -> Option<&'static str> {
+    Some(match mode {
+        0 => "MANUAL",
+        1 => "CIRCLE",
+        2 => "STABILIZE",
+        3 => "TRAINING",
+        4 => "ACRO",
+        5 => "FBWA",
+        6 => "FBWB",
+        7 => "CRUISE",
+        8 => "AUTOTUNE",
+        10 => "AUTO",
+        11 => "RTL",
+        12 => "LOITER",
+        13 => "TAKEOFF",
+        15 => "GUIDED",
+        17 => "QSTABILIZE",
+        18 => "QHOVER",
+        19 => "QLOITER",
+        20 => "QLAND",
+        21 => "QRTL",
+        22 => "QAUTOTUNE",
+        23 => "QACRO",
+        24 => "THERMAL",
+        _ => return None,
+    })
+}
+
+/// Health of one link, from what arrived on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkHealth {
+    /// Vehicle or client side.
+    pub side: Side,
+    /// Frames received since the link came up.
+    pub frames: u64,
+    /// Frames missing by sequence gaps since the link came up.
+    pub lost: u64,
+    /// When the last frame arrived.
+    pub last_heard: Instant,
+    /// Received and lost over the last seconds.
+    pub window: Window,
+}
+
+impl LinkHealth {
+    /// Frames per second over the last 2 s (0 when the link is silent).
+    #[must_use]
+    pub fn rate_hz(&self, now: Instant) -> f64 {
+        self.window.rate_hz(now)
+    }
+
+    /// Loss in percent over the last 10 s, from sequence gaps.
+    #[must_use]
+    pub fn loss_pct(&self, now: Instant) -> f64 {
+        self.window.loss_pct(now)
+    }
+
+    /// Whether the link has been silent for [`LINK_TIMEOUT`].
+    #[must_use]
+    pub fn is_lost(&self, now: Instant) -> bool {
+        now.duration_since(self.last_heard) >= LINK_TIMEOUT
+    }
+}
+
+/// One message id from one sender, as a message inspector lists it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MessageStats {
+    /// Frames received.
+    pub count: u64,
+    /// The latest frame (decoded on demand by the view).
+    pub last: Frame,
+    /// When it arrived.
+    pub last_at: Instant,
+    /// Arrivals over the last seconds.
+    pub window: Window,
+}
+
+/// Everything the tracker knows; published as a snapshot.
+#[derive(Debug, Clone)]
+pub struct VehicleState {
+    /// The time windows count from (when the tracker started).
+    pub epoch: Instant,
+    /// Vehicles by (system, component); the router never lets two vehicle links share a
+    /// system id, so each entry is one vehicle.
+    pub vehicles: BTreeMap<(SystemId, ComponentId), VehicleView>,
+    /// Links by id.
+    pub links: BTreeMap<LinkId, LinkHealth>,
+    /// Every message seen, by (system, component, message id).
+    pub messages: BTreeMap<(SystemId, ComponentId, u32), MessageStats>,
+    last_seq: HashMap<(LinkId, SystemId, ComponentId), u8>,
+    /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
+    text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
+    /// Links that went down: frames of theirs still on the way to the tracker are stale and
+    /// must not bring their vehicles back (a link that reconnects under its id leaves the set).
+    down: HashSet<LinkId>,
+    /// The time of the last frame applied, with its window bucket: a run's frames share it.
+    stamp: Option<Stamp>,
+}
+
+impl Default for VehicleState {
+    fn default() -> Self {
+        Self::new(Instant::now())
+    }
+}
+
+/// Whether a heartbeat comes from a vehicle (pymavlink `probably_vehicle_heartbeat`).
+#[must_use]
+pub fn is_vehicle_heartbeat(mav_type: MavType, autopilot: MavAutopilot) -> bool {
+    autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+        && !matches!(
+            mav_type,
+            MavType::MAV_TYPE_GCS
+                | MavType::MAV_TYPE_GIMBAL
+                | MavType::MAV_TYPE_ADSB
+                | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+        )
+}
+
+impl VehicleState {
+    /// An empty state whose windows count from `epoch`.
+    #[must_use]
+    pub fn new(epoch: Instant) -> Self {
+        Self {
+            epoch,
+            vehicles: BTreeMap::new(),
+            links: BTreeMap::new(),
+            messages: BTreeMap::new(),
+            last_seq: HashMap::default(),
+            text_chunks: HashMap::default(),
+            down: HashSet::default(),
+            stamp: None,
+        }
+    }
+
+    /// Applies one frame that arrived on `link` at `now`, and returns the message it decoded
+    /// (only the ones the view tracks; the rest stay raw).
+    pub fn apply(
+        &mut self,
+        link: LinkId,
+        side: Side,
+        frame: &Frame,
+        now: Instant,
+    ) -> Option<MavMessage> {
+        let stamp = self.stamp(now);
+        self.apply_stamped(link, side, frame, &stamp)
+    }
+
+    /// `now` with its window bucket, for [`VehicleState::apply_stamped`] and the history.
+    pub fn stamp(&mut self, now: Instant) -> Stamp {
+        match self.stamp {
+            Some(s) if s.at() == now && s.epoch() == self.epoch => s,
+            _ => *self.stamp.insert(Stamp::new(self.epoch, now)),
+        }
+    }
+
+    /// [`VehicleState::apply`] at a time already stamped.
+    pub fn apply_stamped(
+        &mut self,
+        link: LinkId,
+        side: Side,
+        frame: &Frame,
+        stamp: &Stamp,
+    ) -> Option<MavMessage> {
+        if !self.down.is_empty() && self.down.contains(&link) {
+            return None;
+        }
+        let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
+        let lost = self.account(link, side, frame, &stamp);
+        let key = frame.sender();
+        if let Some(v) = self.vehicles.get_mut(&key) {
+            v.link = link;
+            v.frames += 1;
+            v.lost += u64::from(lost);
+            v.window.add_stamped(&stamp, 1, lost);
+        }
+        self.messages
+            .entry((key.0, key.1, frame.message_id()))
+            .and_modify(|m| {
+                m.count += 1;
+                m.last = frame.clone();
+                m.last_at = now;
+                m.window.add_stamped(&stamp, 1, 0);
+            })
+            .or_insert_with(|| {
+                let mut window = Window::new(epoch);
+                window.add_stamped(&stamp, 1, 0);
+                MessageStats {
+                    count: 1,
+                    last: frame.clone(),
+                    last_at: now,
+                    window,
+                }
+            });
+        // Decode only what the view uses, and only from known vehicles (or their heartbeat):
+        // the tracker sees every routed frame, and a full decode of each would cost more than
+        // routing it.
+        let id = frame.message_id();
+        let wanted = if id == MSG_HEARTBEAT {
+            true
+        } else {
+            TRACKED.contains(&id) && self.vehicles.contains_key(&key)
+        };
+        if !wanted {
+            return None;
+        }
+        let Ok(msg) = frame.decode() else { return None };
+        if let MavMessage::HEARTBEAT(hb) = &msg {
+            if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
+                return None;
+            }
+            let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
+                system_id: key.0,
+                component_id: key.1,
+                link,
+                frames: 1,
+                lost: 0,
+                window: {
+                    let mut w = Window::new(epoch);
+                    w.add_stamped(&stamp, 1, 0);
+                    w
+                },
+                mav_type: hb.mavtype,
+                autopilot: hb.autopilot,
+                custom_mode: hb.custom_mode,
+                armed: false,
+                system_status: hb.system_status,
+                attitude: None,
+                position: None,
+                servo_us: [0; 16],
+                status_texts: VecDeque::new(),
+                last_heartbeat: now,
+                link_down: false,
+                armed_since: None,
+                reboots: 0,
+                last_reboot: None,
+            });
+            v.mav_type = hb.mavtype;
+            v.autopilot = hb.autopilot;
+            v.custom_mode = hb.custom_mode;
+            v.armed = hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            v.armed_since = match (v.armed, v.armed_since) {
+                (true, None) => Some(now),
+                (true, since) => since,
+                (false, _) => None,
+            };
+            v.system_status = hb.system_status;
+            v.last_heartbeat = now;
+            v.link_down = false;
+            return Some(msg);
+        }
+        let v = self.vehicles.get_mut(&key)?;
+        match &msg {
+            MavMessage::ATTITUDE(a) => {
+                // The boot clock only moves forward while the vehicle runs; going back means
+                // it restarted (a reboot command, a power cycle, a new process on the port).
+                if let Some(prev) = v.attitude
+                    && a.time_boot_ms < prev.time_boot_ms
+                {
+                    v.reboots += 1;
+                    v.last_reboot = Some(Reboot {
+                        before_ms: prev.time_boot_ms,
+                        after_ms: a.time_boot_ms,
+                        at: now,
+                    });
+                }
+                v.attitude = Some(Attitude {
+                    rpy_rad: [a.roll, a.pitch, a.yaw],
+                    rates_rad_s: [a.rollspeed, a.pitchspeed, a.yawspeed],
+                    time_boot_ms: a.time_boot_ms,
+                });
+            }
+            MavMessage::LOCAL_POSITION_NED(p) => {
+                v.position = Some(LocalPosition {
+                    pos_ned_m: [p.x, p.y, p.z],
+                    vel_ned_m_s: [p.vx, p.vy, p.vz],
+                });
+            }
+            MavMessage::SERVO_OUTPUT_RAW(s) => {
+                v.servo_us = [
+                    s.servo1_raw,
+                    s.servo2_raw,
+                    s.servo3_raw,
+                    s.servo4_raw,
+                    s.servo5_raw,
+                    s.servo6_raw,
+                    s.servo7_raw,
+                    s.servo8_raw,
+                    s.servo9_raw,
+                    s.servo10_raw,
+                    s.servo11_raw,
+                    s.servo12_raw,
+                    s.servo13_raw,
+                    s.servo14_raw,
+                    s.servo15_raw,
+                    s.servo16_raw,
+                ];
+            }
+            MavMessage::STATUSTEXT(t) => {
+                if let Some(text) = self.text_chunks.entry(key).or_default().push(t) {
+                    if v.status_texts.len() == STATUS_TEXTS_KEPT {
+                        v.status_texts.pop_front();
+                    }
+                    v.status_texts.push_back((t.severity as u8, text));
+                }
+            }
+            _ => {}
+        }
+        Some(msg)
+    }
+
+    /// Counts a frame in its link's health; returns the frames its sender's sequence says
+    /// were lost just before it.
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> u32 {
+        let (epoch, now) = (self.epoch, stamp.at());
+        let h = self.links.entry(link).or_insert_with(|| LinkHealth {
+            side,
+            frames: 0,
+            lost: 0,
+            last_heard: now,
+            window: Window::new(epoch),
+        });
+        h.frames += 1;
+        h.last_heard = now;
+        let seq = frame.seq();
+        let mut lost = 0;
+        if let Some(last) = self
+            .last_seq
+            .insert((link, frame.sender().0, frame.sender().1), seq)
+        {
+            lost = u32::from(seq.wrapping_sub(last).wrapping_sub(1));
+            h.lost += u64::from(lost);
+        }
+        h.window.add_stamped(stamp, 1, lost);
+        lost
+    }
+
+    /// Forgets a link that went down: its health and its sequence history (a link that comes
+    /// back starts afresh instead of counting the gap as loss). Its vehicles are lost at once,
+    /// and its frames still on their way to the tracker are ignored until
+    /// [`VehicleState::retain_links`] sees it live again.
+    pub fn forget_link(&mut self, link: LinkId) {
+        self.down.insert(link);
+        self.links.remove(&link);
+        self.last_seq.retain(|(l, _, _), _| *l != link);
+        for v in self.vehicles.values_mut().filter(|v| v.link == link) {
+            v.link_down = true;
+        }
+    }
+
+    /// Forgets every link not in `live` (the router's current links).
+    pub fn retain_links(&mut self, live: &[LinkId]) {
+        for id in live {
+            self.down.remove(id);
+        }
+        let gone: Vec<LinkId> = self
+            .links
+            .keys()
+            .filter(|id| !live.contains(id))
+            .copied()
+            .collect();
+        for id in gone {
+            self.forget_link(id);
+        }
+    }
+
+    /// Whether no vehicle has been heard for [`LINK_TIMEOUT`] (or none ever was).
+    #[must_use]
+    pub fn vehicle_lost(&self, now: Instant) -> bool {
+        self.vehicles.values().all(|v| v.is_lost(now))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vtol_link::dialect;
+
+    fn hb(mavtype: MavType, autopilot: MavAutopilot, armed: bool) -> MavMessage {
+        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
+        if armed {
+            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+            custom_mode: 18,
+            mavtype,
+            autopilot,
+            base_mode,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
+    #[test]
+    fn a_boot_clock_going_back_is_a_reboot() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let beat = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 0, &beat),
+            now,
+        );
+        let attitude = |ms: u32, seq: u8| {
+            let m = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+                time_boot_ms: ms,
+                ..Default::default()
+            });
+            Frame::encode_v2(1, 1, seq, &m)
+        };
+        for (seq, ms) in [10_000, 10_050, 10_050, 10_100].into_iter().enumerate() {
+            s.apply(LinkId(1), Side::Vehicle, &attitude(ms, seq as u8), now);
+        }
+        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+        assert_eq!(
+            (v.reboots, v.last_reboot),
+            (0, None),
+            "equal or rising times"
+        );
+        s.apply(LinkId(1), Side::Vehicle, &attitude(1_520, 9), now);
+        s.apply(LinkId(1), Side::Vehicle, &attitude(1_570, 10), now);
+        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+        assert_eq!(v.reboots, 1);
+        let r = v.last_reboot.unwrap();
+        assert_eq!((r.before_ms, r.after_ms), (10_100, 1_520));
+    }
+
+    #[test]
+    fn vehicle_found_by_heartbeat_and_gcs_ignored() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let gcs = hb(
+            MavType::MAV_TYPE_GCS,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+            false,
+        );
+        s.apply(
+            LinkId(1),
+            Side::Client,
+            &Frame::encode_v2(255, 190, 0, &gcs),
+            now,
+        );
+        assert!(s.vehicles.is_empty());
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            true,
+        );
+        s.apply(
+            LinkId(2),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 0, &v),
+            now,
+        );
+        let view = &s.vehicles[&(SystemId(1), ComponentId(1))];
+        assert!(view.armed);
+        assert_eq!(view.mode_name(), "QHOVER");
+    }
+
+    #[test]
+    fn sequence_gaps_count_as_loss() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        for seq in [250u8, 251, 253, 254, 255, 0, 3] {
+            s.apply(
+                LinkId(1),
+                Side::Vehicle,
+                &Frame::encode_v2(1, 1, seq, &v),
+                now,
+            );
+        }
+        let h = &s.links[&LinkId(1)];
+        assert_eq!(h.frames, 7);
+        assert_eq!(h.lost, 3);
+        assert!((h.loss_pct(now) - 30.0).abs() < 1e-9);
+        // Once the link goes down and comes back (a reconnect keeps its id), the gap is not
+        // loss.
+        s.retain_links(&[]);
+        s.retain_links(&[LinkId(1)]);
+        s.apply(
+            LinkId(1),
+            Side::Vehicle,
+            &Frame::encode_v2(1, 1, 100, &v),
+            now,
+        );
+        assert_eq!(s.links[&LinkId(1)].lost, 0);
+    }
+
+    #[test]
+    fn a_vehicle_whose_link_goes_down_is_lost_at_once_and_back_with_its_next_heartbeat() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        for (link, sys) in [(1, 1), (2, 2)] {
+            s.apply(
+                LinkId(link),
+                Side::Vehicle,
+                &Frame::encode_v2(sys, 1, 0, &v),
+                now,
+            );
+        }
+        s.forget_link(LinkId(2));
+        // A heartbeat of link 2 still on its way to the tracker is stale: 2 stays lost.
+        s.apply(
+            LinkId(2),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, 1, &v),
+            now,
+        );
+        let lost =
+            |s: &VehicleState, sys: u8| s.vehicles[&(SystemId(sys), ComponentId(1))].is_lost(now);
+        assert!(!lost(&s, 1));
+        assert!(lost(&s, 2));
+        assert!(!s.vehicle_lost(now));
+        s.apply(
+            LinkId(3),
+            Side::Vehicle,
+            &Frame::encode_v2(2, 1, 2, &v),
+            now,
+        );
+        assert!(!lost(&s, 2));
+    }
+}
