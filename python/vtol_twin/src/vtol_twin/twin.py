@@ -4,7 +4,7 @@ stopped with a check that it exited cleanly.
 The twin prints `listening tcpin:127.0.0.1:PORT` (the MAVLink port) and `control
 tcpin:127.0.0.1:PORT` (the harness channel) on stdout once it is ready. The harness channel is
 a line protocol: one request line (`advance SECONDS`, `state`, `param NAME VALUE`), one JSON
-reply line (`firmware-sim/src/harness.rs` documents it). A twin counts as started when its first
+reply line (`firmware-sim/src/shell/harness.rs` documents it). A twin counts as started when its first
 HEARTBEAT has arrived on the MAVLink port; that frame is read and checked here (CRC and all)
 without pymavlink, so importing this module never fixes pymavlink's MAVLink version.
 """
