@@ -166,7 +166,12 @@ fn write_log(path: &Path, max_frames: u64, seconds: u32) -> u64 {
                 break 'outer;
             }
             let idx = usize::from(sys != 1);
-            let frame = Frame::encode_v2(sys, comp, seq[idx], &m);
+            let frame = Frame::encode_v2(
+                vtol_link::SystemId(sys),
+                vtol_link::ComponentId(comp),
+                seq[idx],
+                &m,
+            );
             seq[idx] = seq[idx].wrapping_add(1);
             let t_us = t0 + u64::from(s) * 1_000_000 + j as u64 * 1_000_000 / per;
             let direction = if sys == 1 {

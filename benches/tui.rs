@@ -101,7 +101,7 @@ fn recording() -> (Instant, VehicleState, History) {
     let mut history = History::new(t0);
     let mut seq = 0u8;
     let mut feed = |ms: u64, msg: &MavMessage, state: &mut VehicleState, history: &mut History| {
-        let f = Frame::encode_v2(1, 1, seq, msg);
+        let f = Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, msg);
         seq = seq.wrapping_add(1);
         let now = t0 + Duration::from_millis(ms);
         let d = state.apply(LinkId(1), Side::Vehicle, &f, now);
@@ -240,7 +240,7 @@ async fn flood(addr: std::net::SocketAddr, per_s: u32, cancel: CancellationToken
             _ = tick.tick() => {
                 buf.clear();
                 for _ in 0..per_tick {
-                    buf.extend_from_slice(Frame::encode_v2(2, 1, seq, &msg).as_bytes());
+                    buf.extend_from_slice(Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), seq, &msg).as_bytes());
                     seq = seq.wrapping_add(1);
                 }
                 if s.write_all(&buf).await.is_err() { return; }

@@ -353,7 +353,12 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
                 for (kind, msg) in frames {
                     let s = seq[i];
                     seq[i] = s.wrapping_add(1);
-                    let f = Frame::encode_v2(sys, 1, s, &msg);
+                    let f = Frame::encode_v2(
+                        vtol_link::SystemId(sys),
+                        vtol_link::ComponentId(1),
+                        s,
+                        &msg,
+                    );
                     let t_send = now_ns();
                     sent.slot(sys, s).store(t_send, Ordering::Release);
                     if kind < 2 && window.is_some_and(|(a, b)| t_send >= a && t_send < b) {

@@ -215,14 +215,24 @@ mod tests {
         s.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(1, 1, 0, &heartbeat(false)),
+            &Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                0,
+                &heartbeat(false),
+            ),
             t0,
         );
         assert_eq!(fleet_part(&s, &[], t0), "", "one vehicle: nothing to add");
         s.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(2, 1, 0, &heartbeat(true)),
+            &Frame::encode_v2(
+                vtol_link::SystemId(2),
+                vtol_link::ComponentId(1),
+                0,
+                &heartbeat(true),
+            ),
             t0 + Duration::from_secs(6),
         );
         let conflict = SysidConflict {

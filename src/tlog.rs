@@ -772,7 +772,12 @@ mod tests {
     use vtol_link::dialect::{self, MavMessage};
 
     fn heartbeat(seq: u8) -> Frame {
-        Frame::encode_v2(255, 190, seq, &vtol_link::gcs_heartbeat())
+        Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            seq,
+            &vtol_link::gcs_heartbeat(),
+        )
     }
 
     #[test]
@@ -808,7 +813,12 @@ mod tests {
             !w.write(&Record {
                 t_us: t,
                 direction: Direction::ToVehicle,
-                frame: Frame::encode_v2(255, 0, 3, &signing)
+                frame: Frame::encode_v2(
+                    vtol_link::SystemId(255),
+                    vtol_link::ComponentId(0),
+                    3,
+                    &signing
+                )
             })
             .unwrap()
         );
@@ -848,7 +858,12 @@ mod tests {
         let mut frames = Vec::new();
         for (i, g) in garbage.iter().enumerate() {
             data.extend_from_slice(g);
-            let f = Frame::encode_v2(1, 1, i as u8, &vtol_link::gcs_heartbeat());
+            let f = Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                i as u8,
+                &vtol_link::gcs_heartbeat(),
+            );
             // Unix µs, as loggers stamp records (2026-11-22), 1 ms apart.
             data.extend_from_slice(&(1_795_346_880_000_000 + i as u64 * 1000).to_be_bytes());
             data.extend_from_slice(f.as_bytes());

@@ -122,7 +122,12 @@ fn serves_the_embedded_twin_and_shuts_down_cleanly_on_sigterm() {
     }
     assert!(vehicle_frames >= 20, "only {vehicle_frames} vehicle frames");
     // A client's own heartbeat, as a script through the daemon sends it.
-    let beat = vtol_link::Frame::encode_v2(255, 0, 0, &vtol_link::gcs_heartbeat());
+    let beat = vtol_link::Frame::encode_v2(
+        vtol_link::SystemId(255),
+        vtol_link::ComponentId(0),
+        0,
+        &vtol_link::gcs_heartbeat(),
+    );
     sock.write_all(beat.as_bytes()).unwrap();
     sock.write_all(b"\xfe\x00garbage that is not mavlink")
         .unwrap();
@@ -381,7 +386,12 @@ fn a_listening_vehicle_url_is_printed_with_its_real_port() {
         .set_read_timeout(Some(Duration::from_millis(200)))
         .unwrap();
     let vehicle_sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let beat = vtol_link::Frame::encode_v2(7, 1, 0, &vtol_link::gcs_heartbeat());
+    let beat = vtol_link::Frame::encode_v2(
+        vtol_link::SystemId(7),
+        vtol_link::ComponentId(1),
+        0,
+        &vtol_link::gcs_heartbeat(),
+    );
     let mut dec = FrameDecoder::new();
     let mut buf = [0u8; 4096];
     let deadline = Instant::now() + Duration::from_secs(20);

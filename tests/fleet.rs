@@ -58,7 +58,12 @@ fn the_tracker_keeps_vehicles_on_one_link_apart() {
             if sys == 3 && n % 4 == 3 {
                 continue;
             }
-            let f = Frame::encode_v2(sys, 1, n, &heartbeat(17 + u32::from(sys), sys == 2));
+            let f = Frame::encode_v2(
+                vtol_link::SystemId(sys),
+                vtol_link::ComponentId(1),
+                n,
+                &heartbeat(17 + u32::from(sys), sys == 2),
+            );
             s.apply(
                 link,
                 Side::Vehicle,
@@ -142,18 +147,42 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
         .expect("router running");
 
     // A is system 1 (QHOVER); B claims system 1 too (QLAND), and is also system 2.
-    a.write_all(Frame::encode_v2(1, 1, 0, &heartbeat(18, false)).as_bytes())
-        .await
-        .unwrap();
+    a.write_all(
+        Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            0,
+            &heartbeat(18, false),
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
     let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
     assert_eq!(got.len(), 1, "A's heartbeat reaches the client");
     let mut conflicts = handle.conflicts.clone();
-    b.write_all(Frame::encode_v2(1, 1, 0, &heartbeat(20, true)).as_bytes())
-        .await
-        .unwrap();
-    b.write_all(Frame::encode_v2(2, 1, 0, &heartbeat(17, false)).as_bytes())
-        .await
-        .unwrap();
+    b.write_all(
+        Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            0,
+            &heartbeat(20, true),
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
+    b.write_all(
+        Frame::encode_v2(
+            vtol_link::SystemId(2),
+            vtol_link::ComponentId(1),
+            0,
+            &heartbeat(17, false),
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
     let seen = tokio::time::timeout(
         Duration::from_secs(5),
         conflicts.wait_for(|c| !c.is_empty()),
@@ -193,9 +222,11 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
         param1: 0.0,
         ..Default::default()
     });
-    b.write_all(Frame::encode_v2(2, 1, 1, &to_a).as_bytes())
-        .await
-        .unwrap();
+    b.write_all(
+        Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 1, &to_a).as_bytes(),
+    )
+    .await
+    .unwrap();
     let got = read_until(&mut a, Duration::from_secs(5), |f| !f.is_empty()).await;
     assert_eq!(got.len(), 1, "B's command for system 1 reaches A");
     assert_eq!(got[0].system_id(), 2);
@@ -206,9 +237,17 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
         .await
         .expect("conflict cleared")
         .expect("router running");
-    b.write_all(Frame::encode_v2(1, 1, 1, &heartbeat(20, true)).as_bytes())
-        .await
-        .unwrap();
+    b.write_all(
+        Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            1,
+            &heartbeat(20, true),
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
     let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].system_id(), 1);
@@ -255,20 +294,35 @@ fn ui_lists_three_vehicles_and_switches() {
         state.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(1, 1, n, &heartbeat(18, true)),
+            &Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                n,
+                &heartbeat(18, true),
+            ),
             t,
         );
         state.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(2, 1, n, &heartbeat(19, true)),
+            &Frame::encode_v2(
+                vtol_link::SystemId(2),
+                vtol_link::ComponentId(1),
+                n,
+                &heartbeat(19, true),
+            ),
             t,
         );
         if n < 4 {
             state.apply(
                 LinkId(1),
                 Side::Vehicle,
-                &Frame::encode_v2(3, 1, n, &heartbeat(17, false)),
+                &Frame::encode_v2(
+                    vtol_link::SystemId(3),
+                    vtol_link::ComponentId(1),
+                    n,
+                    &heartbeat(17, false),
+                ),
                 t,
             );
         }
@@ -313,7 +367,12 @@ fn a_fleet_wider_than_the_screen_wraps_and_scrolls_to_the_selected_vehicle() {
         state.apply(
             LinkId(u32::from(sys)),
             Side::Vehicle,
-            &Frame::encode_v2(sys, 1, 0, &heartbeat(17, false)),
+            &Frame::encode_v2(
+                vtol_link::SystemId(sys),
+                vtol_link::ComponentId(1),
+                0,
+                &heartbeat(17, false),
+            ),
             t0,
         );
     }

@@ -146,7 +146,12 @@ fn write_tlog(path: &Path, seconds: u32) {
             w.write(&Record {
                 t_us: t0 + u64::from(ms) * 1000,
                 direction: Direction::FromVehicle,
-                frame: Frame::encode_v2(1, 1, (i % 256) as u8, m),
+                frame: Frame::encode_v2(
+                    vtol_link::SystemId(1),
+                    vtol_link::ComponentId(1),
+                    (i % 256) as u8,
+                    m,
+                ),
             })
             .unwrap();
         }
@@ -203,7 +208,12 @@ fn the_twins_controller_outputs_in_a_tlog_are_the_inputs_figure() {
             w.write(&Record {
                 t_us: 1_795_346_880_000_000 + u64::from(i) * 20_000,
                 direction: Direction::FromVehicle,
-                frame: Frame::encode_v2(1, 1, (i % 256) as u8, &msg),
+                frame: Frame::encode_v2(
+                    vtol_link::SystemId(1),
+                    vtol_link::ComponentId(1),
+                    (i % 256) as u8,
+                    &msg,
+                ),
             })
             .unwrap();
         }

@@ -112,15 +112,30 @@ async fn targeted_frames_reach_only_links_where_the_target_was_seen() {
     let mut h = harness(2).await;
     // Client 0 announces itself as system 200, client 1 as 201.
     for (i, sys) in [(0usize, 200u8), (1, 201)] {
-        let f = Frame::encode_v2(sys, 0, 0, &statustext(0));
+        let f = Frame::encode_v2(
+            vtol_link::SystemId(sys),
+            vtol_link::ComponentId(0),
+            0,
+            &statustext(0),
+        );
         h.clients[i].write_all(f.as_bytes()).await.unwrap();
     }
     // The vehicle sees both broadcasts.
     let seen = read_frames(&mut h.vehicle, 2, Duration::from_secs(5)).await;
     assert_eq!(seen.len(), 2);
     // A vehicle frame targeted at 201 must reach client 1 only.
-    let targeted = Frame::encode_v2(1, 1, 9, &param_request_read(201, 3));
-    let marker = Frame::encode_v2(1, 1, 10, &statustext(1));
+    let targeted = Frame::encode_v2(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        9,
+        &param_request_read(201, 3),
+    );
+    let marker = Frame::encode_v2(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        10,
+        &statustext(1),
+    );
     h.vehicle.write_all(targeted.as_bytes()).await.unwrap();
     h.vehicle.write_all(marker.as_bytes()).await.unwrap();
     // Each client also hears the other's broadcast; keep the vehicle's frames.
@@ -150,7 +165,7 @@ proptest! {
         rt.block_on(async {
             let mut h = harness(n_clients).await;
             let frames: Vec<Frame> = seqs.iter().enumerate()
-                .map(|(i, s)| Frame::encode_v2(1, 1, *s, &statustext(u8::try_from(i % 250).unwrap())))
+                .map(|(i, s)| Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), *s, &statustext(u8::try_from(i % 250).unwrap())))
                 .collect();
             let mut sent = Vec::new();
             for f in &frames {
@@ -164,7 +179,7 @@ proptest! {
             }
             // No echo: the first thing the vehicle link receives is a client's marker, sent
             // after every vehicle frame was delivered.
-            let marker = Frame::encode_v2(255, 0, 0, &statustext(255));
+            let marker = Frame::encode_v2(vtol_link::SystemId(255), vtol_link::ComponentId(0), 0, &statustext(255));
             h.clients[0].write_all(marker.as_bytes()).await.unwrap();
             let first = read_frames(&mut h.vehicle, 1, Duration::from_secs(5)).await;
             assert_eq!(first, vec![marker]);
@@ -183,9 +198,28 @@ async fn unknown_message_ids_and_v1_frames_are_forwarded_unchanged() {
         vtol_link::frame::crc_extra(id).is_none(),
         "pick an id the dialect does not know"
     );
-    let unknown = Frame::encode_raw_v2(1, 1, 5, id, &[1, 2, 3, 4], 77).unwrap();
-    let v1 = Frame::encode_v1(1, 1, 6, &statustext(3)).unwrap();
-    let marker = Frame::encode_v2(1, 1, 7, &statustext(4));
+    let unknown = Frame::encode_raw_v2(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        5,
+        id,
+        &[1, 2, 3, 4],
+        77,
+    )
+    .unwrap();
+    let v1 = Frame::encode_v1(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        6,
+        &statustext(3),
+    )
+    .unwrap();
+    let marker = Frame::encode_v2(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        7,
+        &statustext(4),
+    );
     for f in [&unknown, &v1, &marker] {
         h.vehicle.write_all(f.as_bytes()).await.unwrap();
     }
@@ -214,7 +248,13 @@ async fn a_slow_client_loses_frames_counted_while_the_others_get_everything() {
         for i in 0..500u32 {
             seq = seq.wrapping_add(1);
             bytes.extend_from_slice(
-                Frame::encode_v2(1, 1, seq, &statustext((i % 250) as u8)).as_bytes(),
+                Frame::encode_v2(
+                    vtol_link::SystemId(1),
+                    vtol_link::ComponentId(1),
+                    seq,
+                    &statustext((i % 250) as u8),
+                )
+                .as_bytes(),
             );
         }
         h.vehicle.write_all(&bytes).await.unwrap();

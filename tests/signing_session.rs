@@ -54,7 +54,12 @@ fn command(seq: u8) -> Frame {
         param1: 0.0,
         ..Default::default()
     });
-    Frame::encode_v2(255, 0, seq, &msg)
+    Frame::encode_v2(
+        vtol_link::SystemId(255),
+        vtol_link::ComponentId(0),
+        seq,
+        &msg,
+    )
 }
 
 fn vehicle_heartbeat() -> Frame {
@@ -63,7 +68,7 @@ fn vehicle_heartbeat() -> Frame {
         autopilot: dialect::MavAutopilot::MAV_AUTOPILOT_GENERIC,
         ..Default::default()
     });
-    Frame::encode_v2(1, 1, 0, &msg)
+    Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &msg)
 }
 
 fn ack() -> Frame {
@@ -74,7 +79,7 @@ fn ack() -> Frame {
         target_component: 0,
         ..Default::default()
     });
-    Frame::encode_v2(1, 1, 1, &msg)
+    Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 1, &msg)
 }
 
 /// The vehicle end of one vehicle link.

@@ -42,7 +42,12 @@ impl Recording {
     }
 
     fn feed(&mut self, ms: u64, msg: &MavMessage) {
-        let frame = Frame::encode_v2(1, 1, self.seq, msg);
+        let frame = Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            self.seq,
+            msg,
+        );
         self.seq = self.seq.wrapping_add(1);
         let now = self.at(ms);
         let decoded = self.state.apply(VEHICLE_LINK, Side::Vehicle, &frame, now);
@@ -50,7 +55,12 @@ impl Recording {
     }
 
     fn feed_gcs(&mut self, ms: u64) {
-        let frame = Frame::encode_v2(255, 190, (ms / 1000) as u8, &vtol_link::gcs_heartbeat());
+        let frame = Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            (ms / 1000) as u8,
+            &vtol_link::gcs_heartbeat(),
+        );
         let now = self.at(ms);
         let decoded = self.state.apply(OWN_LINK, Side::Client, &frame, now);
         self.history.record(&frame, decoded.as_ref(), now);

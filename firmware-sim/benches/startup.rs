@@ -112,7 +112,12 @@ impl Client {
     }
 
     fn send(&mut self, msg: &apm::MavMessage) {
-        let f = Frame::encode_v2(255, 190, self.seq, msg);
+        let f = Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            self.seq,
+            msg,
+        );
         self.seq = self.seq.wrapping_add(1);
         self.s.write_all(f.as_bytes()).unwrap();
     }

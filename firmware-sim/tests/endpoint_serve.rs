@@ -45,7 +45,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Gcs<S> {
     }
 
     async fn send(&mut self, msg: &apm::MavMessage) {
-        let f = Frame::encode_v2(255, 190, self.seq, msg);
+        let f = Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            self.seq,
+            msg,
+        );
         self.seq = self.seq.wrapping_add(1);
         self.stream.write_all(f.as_bytes()).await.unwrap();
     }
@@ -192,7 +197,15 @@ async fn serve_over_tcp_heartbeat_params_commands() {
     let mut payload = [0u8; 33];
     payload[28..30].copy_from_slice(&65000u16.to_le_bytes());
     payload[30] = 1;
-    let raw = Frame::encode_raw_v2(255, 190, 9, 76, &payload, 152).unwrap();
+    let raw = Frame::encode_raw_v2(
+        vtol_link::SystemId(255),
+        vtol_link::ComponentId(190),
+        9,
+        76,
+        &payload,
+        152,
+    )
+    .unwrap();
     gcs.send_raw(&raw).await;
     assert_eq!(gcs.ack().await, (65000, 3));
 

@@ -290,7 +290,14 @@ fn frames_from(data: &[u8], system_id: u8, component_id: u8, ids: &[u32]) -> Vec
         let (payload, next) = tail.split_at(n);
         rest = next;
         let Some(extra) = crc_extra(id) else { continue };
-        if let Ok(f) = Frame::encode_raw_v2(system_id, component_id, seq, id, payload, extra) {
+        if let Ok(f) = Frame::encode_raw_v2(
+            vtol_link::SystemId(system_id),
+            vtol_link::ComponentId(component_id),
+            seq,
+            id,
+            payload,
+            extra,
+        ) {
             out.push(f);
         }
         seq = seq.wrapping_add(1);
@@ -324,8 +331,8 @@ pub fn tracker(data: &[u8]) {
     let mut state = VehicleState::default();
     let t0 = Instant::now();
     let beat = Frame::encode_v2(
-        1,
-        1,
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
         0,
         &MavMessage::HEARTBEAT(vtol_link::dialect::HEARTBEAT_DATA {
             mavtype: vtol_link::dialect::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,

@@ -14,8 +14,8 @@ use vtol_link::signing::{Signing, SigningKey};
 
 fn command_long() -> Frame {
     Frame::encode_v2(
-        255,
-        190,
+        vtol_link::SystemId(255),
+        vtol_link::ComponentId(190),
         0,
         &MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
             param1: 1.0,
@@ -35,7 +35,15 @@ fn signing(c: &mut Criterion) {
         b.iter(|| tx.sign_now(black_box(&small)).unwrap());
     });
     // The largest frame: a 255-byte payload of an id the dialect knows (COMMAND_LONG's CRC_EXTRA).
-    let big = Frame::encode_raw_v2(255, 190, 0, MSG_ID_COMMAND_LONG, &[0x5a; 255], 152).unwrap();
+    let big = Frame::encode_raw_v2(
+        vtol_link::SystemId(255),
+        vtol_link::ComponentId(190),
+        0,
+        MSG_ID_COMMAND_LONG,
+        &[0x5a; 255],
+        152,
+    )
+    .unwrap();
     c.bench_function("sign 255-byte payload (267-byte frame)", |b| {
         b.iter(|| tx.sign_now(black_box(&big)).unwrap());
     });

@@ -346,13 +346,26 @@ mod tests {
     use super::*;
 
     fn hb(seq: u8) -> Frame {
-        Frame::encode_v2(1, 1, seq, &crate::frame::gcs_heartbeat())
+        Frame::encode_v2(
+            crate::SystemId(1),
+            crate::ComponentId(1),
+            seq,
+            &crate::frame::gcs_heartbeat(),
+        )
     }
 
     fn unknown_frame(seq: u8, payload: &[u8]) -> Frame {
         let id = 0x00_AB_CD;
         assert!(crc_extra(id).is_none());
-        Frame::encode_raw_v2(1, 1, seq, id, payload, 0x55).unwrap()
+        Frame::encode_raw_v2(
+            crate::SystemId(1),
+            crate::ComponentId(1),
+            seq,
+            id,
+            payload,
+            0x55,
+        )
+        .unwrap()
     }
 
     #[test]

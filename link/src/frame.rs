@@ -13,6 +13,7 @@ use bytes::Bytes;
 use mavlink::{MavlinkVersion, Message};
 
 use crate::dialect::MavMessage;
+use crate::ids::{ComponentId, SystemId};
 
 /// First byte of a MAVLink 1 frame.
 pub const MAGIC_V1: u8 = 0xFE;
@@ -280,7 +281,12 @@ impl Frame {
 
     /// Builds a MAVLink 2 frame (unsigned) from a typed message. Trailing zero bytes of the
     /// payload are stripped, as the spec asks.
-    pub fn encode_v2(system_id: u8, component_id: u8, seq: u8, msg: &MavMessage) -> Frame {
+    pub fn encode_v2(
+        system_id: SystemId,
+        component_id: ComponentId,
+        seq: u8,
+        msg: &MavMessage,
+    ) -> Frame {
         let mut payload = [0u8; 255];
         let len = msg.ser(MavlinkVersion::V2, &mut payload);
         let id = msg.message_id();
@@ -304,8 +310,8 @@ impl Frame {
     /// knows (its CRC_EXTRA is the dialect's), trailing zero bytes stripped as the spec asks:
     /// for payloads the typed encoder cannot express (enum values the dialect lacks).
     pub fn encode_payload_v2(
-        system_id: u8,
-        component_id: u8,
+        system_id: SystemId,
+        component_id: ComponentId,
         seq: u8,
         message_id: u32,
         payload: &[u8],
@@ -324,8 +330,8 @@ impl Frame {
 
     /// Builds a MAVLink 1 frame from a typed message (no extension fields, as v1 requires).
     pub fn encode_v1(
-        system_id: u8,
-        component_id: u8,
+        system_id: SystemId,
+        component_id: ComponentId,
         seq: u8,
         msg: &MavMessage,
     ) -> Result<Frame, FrameError> {
@@ -334,7 +340,7 @@ impl Frame {
         let id = msg.message_id();
         let id_u8 = u8::try_from(id).map_err(|_| FrameError::IdTooLargeForV1(id))?;
         let mut buf = Vec::with_capacity(HEADER_LEN_V1 + len + CRC_LEN);
-        buf.extend_from_slice(&[MAGIC_V1, len as u8, seq, system_id, component_id, id_u8]);
+        buf.extend_from_slice(&[MAGIC_V1, len as u8, seq, system_id.0, component_id.0, id_u8]);
         buf.extend_from_slice(&payload[..len]);
         let crc = frame_crc(&buf[1..], MavMessage::extra_crc(id));
         buf.extend_from_slice(&crc.to_le_bytes());
@@ -345,8 +351,8 @@ impl Frame {
     /// messages the typed dialect cannot express (unknown ids, or enum values it rejects).
     /// The payload is sent as given (strip trailing zeros yourself if you care).
     pub fn encode_raw_v2(
-        system_id: u8,
-        component_id: u8,
+        system_id: SystemId,
+        component_id: ComponentId,
         seq: u8,
         message_id: u32,
         payload: &[u8],
@@ -365,8 +371,8 @@ impl Frame {
             0,
             0,
             seq,
-            system_id,
-            component_id,
+            system_id.0,
+            component_id.0,
             id[0],
             id[1],
             id[2],
@@ -535,17 +541,13 @@ impl Frame {
     /// The sender's (system, component), typed.
     #[must_use]
     pub fn sender(&self) -> (crate::SystemId, crate::ComponentId) {
-        (
-            crate::SystemId(self.system_id()),
-            crate::ComponentId(self.component_id()),
-        )
+        (SystemId(self.system_id()), ComponentId(self.component_id()))
     }
 
     /// [`Frame::target`], typed.
     #[must_use]
     pub fn target_ids(&self) -> Option<(crate::SystemId, crate::ComponentId)> {
-        self.target()
-            .map(|(s, c)| (crate::SystemId(s), crate::ComponentId(c)))
+        self.target().map(|(s, c)| (SystemId(s), ComponentId(c)))
     }
 
     /// Decodes the payload into a typed ardupilotmega message. Failure (unknown id, enum value
@@ -669,31 +671,40 @@ impl RawCommandAck {
 
     /// An ack with `result` for `command`, addressed back to its sender (progress 255 "not
     /// in progress", `result_param2` 0).
-    pub fn new(command: u16, result: u8, sender_system: u8, sender_component: u8) -> Self {
+    pub fn new(
+        command: u16,
+        result: u8,
+        sender_system: SystemId,
+        sender_component: ComponentId,
+    ) -> Self {
         RawCommandAck {
             command,
             result,
             progress: 0xFF,
             result_param2: 0,
-            target_system: sender_system,
-            target_component: sender_component,
+            target_system: sender_system.0,
+            target_component: sender_component.0,
         }
     }
 
     /// An UNSUPPORTED ack for `cmd`, addressed back to its sender.
-    pub fn unsupported(cmd: &RawCommand, sender_system: u8, sender_component: u8) -> Self {
+    pub fn unsupported(
+        cmd: &RawCommand,
+        sender_system: SystemId,
+        sender_component: ComponentId,
+    ) -> Self {
         RawCommandAck {
             command: cmd.command,
             result: Self::RESULT_UNSUPPORTED,
             progress: 0xFF,
             result_param2: 0,
-            target_system: sender_system,
-            target_component: sender_component,
+            target_system: sender_system.0,
+            target_component: sender_component.0,
         }
     }
 
     /// The ack as an unsigned MAVLink 2 frame (payload trailing zeros stripped).
-    pub fn to_frame(&self, system_id: u8, component_id: u8, seq: u8) -> Frame {
+    pub fn to_frame(&self, system_id: SystemId, component_id: ComponentId, seq: u8) -> Frame {
         let c = self.command.to_le_bytes();
         let r = self.result_param2.to_le_bytes();
         let payload = [
@@ -764,14 +775,14 @@ mod tests {
     #[test]
     fn heartbeat_bytes_match_protocol_probe() {
         // PROTOCOL.md D.1 [probe] bytes.
-        let v2 = Frame::encode_v2(1, 1, 0, &heartbeat());
+        let v2 = Frame::encode_v2(SystemId(1), ComponentId(1), 0, &heartbeat());
         assert_eq!(
             v2.as_bytes(),
             &[
                 0xfd, 0x09, 0, 0, 0, 1, 1, 0, 0, 0, 0x11, 0, 0, 0, 0x13, 0, 0x81, 3, 3, 0xb8, 0xcf
             ]
         );
-        let v1 = Frame::encode_v1(1, 1, 0, &heartbeat()).unwrap();
+        let v1 = Frame::encode_v1(SystemId(1), ComponentId(1), 0, &heartbeat()).unwrap();
         assert_eq!(
             v1.as_bytes(),
             &[
@@ -789,7 +800,7 @@ mod tests {
 
     #[test]
     fn from_bytes_rejects_bad_crc_and_lengths() {
-        let f = Frame::encode_v2(1, 1, 0, &heartbeat());
+        let f = Frame::encode_v2(SystemId(1), ComponentId(1), 0, &heartbeat());
         let mut b = f.as_bytes().to_vec();
         b[12] ^= 1;
         assert!(matches!(
@@ -820,7 +831,7 @@ mod tests {
             if let Some(t) = msg.target_component_id_mut() {
                 *t = 0x34;
             }
-            let f = Frame::encode_v2(7, 8, 9, &msg);
+            let f = Frame::encode_v2(SystemId(7), ComponentId(8), 9, &msg);
             let expected = msg
                 .target_system_id()
                 .map(|s| (s, msg.target_component_id().unwrap_or(0)));
@@ -841,7 +852,7 @@ mod tests {
             target_system: 255,
             target_component: 0,
         };
-        let f = ack.to_frame(1, 1, 5);
+        let f = ack.to_frame(SystemId(1), ComponentId(1), 5);
         assert!(f.is_verified());
         assert!(matches!(f.decode(), Err(FrameError::Parse { .. })));
         assert_eq!(f.target(), Some((255, 0)));
@@ -860,7 +871,7 @@ mod tests {
             confirmation: 2,
             ..Default::default()
         });
-        let f = Frame::encode_v2(255, 190, 0, &long);
+        let f = Frame::encode_v2(SystemId(255), ComponentId(190), 0, &long);
         let c = f.raw_command().unwrap();
         assert_eq!(c.command, 400);
         assert_eq!((c.target_system, c.target_component), (1, 0));
@@ -876,7 +887,9 @@ mod tests {
             frame: apm::MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
             ..Default::default()
         });
-        let c = Frame::encode_v2(255, 190, 0, &int).raw_command().unwrap();
+        let c = Frame::encode_v2(SystemId(255), ComponentId(190), 0, &int)
+            .raw_command()
+            .unwrap();
         assert_eq!(c.command, 192);
         assert_eq!((c.target_system, c.target_component), (3, 1));
         assert!(matches!(
@@ -888,7 +901,7 @@ mod tests {
             }
         ));
         assert!(
-            Frame::encode_v2(1, 1, 0, &heartbeat())
+            Frame::encode_v2(SystemId(1), ComponentId(1), 0, &heartbeat())
                 .raw_command()
                 .is_none()
         );
@@ -900,16 +913,21 @@ mod tests {
         let mut p = [0u8; 10];
         p[..2].copy_from_slice(&400u16.to_le_bytes());
         p[3] = 0xFF;
-        let f = Frame::encode_payload_v2(1, 1, 4, MSG_ID_COMMAND_ACK, &p).unwrap();
+        let f = Frame::encode_payload_v2(SystemId(1), ComponentId(1), 4, MSG_ID_COMMAND_ACK, &p)
+            .unwrap();
         assert!(f.is_verified());
         assert_eq!(f.payload(), &p[..4], "trailing zeros stripped");
         assert_eq!(f.payload_padded::<10>(), p);
         assert_eq!(f.payload_padded::<2>(), [0x90, 0x01]);
         // The same bytes as the dedicated builder's.
-        let ack = RawCommandAck::new(400, 0, 0, 0).to_frame(1, 1, 4);
+        let ack = RawCommandAck::new(400, 0, SystemId(0), ComponentId(0)).to_frame(
+            SystemId(1),
+            ComponentId(1),
+            4,
+        );
         assert_eq!(ack, f);
         assert!(matches!(
-            Frame::encode_payload_v2(1, 1, 0, 60_000, &p),
+            Frame::encode_payload_v2(SystemId(1), ComponentId(1), 0, 60_000, &p),
             Err(FrameError::UnknownMessage(60_000))
         ));
     }
@@ -921,13 +939,25 @@ mod tests {
         p[28..30].copy_from_slice(&65000u16.to_le_bytes());
         p[30] = 1;
         p[31] = 1;
-        let f = Frame::encode_raw_v2(255, 190, 3, MSG_ID_COMMAND_LONG, &p[..32], 152).unwrap();
+        let f = Frame::encode_raw_v2(
+            SystemId(255),
+            ComponentId(190),
+            3,
+            MSG_ID_COMMAND_LONG,
+            &p[..32],
+            152,
+        )
+        .unwrap();
         assert!(f.is_verified());
         assert!(f.decode().is_err());
         let cmd = f.raw_command().unwrap();
         assert_eq!(cmd.command, 65000);
-        let ack =
-            RawCommandAck::unsupported(&cmd, f.system_id(), f.component_id()).to_frame(1, 1, 0);
+        let ack = RawCommandAck::unsupported(
+            &cmd,
+            SystemId(f.system_id()),
+            ComponentId(f.component_id()),
+        )
+        .to_frame(SystemId(1), ComponentId(1), 0);
         assert_eq!(ack.target(), Some((255, 190)));
         assert_eq!(ack.payload(), &[0xe8, 0xfd, 3, 0xff, 0, 0, 0, 0, 255, 190]);
         assert_eq!(Frame::from_bytes(ack.bytes().clone()).unwrap(), ack);

@@ -729,7 +729,12 @@ mod tests {
             target_component: 1,
             ..Default::default()
         });
-        Frame::encode_v2(sysid, compid, seq, &msg)
+        Frame::encode_v2(
+            crate::SystemId(sysid),
+            crate::ComponentId(compid),
+            seq,
+            &msg,
+        )
     }
 
     fn key() -> SigningKey {
@@ -820,7 +825,7 @@ mod tests {
     #[test]
     fn v1_cannot_be_signed_and_counts_as_unsigned() {
         let hb = crate::gcs_heartbeat();
-        let v1 = Frame::encode_v1(255, 190, 0, &hb).unwrap();
+        let v1 = Frame::encode_v1(crate::SystemId(255), crate::ComponentId(190), 0, &hb).unwrap();
         let mut s = Signing::new(key(), 0, 0);
         assert_eq!(s.sign(&v1, at(T0)), Err(SignError::NotV2));
         assert_eq!(
@@ -831,7 +836,15 @@ mod tests {
 
     #[test]
     fn unknown_ids_are_signed_with_the_recovered_crc_extra() {
-        let f = Frame::encode_raw_v2(1, 1, 0, 60_000, &[1, 2, 3], 77).unwrap();
+        let f = Frame::encode_raw_v2(
+            crate::SystemId(1),
+            crate::ComponentId(1),
+            0,
+            60_000,
+            &[1, 2, 3],
+            77,
+        )
+        .unwrap();
         assert!(!f.is_verified());
         let signed = sign_frame(&key(), &f, 0, 5).unwrap();
         let expected = frame_crc(&signed.as_bytes()[1..HEADER_LEN_V2 + 3], 77);
@@ -959,8 +972,8 @@ mod tests {
         let mut vehicle = Signing::new(key(), 0, 0);
         let now = at(T0);
         let radio = Frame::encode_v2(
-            51,
-            68,
+            crate::SystemId(51),
+            crate::ComponentId(68),
             0,
             &MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA::default()),
         );
@@ -1103,8 +1116,8 @@ mod tests {
         )
             .prop_map(|(id, sys, comp, seq, payload)| {
                 Frame::encode_raw_v2(
-                    sys,
-                    comp,
+                    crate::SystemId(sys),
+                    crate::ComponentId(comp),
                     seq,
                     id,
                     &payload,

@@ -32,7 +32,15 @@ fn valid_frame() -> impl Strategy<Value = Frame> {
                 b.extend_from_slice(&crc.to_le_bytes());
                 Frame::from_bytes(b.into()).unwrap()
             } else {
-                Frame::encode_raw_v2(sys, comp, seq, id, &payload, extra).unwrap()
+                Frame::encode_raw_v2(
+                    vtol_link::SystemId(sys),
+                    vtol_link::ComponentId(comp),
+                    seq,
+                    id,
+                    &payload,
+                    extra,
+                )
+                .unwrap()
             }
         })
 }
@@ -68,7 +76,7 @@ proptest! {
         let Ok(msg) = MavMessage::parse(MavlinkVersion::V2, id, &payload) else {
             return Ok(()); // an enum value the dialect rejects: not a message
         };
-        let frame = Frame::encode_v2(sys, comp, seq, &msg);
+        let frame = Frame::encode_v2(vtol_link::SystemId(sys), vtol_link::ComponentId(comp), seq, &msg);
         let mut d = FrameDecoder::new();
         d.push(frame.as_bytes());
         let got: Vec<_> = d.frames().collect();
@@ -87,7 +95,7 @@ proptest! {
             .filter(|&s| s != 0)
             .map(|s| (s, msg.target_component_id().unwrap_or(0))));
         if id < 256 {
-            let v1 = Frame::encode_v1(sys, comp, seq, &msg).unwrap();
+            let v1 = Frame::encode_v1(vtol_link::SystemId(sys), vtol_link::ComponentId(comp), seq, &msg).unwrap();
             let mut d = FrameDecoder::new();
             d.push(v1.as_bytes());
             let got: Vec<_> = d.frames().collect();
@@ -203,9 +211,22 @@ proptest! {
 /// Frames of ids the dialect lacks pass through a clean stream, split anywhere.
 #[test]
 fn unknown_ids_survive_clean_streams() {
-    let u = Frame::encode_raw_v2(3, 4, 5, 0x00_BEEF, &[9, 8, 7, 0xFD, 0xFE, 1], 0x42).unwrap();
+    let u = Frame::encode_raw_v2(
+        vtol_link::SystemId(3),
+        vtol_link::ComponentId(4),
+        5,
+        0x00_BEEF,
+        &[9, 8, 7, 0xFD, 0xFE, 1],
+        0x42,
+    )
+    .unwrap();
     assert!(!u.is_verified());
-    let hb = Frame::encode_v2(1, 1, 0, &MavMessage::default_message_from_id(0).unwrap());
+    let hb = Frame::encode_v2(
+        vtol_link::SystemId(1),
+        vtol_link::ComponentId(1),
+        0,
+        &MavMessage::default_message_from_id(0).unwrap(),
+    );
     let mut stream = Vec::new();
     for _ in 0..3 {
         stream.extend_from_slice(u.as_bytes());

@@ -79,7 +79,7 @@ fn statustext(text: &str) -> Frame {
         id: 0,
         chunk_seq: 0,
     });
-    Frame::encode_v2(1, 1, 0, &msg)
+    Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &msg)
 }
 
 #[test]

@@ -98,7 +98,7 @@ impl Session {
         let mut send = |links: &HashMap<LinkId, LinkSender>,
                         msg: &MavMessage,
                         signing: &mut Option<DaemonSigning>| {
-            let mut frame = Frame::encode_v2(me.0.0, me.1.0, seq, msg);
+            let mut frame = Frame::encode_v2(me.0, me.1, seq, msg);
             seq = seq.wrapping_add(1);
             if let Some(s) = signing {
                 match s.sign_own(&frame) {

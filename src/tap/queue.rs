@@ -178,7 +178,12 @@ mod tests {
         Tapped {
             link: LinkId(1),
             side: Side::Vehicle,
-            frame: Frame::encode_v2(1, 1, seq, &vtol_link::gcs_heartbeat()),
+            frame: Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                seq,
+                &vtol_link::gcs_heartbeat(),
+            ),
             at: std::time::Instant::now(),
         }
     }

@@ -278,7 +278,12 @@ mod tests {
         // 200 s at 50 Hz: only the last 120 s stay, and no more than the caps.
         for i in 0..10_000u64 {
             let msg = attitude(i as f32);
-            let f = Frame::encode_v2(1, 1, (i % 256) as u8, &msg);
+            let f = Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                (i % 256) as u8,
+                &msg,
+            );
             h.record(&f, Some(&msg), t0 + Duration::from_millis(i * 20));
         }
         let att = &h.vehicles[&(vtol_link::SystemId(1), vtol_link::ComponentId(1))].attitude;
@@ -294,7 +299,12 @@ mod tests {
         assert_eq!(back.len(), 2);
         assert_eq!(back[0].index, 9998);
         assert!((back[1].t_s - 199.98).abs() < 1e-9, "{}", back[1].t_s);
-        let sent = Frame::encode_v2(1, 1, (9999 % 256) as u8, &attitude(9999.0));
+        let sent = Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            (9999 % 256) as u8,
+            &attitude(9999.0),
+        );
         assert_eq!(back[1].frame.as_bytes(), sent.as_bytes());
         assert_eq!(frames.since(0).count(), MAX_FRAMES);
     }
@@ -317,7 +327,14 @@ mod tests {
         // One frame every 50 ms for 300 s: only the last 120 s stay (2 400 frames, under the
         // count cap), and their lengths differ frame to frame.
         let sent: Vec<Frame> = (0..6000)
-            .map(|i| Frame::encode_v2(1, 1, (i % 256) as u8, &text(i)))
+            .map(|i| {
+                Frame::encode_v2(
+                    vtol_link::SystemId(1),
+                    vtol_link::ComponentId(1),
+                    (i % 256) as u8,
+                    &text(i),
+                )
+            })
             .collect();
         for (i, f) in sent.iter().enumerate() {
             h.record(f, None, t0 + Duration::from_millis(i as u64 * 50));

@@ -234,7 +234,12 @@ mod tests {
             task,
             ..
         } = tracker(UI_PERIOD, LinkId(7));
-        let frame = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        let frame = Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            0,
+            &vtol_link::gcs_heartbeat(),
+        );
         tap_tx.send_run(&mut vec![Tapped {
             link: LinkId(7),
             side: Side::Vehicle,
@@ -270,7 +275,7 @@ mod tests {
             system_status: apm::MavState::MAV_STATE_STANDBY,
             mavlink_version: 3,
         });
-        Frame::encode_v2(1, 1, 0, &hb)
+        Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &hb)
     }
 
     #[tokio::test(start_paused = true)]
@@ -357,7 +362,12 @@ mod tests {
     }
 
     fn heartbeat_run(link: LinkId, n: usize) -> Vec<Tapped> {
-        let hb = Frame::encode_v2(1, 1, 0, &vtol_link::gcs_heartbeat());
+        let hb = Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            0,
+            &vtol_link::gcs_heartbeat(),
+        );
         (0..n)
             .map(|_| Tapped {
                 link,

@@ -532,7 +532,7 @@ mod tests {
         s.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(1, 1, 0, &beat),
+            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &beat),
             now,
         );
         let attitude = |ms: u32, seq: u8| {
@@ -540,7 +540,7 @@ mod tests {
                 time_boot_ms: ms,
                 ..Default::default()
             });
-            Frame::encode_v2(1, 1, seq, &m)
+            Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &m)
         };
         for (seq, ms) in [10_000, 10_050, 10_050, 10_100].into_iter().enumerate() {
             s.apply(LinkId(1), Side::Vehicle, &attitude(ms, seq as u8), now);
@@ -571,7 +571,12 @@ mod tests {
         s.apply(
             LinkId(1),
             Side::Client,
-            &Frame::encode_v2(255, 190, 0, &gcs),
+            &Frame::encode_v2(
+                vtol_link::SystemId(255),
+                vtol_link::ComponentId(190),
+                0,
+                &gcs,
+            ),
             now,
         );
         assert!(s.vehicles.is_empty());
@@ -583,7 +588,7 @@ mod tests {
         s.apply(
             LinkId(2),
             Side::Vehicle,
-            &Frame::encode_v2(1, 1, 0, &v),
+            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &v),
             now,
         );
         let view = &s.vehicles[&(SystemId(1), ComponentId(1))];
@@ -604,7 +609,7 @@ mod tests {
             s.apply(
                 LinkId(1),
                 Side::Vehicle,
-                &Frame::encode_v2(1, 1, seq, &v),
+                &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &v),
                 now,
             );
         }
@@ -619,7 +624,7 @@ mod tests {
         s.apply(
             LinkId(1),
             Side::Vehicle,
-            &Frame::encode_v2(1, 1, 100, &v),
+            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 100, &v),
             now,
         );
         assert_eq!(s.links[&LinkId(1)].lost, 0);
@@ -638,7 +643,7 @@ mod tests {
             s.apply(
                 LinkId(link),
                 Side::Vehicle,
-                &Frame::encode_v2(sys, 1, 0, &v),
+                &Frame::encode_v2(vtol_link::SystemId(sys), vtol_link::ComponentId(1), 0, &v),
                 now,
             );
         }
@@ -647,7 +652,7 @@ mod tests {
         s.apply(
             LinkId(2),
             Side::Vehicle,
-            &Frame::encode_v2(2, 1, 1, &v),
+            &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 1, &v),
             now,
         );
         let lost =
@@ -658,7 +663,7 @@ mod tests {
         s.apply(
             LinkId(3),
             Side::Vehicle,
-            &Frame::encode_v2(2, 1, 2, &v),
+            &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 2, &v),
             now,
         );
         assert!(!lost(&s, 2));

@@ -265,7 +265,12 @@ mod tests {
         let fixed: WallClock = Arc::new(move || t0);
         let mut s =
             DaemonSigning::start(key.clone(), Some(file.clone()), true, fixed.clone()).unwrap();
-        let hb = Frame::encode_v2(255, 190, 0, &vtol_link::gcs_heartbeat());
+        let hb = Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            0,
+            &vtol_link::gcs_heartbeat(),
+        );
         let a = s.sign(&hb, LinkId(7)).unwrap();
         let b = s.sign(&hb, LinkId(7)).unwrap();
         s.save().unwrap();

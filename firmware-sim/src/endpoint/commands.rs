@@ -181,7 +181,7 @@ impl Endpoint {
     }
 
     fn ack(&mut self, link: LinkKey, frame: &Frame, command: u16, result: u8) {
-        let to = (frame.system_id(), frame.component_id());
+        let to = frame.sender();
         self.send_ack(link, command, result, to);
     }
 
@@ -339,7 +339,7 @@ impl Endpoint {
     /// SET_MODE (11): like DO_SET_MODE, answered with COMMAND_ACK(`command` = 11) as ArduPilot
     /// does (built from raw bytes: the crate's `MavCmd` has no 11).
     pub(super) fn on_set_mode(&mut self, link: LinkKey, frame: &Frame, m: &apm::SET_MODE_DATA) {
-        if m.target_system != self.sysid && m.target_system != 0 {
+        if m.target_system != self.sysid.0 && m.target_system != 0 {
             return;
         }
         let r = if m

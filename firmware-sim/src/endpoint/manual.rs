@@ -73,7 +73,7 @@ impl Endpoint {
     }
 
     pub(super) fn on_manual_control(&mut self, frame: &Frame, m: &apm::MANUAL_CONTROL_DATA) {
-        if m.target != self.sysid || !self.is_from_gcs(frame) {
+        if m.target != self.sysid.0 || !self.is_from_gcs(frame) {
             return;
         }
         // ArduPlane's mapping: y → roll, x → pitch (forward stick = nose down, so reversed),

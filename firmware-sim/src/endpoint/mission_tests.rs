@@ -29,7 +29,12 @@ fn endpoint() -> Endpoint {
 }
 
 fn from(compid: u8, msg: &apm::MavMessage) -> Frame {
-    Frame::encode_v2(GCS_SYSID, compid, 3, msg)
+    Frame::encode_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(compid),
+        3,
+        msg,
+    )
 }
 
 fn v2(msg: &apm::MavMessage) -> Frame {
@@ -109,7 +114,14 @@ fn command(command: u16, p: [f32; 7]) -> Frame {
     }
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
-    Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 5, 76, &payload).unwrap()
+    Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        5,
+        76,
+        &payload,
+    )
+    .unwrap()
 }
 
 fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) -> Frame {
@@ -123,7 +135,14 @@ fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) 
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
     payload[32] = frame_no;
-    Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 5, 75, &payload).unwrap()
+    Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        5,
+        75,
+        &payload,
+    )
+    .unwrap()
 }
 
 fn set_mode(ep: &mut Endpoint, mode: FlightMode) -> Vec<Outbound> {
@@ -148,8 +167,8 @@ fn count_msg(count: u16) -> apm::MavMessage {
 
 fn item_frame(seq: u16, it: &MissionItem) -> Frame {
     Frame::encode_payload_v2(
-        GCS_SYSID,
-        GCS_COMPID,
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
         9,
         MISSION_ITEM_INT_ID,
         &item_payload(seq, it, (1, 1), true),

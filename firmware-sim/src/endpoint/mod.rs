@@ -34,7 +34,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
 
 use mavlink::dialects::ardupilotmega as apm;
-use vtol_link::Frame;
+use vtol_link::{ComponentId, Frame, SystemId};
 
 use crate::model::vehicle::{PHYSICS_DT_S, SystemState, Vehicle, VehicleConfig};
 use crate::nav::globe::Origin;
@@ -43,7 +43,7 @@ use crate::nav::navigation::Navigator;
 use crate::nav::params::Params;
 
 /// Our component id (MAV_COMP_ID_AUTOPILOT1): pymavlink reads params of `(sysid, 1)`.
-pub const COMPID: u8 = 1;
+pub const COMPID: ComponentId = ComponentId::AUTOPILOT1;
 
 /// Physics step in µs.
 const STEP_US: u64 = (PHYSICS_DT_S * 1e6) as u64;
@@ -105,7 +105,7 @@ struct LinkState {
 /// The MAVLink vehicle: the twin, its parameters, and the protocol state of every link.
 #[derive(Debug)]
 pub struct Endpoint {
-    sysid: u8,
+    sysid: SystemId,
     vehicle: Vehicle,
     params: Params,
     param_file: Option<PathBuf>,
@@ -167,7 +167,7 @@ impl Endpoint {
         let mission_file = param_file.as_deref().map(crate::nav::mission::file_beside);
         let origin = params.origin();
         let sysid_override = sysid;
-        let sysid = sysid.unwrap_or(params.value("SYSID_THISMAV") as u8);
+        let sysid = SystemId(sysid.unwrap_or(params.value("SYSID_THISMAV") as u8));
         let vehicle = Vehicle::new(vehicle);
         let last_armed = vehicle.telemetry().armed;
         let last_state = vehicle.telemetry().state;
@@ -218,7 +218,7 @@ impl Endpoint {
 
     /// Our system id.
     #[must_use]
-    pub fn sysid(&self) -> u8 {
+    pub fn sysid(&self) -> SystemId {
         self.sysid
     }
 
@@ -309,9 +309,10 @@ impl Endpoint {
         self.navigator = Navigator::new();
         self.upload = None;
         self.finished = None;
-        self.sysid = self
-            .sysid_override
-            .unwrap_or(self.params.value("SYSID_THISMAV") as u8);
+        self.sysid = SystemId(
+            self.sysid_override
+                .unwrap_or(self.params.value("SYSID_THISMAV") as u8),
+        );
         self.push_resets.clear();
         self.manual = manual::ManualState::default();
         self.failsafe = heartbeat::Failsafe::default();
@@ -493,7 +494,8 @@ impl Endpoint {
 
     /// Routing rule of `PROTOCOL.md` A.1: no target, or target 0 or ours.
     fn for_us(&self, sys: Option<u8>, comp: Option<u8>) -> bool {
-        sys.is_none_or(|s| s == 0 || s == self.sysid) && comp.is_none_or(|c| c == 0 || c == COMPID)
+        sys.is_none_or(|s| s == 0 || s == self.sysid.0)
+            && comp.is_none_or(|c| c == 0 || c == COMPID.0)
     }
 
     fn next_seq(&mut self, link: LinkKey) -> u8 {
@@ -526,7 +528,7 @@ impl Endpoint {
 
     /// Queues a COMMAND_ACK for any command number, including ones the dialect's `MavCmd`
     /// lacks, addressed back to `to` (system, component).
-    fn send_ack(&mut self, link: LinkKey, command: u16, result: u8, to: (u8, u8)) {
+    fn send_ack(&mut self, link: LinkKey, command: u16, result: u8, to: (SystemId, ComponentId)) {
         let seq = self.next_seq(link);
         let frame = vtol_link::RawCommandAck::new(command, result, to.0, to.1)
             .to_frame(self.sysid, COMPID, seq);

@@ -563,14 +563,14 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
                 apm::MavLandedState::MAV_LANDED_STATE_IN_AIR
             },
         }),
-        id::AUTOPILOT_VERSION => return Some(autopilot_version(0)),
+        id::AUTOPILOT_VERSION => return Some(autopilot_version(vtol_link::SystemId(0))),
         _ => return None,
     })
 }
 
 /// AUTOPILOT_VERSION: MAVLink 2, C-cast parameters, COMMAND_INT, local position targets.
 #[must_use]
-pub fn autopilot_version(sysid: u8) -> apm::MavMessage {
+pub fn autopilot_version(sysid: vtol_link::SystemId) -> apm::MavMessage {
     use apm::MavProtocolCapability as C;
     let (major, minor, patch) = crate_version();
     // ArduPilot layout: major.minor.patch.type with type 255 = FIRMWARE_VERSION_TYPE_OFFICIAL.
@@ -582,7 +582,7 @@ pub fn autopilot_version(sysid: u8) -> apm::MavMessage {
             | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
             | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
             | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
-        uid: 0x7654_0000 + u64::from(sysid),
+        uid: 0x7654_0000 + u64::from(sysid.0),
         flight_sw_version: sw,
         middleware_sw_version: 0,
         os_sw_version: 0,

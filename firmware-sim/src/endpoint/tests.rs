@@ -20,11 +20,22 @@ fn endpoint() -> Endpoint {
 }
 
 fn v2(msg: &apm::MavMessage) -> Frame {
-    Frame::encode_v2(GCS_SYSID, GCS_COMPID, 7, msg)
+    Frame::encode_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        7,
+        msg,
+    )
 }
 
 fn v1(msg: &apm::MavMessage) -> Frame {
-    Frame::encode_v1(GCS_SYSID, GCS_COMPID, 3, msg).expect("a MAVLink 1 message")
+    Frame::encode_v1(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        3,
+        msg,
+    )
+    .expect("a MAVLink 1 message")
 }
 
 /// Every outbound frame must be MAVLink 2 from (1, 1); returns the typed messages.
@@ -33,7 +44,7 @@ fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
         .filter_map(|o| {
             assert_eq!(o.frame.version(), MavlinkVersion::V2, "always MAVLink 2");
             let f = &o.frame;
-            assert_eq!((f.system_id(), f.component_id()), (1, COMPID));
+            assert_eq!((f.system_id(), f.component_id()), (1, COMPID.0));
             f.decode().ok()
         })
         .collect()
@@ -309,7 +320,14 @@ fn param_set_with_type_outside_the_enum_is_still_handled() {
     id[..9].copy_from_slice(b"HOVER_ALT");
     payload.extend_from_slice(&id);
     payload.push(0);
-    let frame = Frame::encode_payload_v2(GCS_SYSID, GCS_COMPID, 0, 23, &payload).unwrap();
+    let frame = Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        0,
+        23,
+        &payload,
+    )
+    .unwrap();
     let msgs = decode(&ep.handle(GCS, &frame));
     assert_eq!(param_values(&msgs)[0].param_value, 2.5);
 }
@@ -322,8 +340,8 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     payload[28..30].copy_from_slice(&65000u16.to_le_bytes());
     payload[30] = 1;
     let frame = Frame::encode_payload_v2(
-        GCS_SYSID,
-        GCS_COMPID,
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
         0,
         vtol_link::frame::MSG_ID_COMMAND_LONG,
         &payload,
@@ -344,8 +362,8 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     // Addressed to another system: no ACK at all.
     payload[30] = 42;
     let frame = Frame::encode_payload_v2(
-        GCS_SYSID,
-        GCS_COMPID,
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
         0,
         vtol_link::frame::MSG_ID_COMMAND_LONG,
         &payload,
@@ -558,7 +576,12 @@ fn rc_override_only_from_gcs_and_expires() {
         ..Default::default()
     });
     // From another system id: ignored.
-    let other = Frame::encode_v2(200, 190, 0, &ov);
+    let other = Frame::encode_v2(
+        vtol_link::SystemId(200),
+        vtol_link::ComponentId(190),
+        0,
+        &ov,
+    );
     ep.handle(GCS, &other);
     assert_eq!(ep.vehicle().telemetry().rc_us[0], 0);
     ep.handle(GCS, &v2(&ov));

@@ -134,7 +134,13 @@ impl TwinSigning {
 
     /// Decides about a frame received on a link (`local`: a serial device, see the module
     /// docs) of a vehicle with system id `sysid`.
-    pub fn admit(&mut self, frame: &Frame, local: bool, sysid: u8, now: SystemTime) -> Admit {
+    pub fn admit(
+        &mut self,
+        frame: &Frame,
+        local: bool,
+        sysid: vtol_link::SystemId,
+        now: SystemTime,
+    ) -> Admit {
         let verdict = self.active.as_mut().map(|s| s.verify(frame, now));
         if frame.message_id() == MSG_ID_SETUP_SIGNING && frame.is_verified() {
             let signed = matches!(verdict, Some(Ok(Accepted::Signed { .. })));
@@ -157,14 +163,14 @@ impl TwinSigning {
         &mut self,
         frame: &Frame,
         allowed: bool,
-        sysid: u8,
+        sysid: vtol_link::SystemId,
         now: SystemTime,
     ) -> SetupOutcome {
         let Ok(apm::MavMessage::SETUP_SIGNING(setup)) = frame.decode() else {
             return SetupOutcome::Refused;
         };
-        let for_us = (setup.target_system == 0 || setup.target_system == sysid)
-            && (setup.target_component == 0 || setup.target_component == crate::endpoint::COMPID);
+        let for_us = (setup.target_system == 0 || setup.target_system == sysid.0)
+            && (setup.target_component == 0 || setup.target_component == crate::endpoint::COMPID.0);
         if !for_us {
             return SetupOutcome::NotForUs;
         }
@@ -274,7 +280,12 @@ mod tests {
             target_component: target.1,
             secret_key: *new.as_bytes(),
         });
-        Frame::encode_v2(255, 190, 0, &msg)
+        Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            0,
+            &msg,
+        )
     }
 
     fn param_read() -> Frame {
@@ -282,7 +293,12 @@ mod tests {
             target_system: SYSID,
             target_component: 1,
         });
-        Frame::encode_v2(255, 190, 0, &msg)
+        Frame::encode_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            0,
+            &msg,
+        )
     }
 
     /// A GCS signing with `k` on link id 1.
@@ -291,7 +307,7 @@ mod tests {
     }
 
     fn admit(s: &mut TwinSigning, f: &Frame, local: bool) -> Admit {
-        s.admit(f, local, SYSID, now())
+        s.admit(f, local, vtol_link::SystemId(SYSID), now())
     }
 
     #[test]

@@ -12,7 +12,12 @@ pub const WAIT: Duration = Duration::from_secs(5);
 
 /// A GCS heartbeat from `sys` with sequence `seq`.
 pub fn hb(sys: u8, seq: u8) -> Frame {
-    Frame::encode_v2(sys, 190, seq, &vtol_link::gcs_heartbeat())
+    Frame::encode_v2(
+        vtol_link::SystemId(sys),
+        vtol_link::ComponentId(190),
+        seq,
+        &vtol_link::gcs_heartbeat(),
+    )
 }
 
 /// Waits for the first event matching `pred`, skipping others.
