@@ -1,0 +1,224 @@
+//! The header (mode, state, link health, the fleet list) and the footer.
+
+use ratatui::Frame;
+use ratatui::layout::Rect;
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::text::{Line, Span};
+use ratatui::widgets::Paragraph;
+
+use super::{Snapshot, level_style, status_name};
+use crate::tap::Side;
+use crate::tui::app::{App, View};
+
+pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
+    let now = snap.now;
+    let mut spans = vec![Span::styled(
+        " vtol-gcs ",
+        Style::new().add_modifier(Modifier::REVERSED),
+    )];
+    match app.vehicle(snap.state) {
+        None => spans.push(Span::styled(
+            " waiting for a vehicle heartbeat",
+            Style::new().fg(Color::Yellow),
+        )),
+        Some(v) => {
+            let lost = v.is_lost(now);
+            spans.push(Span::raw(format!(" sys {} ", v.system_id)));
+            spans.push(Span::styled(
+                v.mode_name(),
+                Style::new().add_modifier(Modifier::BOLD),
+            ));
+            spans.push(Span::raw(" "));
+            spans.push(if v.armed {
+                Span::styled(
+                    "ARMED",
+                    Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+                )
+            } else {
+                Span::styled("disarmed", Style::new().fg(Color::Green))
+            });
+            spans.push(Span::raw(format!(" {}", status_name(v.system_status))));
+            let flight = v
+                .armed_since
+                .map_or(0, |t| now.saturating_duration_since(t).as_secs());
+            spans.push(Span::raw(format!(
+                " │ flight {:02}:{:02}",
+                flight / 60,
+                flight % 60
+            )));
+            if lost {
+                spans.push(Span::styled(
+                    format!(
+                        " │ LINK LOST {:.0} s ",
+                        now.saturating_duration_since(v.last_heartbeat)
+                            .as_secs_f64()
+                    ),
+                    Style::new()
+                        .fg(Color::White)
+                        .bg(Color::Red)
+                        .add_modifier(Modifier::BOLD),
+                ));
+            }
+        }
+    }
+    // With several vehicle links (a fleet over Zenoh, several UDP peers) the header shows the
+    // health of the shown vehicle's link; the vehicle list has every vehicle's.
+    let vehicle_links = snap.links.iter().filter(|l| l.side == Side::Vehicle);
+    let shown_link = app
+        .vehicle(snap.state)
+        .map(|v| v.link)
+        .filter(|_| vehicle_links.clone().count() > 1);
+    for l in vehicle_links.filter(|l| shown_link.is_none_or(|s| s == l.id)) {
+        if let Some(h) = snap.state.links.get(&l.id) {
+            spans.push(Span::raw(format!(
+                " │ {:.0} Hz {:.1}% loss",
+                h.rate_hz(now),
+                h.loss_pct(now)
+            )));
+        }
+    }
+    if let Some(c) = snap.router.conflict {
+        spans.push(Span::styled(
+            format!(
+                " │ CONFLICT sys {} on {} and {} ",
+                c.system, c.owner, c.claimant
+            ),
+            Style::new()
+                .fg(Color::White)
+                .bg(Color::Red)
+                .add_modifier(Modifier::BOLD),
+        ));
+    }
+    let mut tabs = Vec::new();
+    for v in View::all() {
+        let style = if *v == app.view {
+            Style::new().add_modifier(Modifier::REVERSED | Modifier::BOLD)
+        } else {
+            Style::new().fg(Color::DarkGray)
+        };
+        tabs.push(Span::styled(format!(" {} ", v.title()), style));
+        tabs.push(Span::raw(" "));
+    }
+    tabs.push(Span::styled(
+        "  Tab: next view  ?: help  q: quit",
+        Style::new().fg(Color::DarkGray),
+    ));
+    f.render_widget(
+        Paragraph::new(vec![Line::from(spans), Line::from(tabs)]),
+        area,
+    );
+}
+
+/// One line per fleet: each vehicle with its link health, the selected one highlighted.
+/// Rows the vehicle list may take under the header; more vehicles than fit scroll so that the
+/// selected one shows.
+pub(super) const VEHICLE_LIST_ROWS: usize = 3;
+
+/// The vehicle list, wrapped to `width` over at most [`VEHICLE_LIST_ROWS`] rows. When the
+/// vehicles do not all fit, the rows start at the selected one's row and say how many are
+/// left out on each side.
+pub(super) fn vehicle_list_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> Vec<Line<'static>> {
+    let now = snap.now;
+    let selected = app
+        .vehicle(snap.state)
+        .map(|v| (v.system_id, v.component_id));
+    let entries: Vec<(String, Style, bool)> = snap
+        .state
+        .vehicles
+        .iter()
+        .map(|(key, v)| {
+            let text = if v.is_lost(now) {
+                format!(
+                    " {} LOST {:.0} s ",
+                    v.system_id,
+                    now.saturating_duration_since(v.last_heartbeat)
+                        .as_secs_f64()
+                )
+            } else {
+                format!(
+                    " {} {} {} {:.0} Hz {:.1}% ",
+                    v.system_id,
+                    v.mode_name(),
+                    if v.armed { "ARMED" } else { "disarmed" },
+                    v.rate_hz(now),
+                    v.loss_pct(now)
+                )
+            };
+            let mut style = if v.is_lost(now) {
+                Style::new().fg(Color::Red)
+            } else if v.armed {
+                Style::new().fg(Color::Yellow)
+            } else {
+                Style::new()
+            };
+            let is_selected = Some(*key) == selected;
+            if is_selected {
+                style = style.add_modifier(Modifier::REVERSED | Modifier::BOLD);
+            }
+            (text, style, is_selected)
+        })
+        .collect();
+    let width = usize::from(width);
+    let title = " vehicles (v/V) ";
+    // Greedy rows of whole entries; a "+N" marker needs room at the end of a row.
+    let marker = 8;
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut used = title.len();
+    for (i, (text, _, _)) in entries.iter().enumerate() {
+        let w = text.chars().count() + 1;
+        if used + w + marker > width && !rows.last().is_some_and(Vec::is_empty) {
+            rows.push(Vec::new());
+            used = 0;
+        }
+        used += w;
+        if let Some(r) = rows.last_mut() {
+            r.push(i);
+        }
+    }
+    let sel_row = rows
+        .iter()
+        .position(|r| r.iter().any(|&i| entries[i].2))
+        .unwrap_or(0);
+    let first = if sel_row < VEHICLE_LIST_ROWS {
+        0
+    } else {
+        sel_row + 1 - VEHICLE_LIST_ROWS
+    };
+    let shown = &rows[first..rows.len().min(first + VEHICLE_LIST_ROWS)];
+    let before: usize = rows[..first].iter().map(Vec::len).sum();
+    let after: usize = rows[first + shown.len()..].iter().map(Vec::len).sum();
+    let dim = Style::new().fg(Color::DarkGray);
+    let mut lines = Vec::new();
+    for (n, row) in shown.iter().enumerate() {
+        let mut spans = Vec::new();
+        if n == 0 {
+            spans.push(Span::styled(title, dim));
+            if before > 0 {
+                spans.push(Span::styled(format!("+{before} "), dim));
+            }
+        }
+        for (k, &i) in row.iter().enumerate() {
+            if k > 0 {
+                spans.push(Span::raw("│"));
+            }
+            let (text, style, _) = &entries[i];
+            spans.push(Span::styled(text.clone(), *style));
+        }
+        if n + 1 == shown.len() && after > 0 {
+            spans.push(Span::styled(format!(" +{after} more"), dim));
+        }
+        lines.push(Line::from(spans));
+    }
+    lines
+}
+
+pub(super) fn draw_footer(f: &mut Frame<'_>, app: &App, area: Rect) {
+    let line = match app.log.back() {
+        Some((l, t)) => Line::from(Span::styled(format!(" {t}"), level_style(*l))),
+        None => Line::from(Span::styled(
+            " a arm  d disarm  t take off (QHOVER)  l land (QLAND)  p QLOITER  x/c/z push",
+            Style::new().fg(Color::DarkGray),
+        )),
+    };
+    f.render_widget(Paragraph::new(line), area);
+}

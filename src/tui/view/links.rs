@@ -1,0 +1,152 @@
+//! The Links view: every link's health, the router counters, the log and endpoints.
+
+use std::fmt::Write as _;
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::widgets::{Block, Paragraph, Row, Table, Wrap};
+
+use super::Snapshot;
+use crate::tap::Side;
+use crate::tracker::state::LINK_TIMEOUT;
+
+pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
+    let now = snap.now;
+    let [table_area, rest] =
+        Layout::vertical([Constraint::Min(6), Constraint::Length(9)]).areas(area);
+    let header = Row::new([
+        "id", "side", "peer", "rate Hz", "loss %", "heard", "rx", "tx", "dropped", "bad crc",
+    ])
+    .style(Style::new().add_modifier(Modifier::BOLD));
+    let rows: Vec<Row> = snap
+        .links
+        .iter()
+        .map(|l| {
+            let h = snap.state.links.get(&l.id);
+            let (rate, loss, heard, lost) = match h {
+                Some(h) => (
+                    format!("{:.1}", h.rate_hz(now)),
+                    format!("{:.1}", h.loss_pct(now)),
+                    format!(
+                        "{:.1} s",
+                        now.saturating_duration_since(h.last_heard).as_secs_f64()
+                    ),
+                    h.is_lost(now),
+                ),
+                None => ("0.0".into(), "-".into(), "never".into(), false),
+            };
+            let side = match (l.side, l.own) {
+                (_, true) => "own",
+                (Side::Vehicle, _) => "vehicle",
+                (Side::Client, _) => "client",
+            };
+            let style = if lost {
+                Style::new().fg(Color::Red)
+            } else {
+                Style::new()
+            };
+            // A policy shows beside the peer; rate-limit drops count with queue-full drops.
+            let (peer, rate_dropped) = match &l.policy {
+                Some((p, c)) => (format!("{} [{}]", l.peer, p.trust), c.dropped_rate),
+                None => (l.peer.clone(), 0),
+            };
+            Row::new(vec![
+                l.id.to_string(),
+                side.to_owned(),
+                peer,
+                rate,
+                loss,
+                if lost { format!("LOST {heard}") } else { heard },
+                l.stats.rx_frames.to_string(),
+                l.stats.tx_frames.to_string(),
+                (l.stats.tx_dropped_queue_full + rate_dropped).to_string(),
+                l.stats.bad_crc.to_string(),
+            ])
+            .style(style)
+        })
+        .collect();
+    f.render_widget(
+        Table::new(
+            rows,
+            [
+                Constraint::Length(8),
+                Constraint::Length(8),
+                Constraint::Min(14),
+                Constraint::Length(8),
+                Constraint::Length(7),
+                Constraint::Length(11),
+                Constraint::Length(8),
+                Constraint::Length(8),
+                Constraint::Length(8),
+                Constraint::Length(8),
+            ],
+        )
+        .header(header)
+        .block(Block::bordered().title(" Links ")),
+        table_area,
+    );
+    let [router, tlog] = Layout::horizontal([Constraint::Percentage(50); 2]).areas(rest);
+    let r = snap.router;
+    let clients = snap
+        .links
+        .iter()
+        .filter(|l| l.side == Side::Client && !l.own)
+        .count();
+    // Refused vehicle frames share the signing line, shown only when there are some.
+    let refused = if r.signing_refused > 0 {
+        format!("  refused {}", r.signing_refused)
+    } else {
+        String::new()
+    };
+    let conflicts = if r.sysid_conflicts > 0 {
+        format!("\nsysid conflict {}", r.sysid_conflicts)
+    } else {
+        String::new()
+    };
+    let text = format!(
+        "clients        {clients}\nframes in      {}\ncopies out     {}\nunroutable     {}\nsigning held   {}{refused}\nlink closed    {}\ntracker behind {}{conflicts}",
+        r.frames_in,
+        r.frames_out,
+        r.unroutable,
+        r.withheld_signing,
+        r.dropped_link_closed,
+        r.dropped_tap
+    );
+    f.render_widget(
+        Paragraph::new(text).block(Block::bordered().title(" Router ")),
+        router,
+    );
+    let mut text = String::new();
+    match &snap.tlog {
+        Some(t) => {
+            let _ = write!(
+                text,
+                "{}\n{:.1} kB, {} records\n{} dropped, {} write errors\n",
+                t.path,
+                t.bytes as f64 / 1000.0,
+                t.records,
+                t.dropped,
+                t.errors
+            );
+            if let Some(why) = &t.failing {
+                let _ = writeln!(text, "NOT WRITING: {why} (routing goes on)");
+            }
+        }
+        None => text.push_str("not logging\n"),
+    }
+    for s in &snap.serving {
+        let _ = writeln!(text, "serving {s}");
+    }
+    let _ = write!(
+        text,
+        "link lost after {} s of silence",
+        LINK_TIMEOUT.as_secs()
+    );
+    f.render_widget(
+        Paragraph::new(text)
+            .wrap(Wrap { trim: false })
+            .block(Block::bordered().title(" Log and endpoints ")),
+        tlog,
+    );
+}

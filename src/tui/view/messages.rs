@@ -1,0 +1,161 @@
+//! The Messages view: the message inspector and its per-field charts.
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::text::Line;
+use ratatui::widgets::{Block, Paragraph, Row, Table};
+use vtol_link::{ComponentId, SystemId};
+
+use super::charts::{COLOURS, Series, chart};
+use super::{SeriesCache, Snapshot};
+use crate::tui::app::{App, View};
+use crate::tui::fields;
+
+pub(super) fn draw_messages(
+    f: &mut Frame<'_>,
+    app: &mut App,
+    snap: &Snapshot<'_>,
+    cache: &mut SeriesCache,
+    area: Rect,
+) {
+    let now = snap.now;
+    let m = &mut app.messages;
+    let filter = m.filter.to_ascii_uppercase();
+    let listed: Vec<(SystemId, ComponentId, u32)> = snap
+        .state
+        .messages
+        .iter()
+        .filter(|(_, s)| filter.is_empty() || s.last.message_name().unwrap_or("").contains(&filter))
+        .map(|(k, _)| *k)
+        .collect();
+    m.selected = m.selected.min(listed.len().saturating_sub(1));
+    let [top, charts_area] = if m.charts.is_empty() {
+        [area, Rect::default()]
+    } else {
+        Layout::vertical([Constraint::Percentage(55), Constraint::Percentage(45)]).areas(area)
+    };
+    let [list_area, fields_area] =
+        Layout::horizontal([Constraint::Length(44), Constraint::Min(20)]).areas(top);
+    let visible = list_area.height.saturating_sub(3) as usize;
+    let first = m.selected.saturating_sub(visible.saturating_sub(1));
+    let rows: Vec<Row> = listed
+        .iter()
+        .enumerate()
+        .skip(first)
+        .take(visible)
+        .map(|(i, k)| {
+            let s = &snap.state.messages[k];
+            let name = s.last.message_name().unwrap_or("?");
+            let style = if i == m.selected {
+                Style::new().add_modifier(Modifier::REVERSED)
+            } else {
+                Style::new()
+            };
+            Row::new(vec![
+                format!("{}:{}", k.0, k.1),
+                name.to_owned(),
+                format!("{:.1}", s.window.rate_hz(now)),
+            ])
+            .style(style)
+        })
+        .collect();
+    let title = if app.typing && app.view == View::Messages {
+        format!(" Messages /{}▏ ", m.filter)
+    } else if m.filter.is_empty() {
+        format!(" Messages ({}) / filter ", listed.len())
+    } else {
+        format!(" Messages /{} ({}) ", m.filter, listed.len())
+    };
+    f.render_widget(
+        Table::new(
+            rows,
+            [
+                Constraint::Length(7),
+                Constraint::Min(20),
+                Constraint::Length(7),
+            ],
+        )
+        .header(
+            Row::new(["from", "message", "Hz"]).style(Style::new().add_modifier(Modifier::BOLD)),
+        )
+        .block(Block::bordered().title(title)),
+        list_area,
+    );
+    let mut numeric = Vec::new();
+    let mut lines = Vec::new();
+    if let Some(k) = listed.get(m.selected) {
+        let s = &snap.state.messages[k];
+        match s.last.decode() {
+            Ok(msg) => {
+                let fs = fields::fields(&msg);
+                let numeric_fields: Vec<_> = fs.iter().filter(|f| f.value.is_some()).collect();
+                m.field = m.field.min(numeric_fields.len().saturating_sub(1));
+                let visible = fields_area.height.saturating_sub(2) as usize;
+                let selected_path = numeric_fields.get(m.field).map(|f| f.path.clone());
+                for f in &fs {
+                    let sel = m.in_fields && Some(&f.path) == selected_path.as_ref();
+                    let style = if sel {
+                        Style::new().add_modifier(Modifier::REVERSED)
+                    } else if f.value.is_none() {
+                        Style::new().fg(Color::DarkGray)
+                    } else {
+                        Style::new()
+                    };
+                    lines.push(Line::styled(format!("{:<24} {}", f.path, f.text), style));
+                }
+                numeric = numeric_fields.into_iter().map(|f| f.path.clone()).collect();
+                // Keep the selected field in view.
+                let sel_line = selected_path
+                    .and_then(|p| fs.iter().position(|f| f.path == p))
+                    .unwrap_or(0);
+                let skip = sel_line.saturating_sub(visible.saturating_sub(1));
+                lines.drain(..skip.min(lines.len()));
+            }
+            Err(e) => lines.push(Line::raw(format!("cannot decode: {e}"))),
+        }
+    }
+    m.listed = listed;
+    m.listed_fields = numeric;
+    let title = if m.in_fields {
+        " Fields (Enter: chart it, n: new chart, ← back) "
+    } else {
+        " Fields (→ to pick one) "
+    };
+    f.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title(title)),
+        fields_area,
+    );
+    if m.charts.is_empty() {
+        return;
+    }
+    let now_t = snap.history.t_s(now);
+    let from = now_t - app.window_s;
+    let areas = Layout::horizontal(vec![
+        Constraint::Ratio(1, m.charts.len() as u32);
+        m.charts.len()
+    ])
+    .split(charts_area);
+    for (ci, chart_keys) in m.charts.iter().enumerate() {
+        let series: Vec<Series> = chart_keys
+            .iter()
+            .enumerate()
+            .map(|(i, k)| {
+                let name = format!(
+                    "{}.{}",
+                    vtol_link::frame::message_name(k.message).unwrap_or("?"),
+                    k.path
+                );
+                let pts = cache
+                    .points(k, snap.history)
+                    .iter()
+                    .filter(|(t, _)| *t >= from)
+                    .map(|(t, v)| (t - now_t, *v))
+                    .collect();
+                (name, COLOURS[i % COLOURS.len()], pts)
+            })
+            .collect();
+        let title = format!(" Chart {} ({} series) ", ci + 1, series.len());
+        f.render_widget(chart(title, &series, app.window_s, ""), areas[ci]);
+    }
+}

@@ -1,0 +1,279 @@
+//! Drawing: one function per view over a [`Snapshot`] of everything shown. Pure apart from the
+//! chart cache, so whole frames render into ratatui's `TestBackend` for snapshot tests.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::widgets::{Paragraph, Wrap};
+use vtol_link::dialect::MavState;
+
+use super::app::{App, Level, SeriesKey, View};
+use super::fields;
+use crate::tap::Side;
+use crate::tracker::history::{History, TimedFrame};
+use crate::tracker::state::{VehicleState, VehicleView};
+
+mod charts;
+mod flight;
+mod header;
+mod links;
+mod messages;
+mod overlay;
+mod params;
+
+use charts::draw_charts;
+use flight::draw_flight;
+pub use flight::heading_tape;
+use header::{draw_footer, draw_header, vehicle_list_lines};
+use links::draw_links;
+use messages::draw_messages;
+use overlay::{draw_confirm, draw_help};
+use params::draw_params;
+
+/// Smallest terminal the views are laid out for.
+pub const MIN_SIZE: (u16, u16) = (80, 24);
+/// Attitude or position older than this is marked stale.
+const STALE_S: f64 = 1.0;
+
+/// One link as the UI shows it.
+#[derive(Debug, Clone)]
+pub struct LinkRow {
+    /// Link id.
+    pub id: vtol_link::LinkId,
+    /// Vehicle or client.
+    pub side: Side,
+    /// Peer.
+    pub peer: String,
+    /// Whether it is the daemon's own traffic (not a client).
+    pub own: bool,
+    /// Counters.
+    pub stats: vtol_link::LinkStatsSnapshot,
+    /// A client endpoint's policy when it is not the default, and what it did.
+    pub policy: Option<(
+        crate::trust::policy::EndpointPolicy,
+        crate::trust::policy::PolicyCountersSnapshot,
+    )>,
+}
+
+/// Router-wide counters.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RouterCounters {
+    /// Frames in.
+    pub frames_in: u64,
+    /// Copies out.
+    pub frames_out: u64,
+    /// Targeted at a system never seen.
+    pub unroutable: u64,
+    /// SETUP_SIGNING withheld.
+    pub withheld_signing: u64,
+    /// Link closed between routing and queueing.
+    pub dropped_link_closed: u64,
+    /// Tracker behind.
+    pub dropped_tap: u64,
+    /// Vehicle frames refused by the signing check (0 without a key).
+    pub signing_refused: u64,
+    /// Vehicle frames refused because another vehicle link owns their system id.
+    pub sysid_conflicts: u64,
+    /// A system id two vehicle links claim now (the first, if several).
+    pub conflict: Option<crate::tap::SysidConflict>,
+}
+
+/// The tlog as shown.
+#[derive(Debug, Clone, Default)]
+pub struct TlogInfo {
+    /// File.
+    pub path: String,
+    /// Bytes written.
+    pub bytes: u64,
+    /// Records written.
+    pub records: u64,
+    /// Records dropped (writer behind).
+    pub dropped: u64,
+    /// Write errors.
+    pub errors: u64,
+    /// The write error while logging fails (a full disk); `None` while it writes.
+    pub failing: Option<String>,
+}
+
+/// Everything one frame shows.
+#[derive(Debug)]
+pub struct Snapshot<'a> {
+    /// The time the frame describes.
+    pub now: Instant,
+    /// Tracker state.
+    pub state: &'a VehicleState,
+    /// Recent past.
+    pub history: &'a History,
+    /// Live links.
+    pub links: Vec<LinkRow>,
+    /// Router counters.
+    pub router: RouterCounters,
+    /// The tlog, if logging.
+    pub tlog: Option<TlogInfo>,
+    /// Where the daemon serves clients.
+    pub serving: Vec<String>,
+}
+
+/// Field series read incrementally from the history's raw frames (each frame decoded once).
+#[derive(Debug, Default)]
+pub struct SeriesCache {
+    series: BTreeMap<SeriesKey, (u64, Vec<(f64, f64)>)>,
+}
+
+impl SeriesCache {
+    /// The points of `key` in the history, decoding only frames not seen before.
+    fn points(&mut self, key: &SeriesKey, history: &History) -> &[(f64, f64)] {
+        let entry = self
+            .series
+            .entry(key.clone())
+            .or_insert_with(|| (0, Vec::new()));
+        let frames = history
+            .frames
+            .get(&(key.system, key.component, key.message));
+        if let Some(frames) = frames {
+            let oldest = frames.oldest_t_s().unwrap_or(0.0);
+            entry.1.retain(|(t, _)| *t >= oldest);
+            for TimedFrame { index, t_s, frame } in frames.since(entry.0) {
+                if let Ok(msg) = frame.decode()
+                    && let Some(v) = fields::value_at(&msg, &key.path)
+                {
+                    entry.1.push((t_s, v));
+                }
+                entry.0 = index + 1;
+            }
+        }
+        &entry.1
+    }
+}
+
+fn severity_style(sev: u8) -> Style {
+    match sev {
+        0..=3 => Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+        4 => Style::new().fg(Color::Yellow),
+        5 => Style::new().fg(Color::Cyan),
+        6 => Style::new(),
+        _ => Style::new().fg(Color::DarkGray),
+    }
+}
+
+fn level_style(l: Level) -> Style {
+    match l {
+        Level::Info => Style::new(),
+        Level::Ok => Style::new().fg(Color::Green),
+        Level::Error => Style::new().fg(Color::Red),
+    }
+}
+
+/// Name of an output from its `SERVOn_FUNCTION` (ArduPilot's numbers), counting ESCs and
+/// ailerons in output order; `SERVOn` when the function is unknown or not published.
+#[must_use]
+pub fn output_names(functions: &[Option<f32>]) -> Vec<String> {
+    let (mut escs, mut ailerons) = (0, 0);
+    functions
+        .iter()
+        .enumerate()
+        .map(|(i, f)| match f.map(|v| v as i32) {
+            Some(33..=40 | 70 | 73 | 74) => {
+                escs += 1;
+                format!("ESC{escs}")
+            }
+            Some(4) => {
+                ailerons += 1;
+                match ailerons {
+                    1 => "left aileron".to_owned(),
+                    2 => "right aileron".to_owned(),
+                    n => format!("aileron {n}"),
+                }
+            }
+            Some(19) => "elevator".to_owned(),
+            Some(21) => "rudder".to_owned(),
+            _ => format!("SERVO{}", i + 1),
+        })
+        .collect()
+}
+
+fn servo_names(app: &App) -> Vec<String> {
+    let f: Vec<Option<f32>> = (1..=8)
+        .map(|i| app.params.value(&format!("SERVO{i}_FUNCTION")))
+        .collect();
+    output_names(&f)
+}
+
+fn status_name(s: MavState) -> &'static str {
+    match s {
+        MavState::MAV_STATE_UNINIT => "UNINIT",
+        MavState::MAV_STATE_BOOT => "BOOT",
+        MavState::MAV_STATE_CALIBRATING => "CALIBRATING",
+        MavState::MAV_STATE_STANDBY => "STANDBY",
+        MavState::MAV_STATE_ACTIVE => "ACTIVE",
+        MavState::MAV_STATE_CRITICAL => "CRITICAL",
+        MavState::MAV_STATE_EMERGENCY => "EMERGENCY",
+        MavState::MAV_STATE_POWEROFF => "POWEROFF",
+        MavState::MAV_STATE_FLIGHT_TERMINATION => "TERMINATION",
+    }
+}
+
+/// Draws the whole screen.
+pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut SeriesCache) {
+    let area = f.area();
+    if area.width < MIN_SIZE.0 || area.height < MIN_SIZE.1 {
+        let text = format!(
+            "Terminal too small: {}x{}, need {}x{}. Enlarge it, or q to quit.",
+            area.width, area.height, MIN_SIZE.0, MIN_SIZE.1
+        );
+        f.render_widget(
+            Paragraph::new(text)
+                .wrap(Wrap { trim: true })
+                .style(Style::new().fg(Color::Yellow)),
+            area,
+        );
+        return;
+    }
+    let fleet = if snap.state.vehicles.len() > 1 {
+        vehicle_list_lines(app, snap, area.width)
+    } else {
+        Vec::new()
+    };
+    let list_rows = u16::try_from(fleet.len()).unwrap_or(u16::MAX);
+    let [header, body, footer] = Layout::vertical([
+        Constraint::Length(2 + list_rows),
+        Constraint::Min(10),
+        Constraint::Length(1),
+    ])
+    .areas(area);
+    draw_header(f, app, snap, header);
+    if !fleet.is_empty() {
+        f.render_widget(
+            Paragraph::new(fleet),
+            Rect {
+                y: header.y + 2,
+                height: list_rows,
+                ..header
+            },
+        );
+    }
+    match app.view {
+        View::Flight => draw_flight(f, app, snap, body),
+        View::Charts => draw_charts(f, app, snap, body),
+        View::Links => draw_links(f, snap, body),
+        View::Messages => draw_messages(f, app, snap, cache, body),
+        View::Params => draw_params(f, app, body),
+    }
+    draw_footer(f, app, footer);
+    if let Some(c) = &app.confirm {
+        draw_confirm(f, app, c, area);
+    }
+    if app.help {
+        draw_help(f, area);
+    }
+}
+
+fn age_s(snap: &Snapshot<'_>, v: &VehicleView, msg: u32) -> Option<f64> {
+    snap.state
+        .messages
+        .get(&(v.system_id, v.component_id, msg))
+        .map(|m| snap.now.saturating_duration_since(m.last_at).as_secs_f64())
+}

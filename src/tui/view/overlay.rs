@@ -1,0 +1,99 @@
+//! Overlays: the confirmation prompt and the help screen.
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Block, Cell, Clear, Paragraph, Row, Table};
+
+use crate::tui::app::{App, Confirm};
+
+pub(super) fn centered(area: Rect, w: u16, h: u16) -> Rect {
+    let w = w.min(area.width);
+    let h = h.min(area.height);
+    Rect {
+        x: area.x + (area.width - w) / 2,
+        y: area.y + (area.height - h) / 2,
+        width: w,
+        height: h,
+    }
+}
+
+pub(super) fn draw_confirm(f: &mut Frame<'_>, app: &App, c: &Confirm, area: Rect) {
+    let mut lines = Vec::new();
+    let title = match c {
+        Confirm::Arm { force: false } => "Arm the vehicle?",
+        Confirm::Arm { force: true } => "FORCE arm (skip pre-arm checks)?",
+        Confirm::Disarm => "Disarm the vehicle (motors stop, even in the air)?",
+        Confirm::Upload => "Upload these gains as one transaction?",
+    };
+    lines.push(Line::from(Span::styled(
+        title,
+        Style::new().add_modifier(Modifier::BOLD),
+    )));
+    if let (Confirm::Upload, Some(diff)) = (c, &app.params.diff) {
+        for (name, now, wanted) in diff {
+            let now = now.map_or_else(|| "(missing)".to_owned(), |v| v.to_string());
+            lines.push(Line::raw(format!("  {name:<16} {now:>10} → {wanted}")));
+        }
+    }
+    lines.push(Line::raw(""));
+    lines.push(Line::raw("y: yes    any other key: cancel"));
+    let h = (lines.len() as u16 + 2).min(area.height);
+    let r = centered(area, 60, h);
+    f.render_widget(Clear, r);
+    f.render_widget(
+        Paragraph::new(lines).block(
+            Block::bordered()
+                .title(" Confirm ")
+                .border_style(Style::new().fg(Color::Yellow)),
+        ),
+        r,
+    );
+}
+
+pub(super) const HELP: &[(&str, &str)] = &[
+    ("Tab / Shift-Tab", "next / previous view"),
+    ("v / V", "next / previous vehicle (when several)"),
+    ("?", "this help (any key closes it)"),
+    ("q, Ctrl-C", "quit"),
+    ("a / A / d", "arm / force arm / disarm (then y to confirm)"),
+    ("t", "take off: QHOVER (climbs to HOVER_ALT when armed)"),
+    ("l", "land: QLAND"),
+    ("p / s", "QLOITER / QSTABILIZE"),
+    (
+        "arrows",
+        "QLOITER: move the target 0.5 m north/south/east/west",
+    ),
+    ("PgUp / PgDn", "QLOITER: target 0.5 m up / down"),
+    (
+        "x X / c C / z Z",
+        "push roll / pitch / yaw, + and - (SIM_PUSH_*)",
+    ),
+    ("+ / -", "chart window longer / shorter (5..120 s)"),
+    ("Messages: ↑↓ ← →", "select message / field"),
+    (
+        "Messages: Enter",
+        "add the field to the chart; n new chart; Del remove",
+    ),
+    ("Params: / Enter", "filter; edit the selected value"),
+    (
+        "Params: f / r",
+        "load a gains file (diff, then upload) / download again",
+    ),
+    ("/ … Enter, Esc", "type a filter; Esc clears it"),
+];
+
+pub(super) fn draw_help(f: &mut Frame<'_>, area: Rect) {
+    let rows: Vec<Row> = HELP
+        .iter()
+        .map(|(k, v)| Row::new(vec![Cell::from(*k), Cell::from(*v)]))
+        .collect();
+    let r = centered(area, 78, HELP.len() as u16 + 2);
+    f.render_widget(Clear, r);
+    f.render_widget(
+        Table::new(rows, [Constraint::Length(20), Constraint::Min(20)])
+            .block(Block::bordered().title(" Keys ")),
+        r,
+    );
+}
