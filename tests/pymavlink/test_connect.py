@@ -11,7 +11,7 @@ import textwrap
 from conftest import (
     FLAG_ARMED,
     FLAG_CUSTOM_MODE,
-    MAV_AUTOPILOT_GENERIC,
+    MAV_AUTOPILOT_ARDUPILOTMEGA,
     MAV_TYPE_VTOL_DUOROTOR,
     MODES,
     VEHICLE_SYSID,
@@ -23,7 +23,7 @@ def check_vehicle_heartbeat(g):
     hb = g.wait_vehicle_heartbeat()
     assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
     assert hb.type == MAV_TYPE_VTOL_DUOROTOR
-    assert hb.autopilot == MAV_AUTOPILOT_GENERIC
+    assert hb.autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA
     assert hb.base_mode & FLAG_CUSTOM_MODE, hb
     assert not hb.base_mode & FLAG_ARMED, hb
     assert hb.custom_mode in MODES.values(), hb

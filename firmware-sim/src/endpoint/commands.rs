@@ -67,6 +67,12 @@ pub mod cmd {
     pub const MISSION_START: u16 = 300;
     /// MAV_CMD_GET_HOME_POSITION.
     pub const GET_HOME_POSITION: u16 = 410;
+    /// MAV_CMD_DO_CHANGE_SPEED.
+    pub const DO_CHANGE_SPEED: u16 = 178;
+    /// MAV_CMD_NAV_LAND: ArduPlane does not take it as a command (UNSUPPORTED).
+    pub const NAV_LAND: u16 = 21;
+    /// MAV_CMD_NAV_VTOL_LAND: likewise.
+    pub const NAV_VTOL_LAND: u16 = 85;
 }
 
 /// ArduPlane's RTL mode number, flown as QRTL.
@@ -161,12 +167,14 @@ impl Endpoint {
             }
             _ => {
                 let mut follow_up = Vec::new();
+                let mode_before = self.vehicle.telemetry().mode;
                 let r = self.execute(link, c, &mut follow_up);
                 self.commands.last.insert(key, (r, self.now_us));
                 self.ack(link, frame, c.command, r);
                 for msg in follow_up {
                     self.send(link, &msg);
                 }
+                self.heartbeat_on_mode_change(mode_before);
                 // The ACK goes out first, then the autopilot restarts.
                 if c.command == cmd::PREFLIGHT_REBOOT_SHUTDOWN && r == result::ACCEPTED {
                     let p1 = c.params[0].round();
@@ -178,6 +186,15 @@ impl Endpoint {
             }
         };
         self.ack(link, frame, c.command, result);
+    }
+
+    /// After a command changed the mode, the changed HEARTBEAT to every link at once (ArduPilot
+    /// sends it at once too), so a client sees the new mode without waiting for the 1 Hz one.
+    fn heartbeat_on_mode_change(&mut self, before: FlightMode) {
+        if self.vehicle.telemetry().mode != before {
+            let hb = self.heartbeat();
+            self.broadcast(&hb);
+        }
     }
 
     fn ack(&mut self, link: LinkKey, frame: &Frame, command: u16, result: u8) {
@@ -240,7 +257,7 @@ impl Endpoint {
                 }
             }
             cmd::REQUEST_AUTOPILOT_CAPABILITIES => {
-                after.push(streams::autopilot_version(self.sysid));
+                after.push(super::identity::autopilot_version(self.sysid));
                 result::ACCEPTED
             }
             cmd::DO_VTOL_TRANSITION => match p[0] as u32 {
@@ -266,6 +283,20 @@ impl Endpoint {
                 result::ACCEPTED
             }
             cmd::DO_SET_HOME => self.cmd_set_home(link, c),
+            // Speed type (air, ground, climb, descent) and a speed, −1 (or −2) = unchanged, as
+            // ArduPlane checks them. The twin's position loop sets its own horizontal speed, so
+            // an accepted change has nothing to act on.
+            cmd::DO_CHANGE_SPEED => {
+                let ok_type = (0.0..=3.0).contains(&p[0]) && p[0].fract() == 0.0;
+                let ok_speed = p[1] > 0.0 || p[1] == -1.0 || p[1] == -2.0;
+                if ok_type && ok_speed && p[1].is_finite() {
+                    result::ACCEPTED
+                } else {
+                    result::FAILED
+                }
+            }
+            // Landing is a mode (QLAND, QRTL) or a mission item on ArduPlane, not a command.
+            cmd::NAV_LAND | cmd::NAV_VTOL_LAND => result::UNSUPPORTED,
             cmd::PREFLIGHT_REBOOT_SHUTDOWN => match p[0].round() {
                 // Reboot the autopilot: only on the ground, disarmed, as ArduPilot does.
                 1.0 if self.vehicle.telemetry().armed => result::DENIED,
@@ -342,6 +373,7 @@ impl Endpoint {
         if m.target_system != self.sysid.0 && m.target_system != 0 {
             return;
         }
+        let mode_before = self.vehicle.telemetry().mode;
         let r = if m
             .base_mode
             .contains(apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
@@ -351,6 +383,7 @@ impl Endpoint {
             result::DENIED
         };
         self.ack(link, frame, SET_MODE_ID, r);
+        self.heartbeat_on_mode_change(mode_before);
     }
 
     #[allow(deprecated)]

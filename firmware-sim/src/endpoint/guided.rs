@@ -246,6 +246,31 @@ impl Endpoint {
         }
     }
 
+    /// A MISSION_ITEM or MISSION_ITEM_INT with `current` = 2: ArduPilot's guided waypoint (what
+    /// DroneKit's `simple_goto` sends). Flown in GUIDED only, as ArduPlane does; anything else is
+    /// refused with the reason.
+    pub(super) fn guided_item(
+        &mut self,
+        item: &crate::nav::mission::MissionItem,
+    ) -> Result<(), String> {
+        let t = *self.vehicle.telemetry();
+        if t.mode != FlightMode::Guided {
+            return Err(format!(
+                "Guided waypoint refused: mode is {}, not GUIDED",
+                t.mode
+            ));
+        }
+        let here = self.pos_ned();
+        let keep = self.navigator.hold_point(&here);
+        let target = self
+            .global_target(item.frame, item.x, item.y, f64::from(item.z), &keep)
+            .map_err(|e| e.to_string())?;
+        self.run_nav(|nav, inp, ev| nav.reposition(target, inp, ev))
+            .map_err(|e| e.to_string())?;
+        self.navigate();
+        Ok(())
+    }
+
     /// MISSION_START (300): AUTO from item `param1` (1 when 0).
     pub(super) fn cmd_mission_start(&mut self, link: LinkKey, first: f32) -> u8 {
         if self.mission.count() <= 1 {
@@ -295,6 +320,21 @@ impl Endpoint {
             &self.home_ned_m,
             self.vehicle.telemetry().t_us,
         )
+    }
+
+    /// Home as mission item 0 (a NAV_WAYPOINT in the global frame, altitude above mean sea
+    /// level), what ArduPilot serves in the home slot.
+    pub(super) fn home_item(&self) -> crate::nav::mission::MissionItem {
+        let p = self.origin.to_global(&self.home_ned_m);
+        crate::nav::mission::MissionItem {
+            x: p.lat_e7,
+            y: p.lon_e7,
+            z: p.alt_amsl_m as f32,
+            command: crate::nav::mission::cmd::NAV_WAYPOINT,
+            frame: frame::GLOBAL,
+            autocontinue: 1,
+            ..Default::default()
+        }
     }
 
     /// Moves home, telling every link when it moved.

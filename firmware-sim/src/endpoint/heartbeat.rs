@@ -60,8 +60,8 @@ impl Endpoint {
         }
         apm::MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA {
             custom_mode: t.mode.custom_mode(),
-            mavtype: apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            autopilot: apm::MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            mavtype: super::identity::MAV_TYPE,
+            autopilot: super::identity::AUTOPILOT,
             base_mode,
             system_status: mav_state(t.state, self.failsafe.active),
             mavlink_version: 3,

@@ -43,6 +43,8 @@ pub const MISSION_ITEM_INT_ID: u32 = 73;
 const TYPE_MISSION: u8 = 0;
 /// `MAV_MISSION_TYPE_ALL`.
 const TYPE_ALL: u8 = 255;
+/// `current` of a MISSION_ITEM that is ArduPilot's guided waypoint, not part of an upload.
+const GUIDED_WAYPOINT: u8 = 2;
 
 /// An upload in progress.
 #[derive(Debug, Clone)]
@@ -212,6 +214,17 @@ impl Endpoint {
         let from = (frame.system_id(), frame.component_id());
         if r.mission_type != TYPE_MISSION {
             self.mission_ack(link, from, r.mission_type, R::MAV_MISSION_UNSUPPORTED);
+            return;
+        }
+        if r.item.current == GUIDED_WAYPOINT {
+            let result = match self.guided_item(&r.item) {
+                Ok(()) => R::MAV_MISSION_ACCEPTED,
+                Err(why) => {
+                    self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &why);
+                    R::MAV_MISSION_ERROR
+                }
+            };
+            self.mission_ack(link, from, TYPE_MISSION, result);
             return;
         }
         let now = self.stream_now_us;
@@ -402,7 +415,9 @@ impl Endpoint {
         let to = (frame.system_id(), frame.component_id());
         let item = (kind == TYPE_MISSION)
             .then(|| self.mission.get(seq).copied())
-            .flatten();
+            .flatten()
+            // Home is always readable as item 0, also with no mission stored (ArduPilot).
+            .or_else(|| (kind == TYPE_MISSION && seq == 0).then(|| self.home_item()));
         match item {
             Some(item) => {
                 let payload = item_payload(seq, &item, to, int);

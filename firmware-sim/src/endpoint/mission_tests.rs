@@ -597,3 +597,114 @@ fn guided_take_off_reposition_and_auto_mission() {
         t.pos_m
     );
 }
+
+/// MISSION_REQUEST_INT for `seq`; returns the replies.
+fn request_int(ep: &mut Endpoint, seq: u16) -> Vec<Outbound> {
+    let req = apm::MavMessage::MISSION_REQUEST_INT(apm::MISSION_REQUEST_INT_DATA {
+        seq,
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+    });
+    ep.handle(GCS, &v2(&req))
+}
+
+#[test]
+fn home_slot_is_readable_with_no_mission() {
+    let mut ep = endpoint();
+    assert!(download(&mut ep).is_empty(), "MISSION_COUNT 0");
+    // DroneKit asks for item 0 even after a count of 0: home, as ArduPilot serves it.
+    let out = request_int(&mut ep, 0);
+    let f = &out[0].frame;
+    assert_eq!(f.message_id(), MISSION_ITEM_INT_ID);
+    let home = raw_item(f).unwrap();
+    let o = ep.params().origin();
+    let want = o.to_global(&ep.home_ned_m());
+    assert_eq!(
+        (home.seq, home.item.x, home.item.y),
+        (0, want.lat_e7, want.lon_e7)
+    );
+    assert_eq!(home.item.frame, frame::GLOBAL);
+    assert!((f64::from(home.item.z) - want.alt_amsl_m).abs() < 0.01);
+    // Past it: still INVALID_SEQUENCE.
+    assert_eq!(
+        mission_acks(&request_int(&mut ep, 1)),
+        vec![apm::MavMissionResult::MAV_MISSION_INVALID_SEQUENCE]
+    );
+}
+
+/// A MISSION_ITEM (floats, as DroneKit's `simple_goto` sends it) with `current` = 2.
+fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
+    let mut it = item(mcmd::NAV_WAYPOINT, north_m, 0.0, alt);
+    it.frame = frame::GLOBAL_RELATIVE_ALT;
+    it.current = 2;
+    let p = item_payload(0, &it, (0, 0), false);
+    Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        4,
+        MISSION_ITEM_ID,
+        &p,
+    )
+    .unwrap()
+}
+
+#[test]
+fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 200_000);
+    // Not in GUIDED: refused with the reason, as ArduPlane refuses it.
+    let out = ep.handle(GCS, &guided_waypoint(3.0, 2.0));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ERROR]
+    );
+    let why: String = texts(&out)
+        .iter()
+        .map(|t| t.text.to_str().unwrap().to_owned())
+        .collect();
+    assert!(why.contains("not GUIDED"), "{why}");
+    assert!(ep.mission().is_empty(), "not stored as a mission");
+    set_mode(&mut ep, FlightMode::Guided);
+    ep.handle(GCS, &command(400, [1.0; 7]));
+    ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]));
+    run_until(&mut ep, 5_000_000);
+    let out = ep.handle(GCS, &guided_waypoint(3.0, 2.0));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    run_until(&mut ep, 13_000_000);
+    let pos = ep.vehicle().telemetry().pos_m;
+    // Paper frame: x is south.
+    assert!(
+        (pos.x + 3.0).abs() < 0.3 && (pos.z - 2.0).abs() < 0.3,
+        "{pos}"
+    );
+    // Beyond NAV_RADIUS_MAX: refused with the reason.
+    let out = ep.handle(GCS, &guided_waypoint(150.0, 2.0));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ERROR]
+    );
+}
+
+#[test]
+fn auto_with_no_mission_reaches_nothing() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 200_000);
+    set_mode(&mut ep, FlightMode::Guided);
+    ep.handle(GCS, &command(400, [1.0; 7]));
+    ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]));
+    let mut out = run_until(&mut ep, 4_000_000);
+    // MISSION_START with no mission: FAILED, said why.
+    let start = ep.handle(GCS, &command(300, [0.0; 7]));
+    assert_eq!(acks(&start), vec![(300, commands::result::FAILED)]);
+    out.extend(set_mode(&mut ep, FlightMode::Auto));
+    out.extend(run_until(&mut ep, 20_000_000));
+    assert!(
+        reached(&out).is_empty(),
+        "no item reached: {:?}",
+        reached(&out)
+    );
+}

@@ -23,10 +23,12 @@ pub mod commands;
 pub mod ftp;
 pub mod guided;
 pub mod heartbeat;
+pub mod identity;
 pub mod manual;
 pub mod mission;
 pub mod params_protocol;
 pub mod position;
+pub mod readiness;
 pub mod statustext;
 pub mod streams;
 
@@ -144,6 +146,8 @@ pub struct Endpoint {
     home_ned_m: nalgebra::Vector3<f64>,
     /// Id of the last STATUSTEXT sent in chunks.
     text_id: u16,
+    /// The failing pre-arm check last announced.
+    prearm: readiness::PreArmReport,
 }
 
 /// How long a reboot keeps the twin silent, µs: a small autopilot restarting (ArduPilot's own
@@ -199,6 +203,7 @@ impl Endpoint {
             origin,
             home_ned_m,
             text_id: 0,
+            prearm: readiness::PreArmReport::default(),
         };
         ep.apply_wind();
         ep
@@ -317,6 +322,7 @@ impl Endpoint {
         self.manual = manual::ManualState::default();
         self.failsafe = heartbeat::Failsafe::default();
         self.commands = commands::CommandMemory::default();
+        self.prearm = readiness::PreArmReport::default();
         let groups = self.group_rates_from_params();
         for l in self.links.values_mut() {
             l.schedule = streams::Schedule::new(groups);
@@ -375,6 +381,7 @@ impl Endpoint {
         self.expire_pushes();
         self.check_failsafe();
         self.report_vehicle_events();
+        self.report_prearm();
         self.mission_timeouts();
         self.drain_param_queues();
         let errors_comm = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
@@ -401,7 +408,9 @@ impl Endpoint {
     fn build_messages(&self, msgid: u32, errors_comm: u16) -> Vec<apm::MavMessage> {
         match msgid {
             streams::id::HEARTBEAT => vec![self.heartbeat()],
-            streams::id::AUTOPILOT_VERSION => vec![streams::autopilot_version(self.sysid)],
+            streams::id::SYS_STATUS => self.sys_status(errors_comm).into_iter().collect(),
+            readiness::EKF_STATUS_REPORT => vec![readiness::ekf_status_report(&self.vehicle)],
+            streams::id::AUTOPILOT_VERSION => vec![identity::autopilot_version(self.sysid)],
             streams::id::NAMED_VALUE_FLOAT => {
                 streams::controller_outputs(self.vehicle.telemetry()).into()
             }
@@ -589,6 +598,9 @@ impl Endpoint {
                 "Disarming motors"
             };
             self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, text);
+            // The changed HEARTBEAT goes out at once, as ArduPilot sends it.
+            let hb = self.heartbeat();
+            self.broadcast(&hb);
         }
         if t.state != self.last_state {
             self.last_state = t.state;
@@ -601,5 +613,11 @@ impl Endpoint {
 
 #[cfg(test)]
 mod mission_tests;
+#[cfg(test)]
+mod params_tests;
+#[cfg(test)]
+mod readiness_tests;
+#[cfg(test)]
+mod test_support;
 #[cfg(test)]
 mod tests;

@@ -48,6 +48,7 @@ pub mod id {
         BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, HOME_POSITION, MISSION_CURRENT,
         NAV_CONTROLLER_OUTPUT, VFR_HUD,
     };
+    pub use super::super::readiness::EKF_STATUS_REPORT;
 }
 
 /// Names of the controller's outputs sent as NAMED_VALUE_FLOAT, in order: τ̃φ, τ̃θ, τ̃ψ (rad/s²,
@@ -131,7 +132,7 @@ pub struct StreamDef {
 }
 
 /// Every message the twin streams, with its default rate.
-pub const STREAMABLE: [StreamDef; 19] = [
+pub const STREAMABLE: [StreamDef; 20] = [
     StreamDef {
         msgid: id::HEARTBEAT,
         default_hz: 1.0,
@@ -229,6 +230,11 @@ pub const STREAMABLE: [StreamDef; 19] = [
         msgid: id::HOME_POSITION,
         default_hz: 0.0,
         group: None,
+    },
+    StreamDef {
+        msgid: id::EKF_STATUS_REPORT,
+        default_hz: 1.0,
+        group: Some(Group::Extra3),
     },
 ];
 
@@ -563,48 +569,11 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
                 apm::MavLandedState::MAV_LANDED_STATE_IN_AIR
             },
         }),
-        id::AUTOPILOT_VERSION => return Some(autopilot_version(vtol_link::SystemId(0))),
+        id::AUTOPILOT_VERSION => {
+            return Some(super::identity::autopilot_version(vtol_link::SystemId(0)));
+        }
         _ => return None,
     })
-}
-
-/// AUTOPILOT_VERSION: MAVLink 2, C-cast parameters, COMMAND_INT, local position targets.
-#[must_use]
-pub fn autopilot_version(sysid: vtol_link::SystemId) -> apm::MavMessage {
-    use apm::MavProtocolCapability as C;
-    let (major, minor, patch) = crate_version();
-    // ArduPilot layout: major.minor.patch.type with type 255 = FIRMWARE_VERSION_TYPE_OFFICIAL.
-    let sw = (major << 24) | (minor << 16) | (patch << 8) | 255;
-    let mut custom = [0u8; 8];
-    custom[..7].copy_from_slice(b"vtoltwn");
-    apm::MavMessage::AUTOPILOT_VERSION(apm::AUTOPILOT_VERSION_DATA {
-        capabilities: C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
-            | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
-        uid: 0x7654_0000 + u64::from(sysid.0),
-        flight_sw_version: sw,
-        middleware_sw_version: 0,
-        os_sw_version: 0,
-        board_version: 0,
-        vendor_id: 0,
-        product_id: 0,
-        flight_custom_version: custom,
-        middleware_custom_version: [0; 8],
-        os_custom_version: [0; 8],
-        uid2: [0; 18],
-    })
-}
-
-fn crate_version() -> (u32, u32, u32) {
-    let mut it = env!("CARGO_PKG_VERSION")
-        .split('.')
-        .map(|s| s.parse().unwrap_or(0));
-    (
-        it.next().unwrap_or(0),
-        it.next().unwrap_or(0),
-        it.next().unwrap_or(0),
-    )
 }
 
 /// Quaternion (w, x, y, z) of NED roll, pitch, yaw (ZYX).

@@ -327,6 +327,9 @@ impl Navigator {
 
     fn complete_mission(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
         self.state = MissionState::Complete;
+        // Nothing of AUTO is left to fly: a leg started in another mode (a GUIDED take-off
+        // still climbing) must not complete as if it were a mission item.
+        self.leg = Leg::Idle;
         if inp.armed && !inp.landed {
             events.push(NavEvent::Info(
                 "Mission complete, changing mode to QRTL".into(),
@@ -334,7 +337,6 @@ impl Navigator {
             events.push(NavEvent::SetMode(FlightMode::QRtl));
         } else {
             events.push(NavEvent::Info("Mission complete".into()));
-            self.leg = Leg::Idle;
         }
     }
 

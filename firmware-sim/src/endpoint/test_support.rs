@@ -1,0 +1,143 @@
+//! Helpers of the endpoint's state-machine tests: an endpoint with one GCS link, frames in
+//! both MAVLink versions, and readers of what comes out.
+
+pub(super) use mavlink::dialects::ardupilotmega as apm;
+pub(super) use mavlink::types::CharArray;
+
+pub(super) use super::*;
+pub(super) use crate::nav::params::TABLE;
+pub(super) use vtol_link::{FrameDecoder, MavlinkVersion};
+
+pub(super) const GCS: LinkKey = LinkKey(1);
+pub(super) const GCS_SYSID: u8 = 255;
+pub(super) const GCS_COMPID: u8 = 190;
+
+pub(super) fn endpoint() -> Endpoint {
+    let mut config = EndpointConfig::default();
+    config.vehicle.ideal_sensors = true;
+    let mut ep = Endpoint::new(config);
+    ep.add_link(GCS);
+    ep
+}
+
+pub(super) fn v2(msg: &apm::MavMessage) -> Frame {
+    Frame::encode_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        7,
+        msg,
+    )
+}
+
+pub(super) fn v1(msg: &apm::MavMessage) -> Frame {
+    Frame::encode_v1(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        3,
+        msg,
+    )
+    .expect("a MAVLink 1 message")
+}
+
+/// Every outbound frame must be MAVLink 2 from (1, 1); returns the typed messages.
+pub(super) fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
+    out.iter()
+        .filter_map(|o| {
+            assert_eq!(o.frame.version(), MavlinkVersion::V2, "always MAVLink 2");
+            let f = &o.frame;
+            assert_eq!((f.system_id(), f.component_id()), (1, COMPID.0));
+            f.decode().ok()
+        })
+        .collect()
+}
+
+pub(super) fn command_long(command: apm::MavCmd, p: [f32; 7], confirmation: u8) -> apm::MavMessage {
+    apm::MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: 1,
+        target_component: 0,
+        confirmation,
+    })
+}
+
+/// (command, result) of every COMMAND_ACK, read from raw bytes (unknown ids do not decode).
+pub(super) fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
+    out.iter()
+        .map(|o| &o.frame)
+        .filter(|f| f.message_id() == 77)
+        .map(|f| {
+            let p: [u8; 10] = f.payload_padded();
+            assert_eq!(
+                (p[8], p[9]),
+                (GCS_SYSID, GCS_COMPID),
+                "ACK targets the sender"
+            );
+            (u16::from_le_bytes([p[0], p[1]]), p[2])
+        })
+        .collect()
+}
+
+pub(super) fn heartbeat_of(msgs: &[apm::MavMessage]) -> apm::HEARTBEAT_DATA {
+    msgs.iter()
+        .rev()
+        .find_map(|m| match m {
+            apm::MavMessage::HEARTBEAT(h) => Some(h.clone()),
+            _ => None,
+        })
+        .expect("a heartbeat")
+}
+
+pub(super) fn param_set(name: &str, value: f32) -> apm::MavMessage {
+    apm::MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
+        param_value: value,
+        target_system: 1,
+        target_component: 1,
+        param_id: CharArray::from(name),
+        param_type: apm::MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
+}
+
+pub(super) fn param_values(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_VALUE_DATA> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::PARAM_VALUE(v) => Some(v.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+pub(super) fn param_errors(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_ERROR_DATA> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::PARAM_ERROR(v) => Some(v.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+pub(super) fn texts(msgs: &[apm::MavMessage]) -> Vec<String> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            apm::MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Ticks in 5 ms steps up to `until_us`, collecting everything.
+pub(super) fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
+    let mut out = Vec::new();
+    let mut t = ep.now_us();
+    while t < until_us {
+        t = (t + 5_000).min(until_us);
+        out.extend(ep.tick(t));
+    }
+    out
+}

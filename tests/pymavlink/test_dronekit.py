@@ -1,0 +1,130 @@
+"""DroneKit (`dronekit2`, the maintained fork of DroneKit-Python) flies the twin as it flies
+ArduPilot SITL, each step written the way DroneKit's documentation writes it: `connect(...,
+wait_ready=True)`, `commands.download()` on a fresh twin (home comes from mission item 0),
+parameters read and written, the guide's `arm_and_takeoff()` with its `is_armable` wait,
+`simple_goto`, a mission built with `commands.add` and uploaded, AUTO to its end, RTL to landed
+and disarmed. Directly against the twin and through the daemon, over TCP and UDP.
+
+Where the documentation polls with `time.sleep(1)`, the tests use DroneKit's own
+`vehicle.wait_for(condition, timeout=...)`: the same loop, bounded, checking ten times a second.
+"""
+
+from __future__ import annotations
+
+import pytest
+from dronekit import Command, LocationGlobalRelative, VehicleMode, connect
+from pymavlink import mavutil
+
+from conftest import f32, twin_factory  # noqa: F401 (fixture)
+from daemon_support import daemon_factory  # noqa: F401 (fixture)
+from sdk_targets import TARGET_IDS, TARGETS, distance_m, offset, start_target
+
+TAKEOFF_ALT = 2.0
+# Upper bounds, wall seconds (the twin flies at sdk_targets.FLIGHT_SPEED x real time).
+STEP_TIMEOUT = 30.0
+
+
+@pytest.fixture(params=TARGETS, ids=TARGET_IDS)
+def target(request, twin_factory, daemon_factory):  # noqa: F811
+    route, transport = request.param
+    return start_target(route, transport, twin_factory, daemon_factory)
+
+
+def arm_and_takeoff(vehicle, a_target_altitude):
+    """The DroneKit guide's arm_and_takeoff (examples/simple_goto), its polls bounded."""
+    # Don't let the user try to arm until autopilot is ready
+    vehicle.wait_for(lambda: vehicle.is_armable, timeout=STEP_TIMEOUT,
+                     errmsg="never armable (EKF_STATUS_REPORT, GPS fix)")
+    # Copter should arm in GUIDED mode
+    vehicle.mode = VehicleMode("GUIDED")
+    vehicle.armed = True
+    vehicle.wait_for(lambda: vehicle.armed, timeout=STEP_TIMEOUT, errmsg="never armed")
+    vehicle.simple_takeoff(a_target_altitude)  # Take off to target altitude
+    vehicle.wait_for(
+        lambda: (vehicle.location.global_relative_frame.alt or 0.0) >= a_target_altitude * 0.95,
+        timeout=STEP_TIMEOUT, errmsg="never reached the take-off altitude")
+
+
+def test_dronekit_flies_the_twin_as_documented(target):
+    vehicle = connect(target.pymavlink_url, wait_ready=True, timeout=STEP_TIMEOUT,
+                      heartbeat_timeout=STEP_TIMEOUT)
+    try:
+        fly_documented_flows(vehicle)
+    finally:
+        vehicle.close()
+
+
+def fly_documented_flows(vehicle):
+    # Identity: ArduPilot, and the capabilities it really has.
+    assert vehicle._autopilot_type == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    vehicle.wait_for(lambda: vehicle._capabilities is not None, timeout=STEP_TIMEOUT,
+                     errmsg="no AUTOPILOT_VERSION")
+    caps = vehicle.capabilities
+    assert caps.mission_int and caps.mission_float and caps.command_int and not caps.ftp
+    assert vehicle.mode.name == "QSTABILIZE"
+
+    # A fresh twin: no mission, and home read from item 0 (ArduPilot always serves it).
+    cmds = vehicle.commands
+    cmds.download()
+    cmds.wait_ready(timeout=STEP_TIMEOUT)
+    assert cmds.count == 0
+    home = vehicle.home_location
+    assert home is not None and abs(home.lat) > 0 and abs(home.lon) > 0, home
+
+    # Parameters: all of them came with wait_ready=True; one written and read back.
+    assert len(vehicle.parameters) >= 50
+    assert vehicle.parameters["WP_RADIUS"] == pytest.approx(0.3, abs=1e-6)
+    vehicle.parameters["WP_RADIUS"] = 0.5
+    vehicle.wait_for(lambda: abs(vehicle.parameters["WP_RADIUS"] - 0.5) < 1e-6,
+                     timeout=STEP_TIMEOUT, errmsg="WP_RADIUS not written")
+
+    arm_and_takeoff(vehicle, TAKEOFF_ALT)
+    assert vehicle.mode.name == "GUIDED"
+
+    # simple_goto: MISSION_ITEM with current = 2, ArduPilot's guided waypoint. MISSION_ITEM
+    # carries degrees as float32 (about 1 m of longitude here): the target is where those land.
+    here = vehicle.location.global_relative_frame
+    lat, lon = offset(here.lat, here.lon, 3.0, 0.0)
+    vehicle.simple_goto(LocationGlobalRelative(lat, lon, TAKEOFF_ALT))
+
+    def near(lat, lon, tol=0.5):
+        loc = vehicle.location.global_relative_frame
+        return distance_m(loc.lat, loc.lon, f32(lat), f32(lon)) <= tol
+
+    vehicle.wait_for(lambda: near(lat, lon), timeout=STEP_TIMEOUT, errmsg="simple_goto not flown")
+
+    # A mission built with commands.add and uploaded (the guide's mission_basic), then AUTO.
+    cmds.clear()
+    frame = mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+    wp1 = offset(home.lat, home.lon, 3.0, 2.0)
+    wp2 = offset(home.lat, home.lon, 0.0, 2.0)
+    cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0,
+                     0, 0, TAKEOFF_ALT))
+    cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0,
+                     wp1[0], wp1[1], TAKEOFF_ALT))
+    cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0,
+                     wp2[0], wp2[1], TAKEOFF_ALT))
+    cmds.upload(timeout=STEP_TIMEOUT)
+    cmds.download()
+    cmds.wait_ready(timeout=STEP_TIMEOUT)
+    assert cmds.count == 3
+    assert [c.command for c in cmds] == [22, 16, 16]
+
+    vehicle.commands.next = 0
+    vehicle.mode = VehicleMode("AUTO")
+    vehicle.wait_for(lambda: vehicle.mode.name == "AUTO", timeout=STEP_TIMEOUT,
+                     errmsg="never in AUTO")
+    # To the end: the last waypoint flown, then ArduPlane's end of mission (QRTL here).
+    vehicle.wait_for(lambda: vehicle.mode.name != "AUTO", timeout=STEP_TIMEOUT,
+                     errmsg="mission never ended")
+    assert near(*wp2, tol=1.0)  # WP_RADIUS 0.5 m, and the approach to QRTL started
+
+    # RTL (flown as QRTL, ArduPlane's Q_RTL_MODE) to landed and disarmed.
+    vehicle.mode = VehicleMode("RTL")
+    vehicle.wait_for(lambda: vehicle.mode.name == "QRTL", timeout=STEP_TIMEOUT,
+                     errmsg="never in QRTL")
+    vehicle.wait_for(lambda: not vehicle.armed, timeout=STEP_TIMEOUT,
+                     errmsg="never landed and disarmed")
+    loc = vehicle.location.global_relative_frame
+    assert distance_m(loc.lat, loc.lon, home.lat, home.lon) < 1.0
+    assert loc.alt < 0.3
