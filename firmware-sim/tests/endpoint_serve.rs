@@ -146,7 +146,7 @@ async fn serve_over_tcp_heartbeat_params_commands() {
     let mut gcs = Gcs::new(TcpStream::connect(addr).await.unwrap());
 
     let hb = gcs.heartbeat().await;
-    assert_eq!(hb.mavtype as u8, 19);
+    assert_eq!(hb.mavtype as u8, 1, "MAV_TYPE_FIXED_WING, as ArduPlane");
     assert_eq!(
         hb.base_mode.bits() & 0x81,
         0x01,

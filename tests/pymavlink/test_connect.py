@@ -12,7 +12,7 @@ from conftest import (
     FLAG_ARMED,
     FLAG_CUSTOM_MODE,
     MAV_AUTOPILOT_ARDUPILOTMEGA,
-    MAV_TYPE_VTOL_DUOROTOR,
+    MAV_TYPE_FIXED_WING,
     MODES,
     VEHICLE_SYSID,
     f32,
@@ -22,7 +22,7 @@ from conftest import (
 def check_vehicle_heartbeat(g):
     hb = g.wait_vehicle_heartbeat()
     assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
-    assert hb.type == MAV_TYPE_VTOL_DUOROTOR
+    assert hb.type == MAV_TYPE_FIXED_WING
     assert hb.autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA
     assert hb.base_mode & FLAG_CUSTOM_MODE, hb
     assert not hb.base_mode & FLAG_ARMED, hb

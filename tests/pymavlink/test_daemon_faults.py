@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from conftest import MAV_TYPE_VTOL_DUOROTOR, VEHICLE_COMPID, VEHICLE_SYSID
+from conftest import MAV_TYPE_FIXED_WING, VEHICLE_COMPID, VEHICLE_SYSID
 from daemon_support import daemon_factory, frame_ids, raw_records, script, wait_vehicle_silence  # noqa: F401 (fixture)
 from test_daemon_tlog import read_with_pymavlink
 
@@ -184,7 +184,7 @@ def test_client_closing_mid_frame_harms_nobody(daemon_factory):  # noqa: F811
     g = script(daemon.tcp)
     try:
         hb = g.wait_vehicle_heartbeat(timeout=15)
-        assert hb.type == MAV_TYPE_VTOL_DUOROTOR
+        assert hb.type == MAV_TYPE_FIXED_WING
         # A whole COMMAND_LONG for the vehicle, of which only the first half is sent.
         mav = mavutil.mavlink.MAVLink(None, srcSystem=255, srcComponent=0)
         frame = bytes(mav.command_long_encode(VEHICLE_SYSID, VEHICLE_COMPID, HALF_SENT_CMD, 0,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from conftest import MAV_TYPE_VTOL_DUOROTOR, VEHICLE_SYSID
+from conftest import MAV_TYPE_FIXED_WING, VEHICLE_SYSID
 from daemon_support import Socat, daemon_factory, script, wait_vehicle_silence  # noqa: F401 (fixture)
 
 
@@ -23,7 +23,7 @@ def test_serial_vehicle_link_survives_pty_restart(twin_factory, daemon_factory, 
         g = script(daemon.tcp)
         try:
             hb = g.wait_vehicle_heartbeat(timeout=20)
-            assert hb.type == MAV_TYPE_VTOL_DUOROTOR, hb
+            assert hb.type == MAV_TYPE_FIXED_WING, hb
             before = g.recv("ATTITUDE", timeout=10)
 
             socat.stop()  # both ptys close under the twin and the daemon
@@ -42,7 +42,7 @@ def test_serial_vehicle_link_survives_pty_restart(twin_factory, daemon_factory, 
             assert first < 1.0, f"the link resumed {first * 1000:.0f} ms after the device returned"
             print(f"link resumed {first * 1000:.0f} ms after the device returned")
             hb = g.wait_vehicle_heartbeat(timeout=30)
-            assert hb.type == MAV_TYPE_VTOL_DUOROTOR, hb
+            assert hb.type == MAV_TYPE_FIXED_WING, hb
             after = g.recv("ATTITUDE", timeout=10)
             # the same twin, still running: its clock went on
             assert after.time_boot_ms > before.time_boot_ms, (before, after)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 
-from conftest import MAV_TYPE_VTOL_DUOROTOR
+from conftest import MAV_TYPE_FIXED_WING
 from daemon_support import daemon_factory, script, wait_vehicle_silence  # noqa: F401 (fixture)
 
 
@@ -18,7 +18,7 @@ def test_daemon_reconnects_to_restarted_twin(twin_factory, daemon_factory):  # n
     g = script(daemon.tcp)
     try:
         hb = g.wait_vehicle_heartbeat(timeout=20)
-        assert hb.type == MAV_TYPE_VTOL_DUOROTOR, hb
+        assert hb.type == MAV_TYPE_FIXED_WING, hb
         g.recv("ATTITUDE", timeout=10)
 
         twin_factory.twins.remove(twin)
@@ -30,7 +30,7 @@ def test_daemon_reconnects_to_restarted_twin(twin_factory, daemon_factory):  # n
         twin2 = twin_factory(listen=[f"tcpin:{host}:{port}"], speed=1)
         assert twin2.host_port("tcpin") == (host, port)
         hb = g.wait_vehicle_heartbeat(timeout=30)
-        assert hb.type == MAV_TYPE_VTOL_DUOROTOR, hb
+        assert hb.type == MAV_TYPE_FIXED_WING, hb
         att = g.recv("ATTITUDE", timeout=10)
         # the first twin is dead, so this is the new one: its clock began after it was spawned
         age_ms = (time.monotonic() - started) * 1000

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from conftest import FLAG_CUSTOM_MODE, MAV_TYPE_VTOL_DUOROTOR, Gcs
+from conftest import FLAG_CUSTOM_MODE, MAV_TYPE_FIXED_WING, Gcs
 
 PTY_RE = re.compile(r"PTY is (/dev/pts/\d+)")
 
@@ -52,7 +52,7 @@ def test_serial_heartbeat_and_param(twin_factory, pty_pair):
     g = Gcs(gcs_end, baud=115200)
     try:
         hb = g.wait_vehicle_heartbeat(timeout=20)
-        assert hb.type == MAV_TYPE_VTOL_DUOROTOR and hb.base_mode & FLAG_CUSTOM_MODE
+        assert hb.type == MAV_TYPE_FIXED_WING and hb.base_mode & FLAG_CUSTOM_MODE
         assert g.m.target_system == 1
         p = g.param_get("HOVER_ALT")
         assert p.param_count > 0

@@ -6,9 +6,11 @@
 //! conventions, so it says `MAV_AUTOPILOT_ARDUPILOTMEGA`: ground stations and SDKs choose their
 //! ArduPilot support from that field (QGroundControl its firmware plugin, MAVSDK its mode
 //! encoding, DroneKit and pymavlink their mode tables). The vehicle type is
-//! `MAV_TYPE_VTOL_TAILSITTER_DUOROTOR`, what ArduPlane reports for a two-motor tailsitter with
-//! `Q_MAV_TYPE` = 19 (ArduPlane's `QuadPlane::get_mav_type`: the parameter's value, or
-//! FIXED_WING when it is 0), the setting ArduPilot recommends so that ground stations show a VTOL.
+//! `MAV_TYPE_FIXED_WING`, what ArduPlane reports for a two-motor tailsitter as it comes: its
+//! `QuadPlane::get_mav_type` returns `Q_MAV_TYPE`, or FIXED_WING while that parameter is 0, its
+//! default. It is also the only type for which MAVSDK reads and sets ArduPlane's mode numbers:
+//! with any other (a VTOL type included) it takes the vehicle for ArduCopter and sends copter
+//! modes (GUIDED as 4, AUTO as 3), which ArduPlane and the twin refuse.
 //!
 //! The capability bits are those of what the twin serves: missions as MISSION_ITEM and
 //! MISSION_ITEM_INT, COMMAND_INT, parameters as floats (C-cast integers, as ArduPilot encodes
@@ -21,8 +23,8 @@ use vtol_link::SystemId;
 /// HEARTBEAT `autopilot`.
 pub const AUTOPILOT: apm::MavAutopilot = apm::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA;
 
-/// HEARTBEAT `type`: ArduPlane's for a two-motor tailsitter (`Q_MAV_TYPE` = 19).
-pub const MAV_TYPE: apm::MavType = apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR;
+/// HEARTBEAT `type`: ArduPlane's for a two-motor tailsitter (`Q_MAV_TYPE` = 0, the default).
+pub const MAV_TYPE: apm::MavType = apm::MavType::MAV_TYPE_FIXED_WING;
 
 /// The UID of the twin with system id `sysid` (`AUTOPILOT_VERSION.uid`).
 #[must_use]

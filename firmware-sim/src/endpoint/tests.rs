@@ -7,8 +7,8 @@ fn heartbeat_fields_and_not_armed_by_default() {
     let mut ep = endpoint();
     let out = run_until(&mut ep, 2_500_000);
     let hb = heartbeat_of(&decode(&out));
-    assert_eq!(hb.mavtype, apm::MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR);
-    assert_eq!(hb.mavtype as u8, 19);
+    assert_eq!(hb.mavtype, apm::MavType::MAV_TYPE_FIXED_WING);
+    assert_eq!(hb.mavtype as u8, 1);
     assert_eq!(hb.autopilot, apm::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
     assert!(
         hb.base_mode
