@@ -181,14 +181,21 @@ fn sdk_commands_get_ardupilots_results_once_long_and_int() {
     let mut ep = endpoint();
     run_until(&mut ep, 100_000);
     // (command, params, result): DO_CHANGE_SPEED accepted and checked; the landing commands
-    // are modes or mission items on ArduPlane; HOME_POSITION and AUTOPILOT_VERSION by request.
-    let cases: [(u16, [f32; 4], u8); 6] = [
+    // are modes or mission items on ArduPlane; HOME_POSITION and AUTOPILOT_VERSION by request;
+    // a message interval, home here, MISSION_START with no mission, and RTL last (it changes
+    // the mode).
+    let cases: [(u16, [f32; 4], u8); 11] = [
         (178, [1.0, 5.0, -1.0, 0.0], 0),
         (178, [9.0, 5.0, -1.0, 0.0], 4),
         (21, [0.0; 4], 3),
         (85, [0.0; 4], 3),
         (512, [242.0, 0.0, 0.0, 0.0], 0),
         (410, [0.0; 4], 0),
+        (520, [1.0, 0.0, 0.0, 0.0], 0),
+        (511, [30.0, 100_000.0, 0.0, 0.0], 0),
+        (179, [1.0, 0.0, 0.0, 0.0], 0),
+        (300, [0.0; 4], 4),
+        (20, [0.0; 4], 0),
     ];
     for (command, p, want) in cases {
         for frame in [
