@@ -55,10 +55,14 @@ def test_dronekit_flies_the_twin_as_documented(target):
 
 
 def fly_documented_flows(vehicle):
-    # Identity: ArduPilot, and the capabilities it really has.
-    assert vehicle._autopilot_type == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
-    vehicle.wait_for(lambda: vehicle._capabilities is not None, timeout=STEP_TIMEOUT,
+    # Identity: ArduPilot (ArduPlane's vehicle type), a release version from AUTOPILOT_VERSION,
+    # and the capabilities it really has.
+    vehicle.wait_for(lambda: vehicle.version.raw_version is not None, timeout=STEP_TIMEOUT,
                      errmsg="no AUTOPILOT_VERSION")
+    version = vehicle.version
+    assert version.autopilot_type == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert version.vehicle_type == mavutil.mavlink.MAV_TYPE_FIXED_WING
+    assert version.is_stable()
     caps = vehicle.capabilities
     assert caps.mission_int and caps.mission_float and caps.command_int and not caps.ftp
     assert vehicle.mode.name == "QSTABILIZE"
