@@ -317,6 +317,13 @@ pub async fn start(
                 })?;
             vehicle_addr = h.local_addr();
             tasks.spawn(h.join());
+            if matches!(url, LinkUrl::UdpOut { .. }) {
+                tasks.spawn(udpout_hello(
+                    client.clone(),
+                    state_rx.clone(),
+                    cancel.clone(),
+                ));
+            }
         }
     }
 
@@ -341,6 +348,33 @@ pub async fn start(
         router: router_handle,
         history,
     })
+}
+
+/// How often the daemon speaks first on a `udpout` vehicle link while no vehicle is heard.
+const HELLO_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Speaks first on a `udpout` vehicle link: a vehicle listening on `udpin` learns where to send
+/// only from what it hears. While no vehicle is heard (at start, and after a vehicle restart
+/// that forgot its peer) the daemon's client sends [`crate::client::hello`] once a second:
+/// a TIMESYNC request, not a heartbeat, so it never arms or feeds the vehicle's GCS-loss
+/// failsafe (ArduPilot and the twin count any HEARTBEAT from SYSID_MYGCS as the operator's).
+async fn udpout_hello(
+    client: ClientHandle,
+    state: watch::Receiver<VehicleState>,
+    cancel: CancellationToken,
+) {
+    let mut every = tokio::time::interval(HELLO_EVERY);
+    loop {
+        tokio::select! {
+            () = cancel.cancelled() => return,
+            _ = every.tick() => {}
+        }
+        let now = tracker::now();
+        let heard = state.borrow().vehicles.values().any(|v| !v.is_lost(now));
+        if !heard && client.send(crate::client::hello()).await.is_err() {
+            return;
+        }
+    }
 }
 
 /// Runs the twin inside the daemon on one end of an in-memory byte link.

@@ -148,6 +148,15 @@ pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
             let s = stats::scan(&mut reader, size, &mut |n| bar.set_position(n));
             bar.finish_and_clear();
             vtol_gcs::log::finish_read(&mut reader, &file)?;
+            // A file with no record at all is no log: say so and fail, instead of a table of
+            // zeros that looks like an answer.
+            if s.frames == 0 {
+                anyhow::bail!(
+                    "{}: no tlog record in {} bytes (not a tlog, or empty)",
+                    file.display(),
+                    s.file_bytes
+                );
+            }
             if json {
                 println!("{}", serde_json::to_string_pretty(&s)?);
             } else {

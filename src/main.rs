@@ -18,9 +18,19 @@ use vtol_link::LinkUrl;
 mod log_cli;
 
 /// Terminal ground station and MAVLink bridge for the two-rotor convertible VTOL.
+///
+/// With no subcommand it runs the terminal UI and takes exactly the options of `vtol-gcs tui`
+/// (`vtol-gcs --vehicle tcp:127.0.0.1:5760` is `vtol-gcs tui --vehicle tcp:127.0.0.1:5760`).
+///
+/// Exit status (every subcommand): 0 done; 1 refused by the vehicle (or `params diff`: the
+/// vehicle differs); 2 usage or input error; 3 no vehicle, or a link failure; 4 a rollback that
+/// could not complete. See docs/cli.md.
 #[derive(Debug, Parser)]
-#[command(version, about)]
+#[command(version, about, args_conflicts_with_subcommands = true)]
 struct Cli {
+    /// The terminal UI's options (as `vtol-gcs tui`).
+    #[command(flatten)]
+    tui: TuiArgs,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -58,7 +68,8 @@ struct TuiArgs {
 
 #[derive(Debug, Args, Default)]
 struct RunArgs {
-    /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
+    /// Vehicle link: `embedded` (default: the twin in this process, its parameters in memory
+    /// only, lost when vtol-gcs exits: `params save` keeps them), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
     /// serial:DEV[:BAUD]), a fleet over Zenoh (zenoh:FLEET/* or zenoh:FLEET/VEHICLE) or a tlog
     /// played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]
@@ -191,24 +202,37 @@ fn main() -> std::process::ExitCode {
         Some(Command::Log(cmd)) => log_cli::run(cmd),
         Some(Command::Run(args)) => run(args),
         Some(Command::Tui(t)) => ui(t.run, t.connect),
-        None => ui(RunArgs::default(), None),
+        None => ui(cli.tui.run, cli.tui.connect),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", vtol_link::error_line(e.as_ref()));
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(exit_code(&e))
         }
     }
 }
 
+/// The exit status of a failed UI, daemon or log command (docs/cli.md): a link that cannot be
+/// opened is a link failure (3); everything else stopped at start on what it was given (2).
+fn exit_code(e: &anyhow::Error) -> u8 {
+    match e.downcast_ref::<vtol_gcs::daemon::DaemonError>() {
+        Some(vtol_gcs::daemon::DaemonError::Link { .. }) => client_cli::EXIT_LINK,
+        _ => client_cli::EXIT_USAGE,
+    }
+}
+
 fn env_filter() -> tracing_subscriber::EnvFilter {
-    tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into())
+    // Zenoh warns about what it then returns as an error: the error line says it once.
+    tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "warn,zenoh=error".into())
 }
 
 fn init_stderr_tracing() {
+    // Colour codes only for a terminal: a pipe or a file gets plain text.
     tracing_subscriber::fmt()
         .with_env_filter(env_filter())
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
         .init();
 }

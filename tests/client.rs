@@ -151,11 +151,12 @@ async fn pull_push_and_rollback_lossless() {
         Err(ClientError::Refused { reason }) => assert!(reason.contains("LAT_SAT_D"), "{reason}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
+    // A name the vehicle does not have is an input error (exit 2 on the command line).
     match r.client.param_get("NO_SUCH_PARAM").await {
-        Err(ClientError::Refused { reason }) => {
+        Err(ClientError::Usage(reason)) => {
             assert!(reason.contains("NO_SUCH_PARAM"), "{reason}")
         }
-        other => panic!("expected a refusal, got {other:?}"),
+        other => panic!("expected an input error, got {other:?}"),
     }
     // An integer parameter confirms with the vehicle's rounding.
     assert_eq!(r.client.param_set("SIM_PUSH_MS", 250.4).await, Ok(250.0));

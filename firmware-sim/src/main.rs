@@ -165,10 +165,16 @@ state={:?} armed={} landed={}",
         t.armed,
         t.landed,
     );
-    if args.csv.as_deref() == Some("-") {
-        eprintln!("{line}");
-    } else {
-        writeln!(std::io::stdout(), "{line}")?;
+    match args.csv.as_deref() {
+        Some("-") => eprintln!("{line}"),
+        Some(path) => {
+            writeln!(std::io::stdout(), "{line}")?;
+            eprintln!("{} CSV rows written to {path}", summary.rows);
+        }
+        None => {
+            writeln!(std::io::stdout(), "{line}")?;
+            eprintln!("no CSV written (give --csv FILE, or --csv - for standard output)");
+        }
     }
     Ok(())
 }

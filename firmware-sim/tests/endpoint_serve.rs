@@ -313,7 +313,7 @@ async fn cli_prints_bound_address_and_persists_params() {
     .await;
     // The echo follows the save, so the file is complete now.
     let saved = std::fs::read_to_string(&param_file).unwrap();
-    assert!(saved.contains("ALT_KD           2.000000\n"), "{saved}");
+    assert!(saved.contains("ALT_KD           2\n"), "{saved}");
     // SIGTERM: a clean exit with status 0.
     let child = guard.0.take().unwrap();
     let pid = child.id().to_string();

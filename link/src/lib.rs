@@ -56,6 +56,9 @@ pub fn error_line(err: &(dyn std::error::Error + 'static)) -> String {
         }
         cause = c.source();
     }
+    // Some dependencies (Zenoh) append where in their sources an error was made: the user
+    // cannot act on a path of the build machine.
+    let mut line = strip_source_locations(&line);
     // Errors quote what the user gave (a URL, a line of a file): a line break or another
     // control character in it is shown escaped, so the error stays one line.
     if line.contains(char::is_control) {
@@ -73,6 +76,34 @@ pub fn error_line(err: &(dyn std::error::Error + 'static)) -> String {
     line
 }
 
+/// `text` without the ` at /path/to/file.rs:LINE` source locations some errors carry.
+fn strip_source_locations(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find(" at ") {
+        let after = &rest[i + 4..];
+        let end = after
+            .find(|c: char| c.is_whitespace() || c == ']')
+            .unwrap_or(after.len());
+        let token = after[..end].trim_end_matches('.');
+        let is_location = token.contains('/')
+            && token.rsplit_once(".rs:").is_some_and(|(_, pos)| {
+                !pos.is_empty() && pos.chars().all(|c| c.is_ascii_digit() || c == ':')
+            });
+        if is_location {
+            out.push_str(&rest[..i]);
+            rest = after[token.len()..]
+                .strip_prefix('.')
+                .unwrap_or(&after[token.len()..]);
+        } else {
+            out.push_str(&rest[..i + 4]);
+            rest = after;
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
 #[cfg(test)]
 mod error_line_tests {
     #[derive(Debug, thiserror::Error)]
@@ -83,5 +114,25 @@ mod error_line_tests {
     fn causes_already_quoted_are_not_repeated() {
         let e = Outer(std::io::Error::other("address in use"));
         assert_eq!(super::error_line(&e), "cannot open link: address in use");
+    }
+
+    /// Zenoh's errors name its source files on the build machine: left out.
+    #[test]
+    fn source_locations_of_dependencies_are_left_out() {
+        let zenoh = "Can not create a new TCP listener bound to tcp/127.0.0.1:7447: \
+            [127.0.0.1:7447: Address already in use (os error 98) at \
+            /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] \
+            at /root/.cargo/registry/src/x/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
+        let e = Outer(std::io::Error::other(zenoh));
+        assert_eq!(
+            super::error_line(&e),
+            "cannot open link: Can not create a new TCP listener bound to tcp/127.0.0.1:7447: \
+             [127.0.0.1:7447: Address already in use (os error 98)]"
+        );
+        // A URL or a word "at" that is no source location stays.
+        let e = Outer(std::io::Error::other(
+            "no answer at tcp:127.0.0.1:5760 at all",
+        ));
+        assert!(super::error_line(&e).ends_with("no answer at tcp:127.0.0.1:5760 at all"));
     }
 }

@@ -15,6 +15,7 @@ pub mod machine;
 pub mod param;
 pub mod probe;
 mod session;
+pub use session::{Heard, hello};
 pub mod statustext;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -122,6 +123,7 @@ pub struct ClientHandle {
     rtt: Arc<Mutex<Rtt>>,
     shared: Arc<session::Shared>,
     cache: Arc<Mutex<ParamSet>>,
+    heard: watch::Receiver<Heard>,
 }
 
 /// While alive, the client sends its 1 Hz GCS heartbeat: an operator is watching.
@@ -147,9 +149,11 @@ impl ClientHandle {
         config: ClientConfig,
         links_rx: mpsc::Receiver<vtol_link::LinkEvent>,
         signing: Option<crate::trust::signing::DaemonSigning>,
+        hello: bool,
         cancel: CancellationToken,
     ) -> Self {
         let me = (config.system_id, config.component_id);
+        let (heard_tx, heard) = watch::channel(Heard::default());
         let (out, out_rx) = mpsc::channel(OUT_QUEUE);
         let (inbound, _) = broadcast::channel(INBOUND_QUEUE);
         let (target_tx, target) = watch::channel(config.target);
@@ -167,6 +171,8 @@ impl ClientHandle {
             fixed_target: config.target.is_some(),
             shared: Arc::clone(&shared),
             signing,
+            heard: heard_tx,
+            hello,
         };
         tokio::spawn(session.run(links_rx, out_rx, cancel));
         Self {
@@ -179,6 +185,7 @@ impl ClientHandle {
             rtt: Arc::new(Mutex::new(Rtt::default())),
             shared,
             cache: Arc::new(Mutex::new(ParamSet::new())),
+            heard,
         }
     }
 
@@ -212,7 +219,26 @@ impl ClientHandle {
             .await
             .map_err(|e| ClientError::Link(format!("cannot open {url}: {e}")))?;
         tokio::spawn(endpoint.join());
-        Ok(Self::spawn(config, rx, signing, cancel))
+        Ok(Self::spawn(config, rx, signing, true, cancel))
+    }
+
+    /// A client on its own byte stream (a TCP connection the caller opened, so that a refused
+    /// connection fails at once), signing as [`ClientHandle::connect_signed`].
+    pub fn over_own_stream<S>(
+        stream: S,
+        peer: &str,
+        config: ClientConfig,
+        signing: Option<crate::trust::signing::DaemonSigning>,
+        cancel: CancellationToken,
+    ) -> Self
+    where
+        S: AsyncRead + AsyncWrite + Send + 'static,
+    {
+        let (tx, rx) = mpsc::channel(INBOUND_QUEUE);
+        let (_, task) =
+            vtol_link::spawn_stream_link(stream, peer, tx, LinkOptions::default(), cancel.clone());
+        drop(task);
+        Self::spawn(config, rx, signing, true, cancel)
     }
 
     /// A client over a byte stream carrying MAVLink frames (the daemon's own-traffic link).
@@ -229,7 +255,7 @@ impl ClientHandle {
             cancel.clone(),
         );
         drop(task);
-        Self::spawn(config, rx, None, cancel)
+        Self::spawn(config, rx, None, false, cancel)
     }
 
     /// Waits until the session task has ended (after its cancellation): what it saves on the
@@ -237,6 +263,20 @@ impl ClientHandle {
     pub async fn stopped(&self) {
         let mut rx = self.links_up.clone();
         while rx.changed().await.is_ok() {}
+    }
+
+    /// Who has been heard so far (vehicles, and frames refused by the signing rules).
+    #[must_use]
+    pub fn heard(&self) -> Heard {
+        self.heard.borrow().clone()
+    }
+
+    /// Waits up to `timeout` until `pred` holds for what has been heard; returns what was
+    /// heard either way.
+    pub async fn wait_heard(&self, timeout: Duration, pred: impl Fn(&Heard) -> bool) -> Heard {
+        let mut rx = self.heard.clone();
+        let _ = tokio::time::timeout(timeout, rx.wait_for(|h| pred(h))).await;
+        self.heard()
     }
 
     /// Our (system, component).
@@ -649,9 +689,8 @@ fn step_result(r: Result<f32, ClientError>) -> Result<Result<f32, StepError>, Cl
 fn failure(name: &str, f: ParamFailure) -> ClientError {
     match f {
         ParamFailure::Refused(reason) => ClientError::Refused { reason },
-        ParamFailure::Unknown => ClientError::Refused {
-            reason: format!("the vehicle has no parameter {name}"),
-        },
+        // A name the vehicle does not know is an input error, not a refusal.
+        ParamFailure::Unknown => ClientError::Usage(format!("the vehicle has no parameter {name}")),
         ParamFailure::NoAnswer { tries, last_echo } => ClientError::Timeout(match last_echo {
             Some(v) => {
                 format!("{name}: no confirming echo after {tries} tries (vehicle reports {v})")

@@ -10,7 +10,7 @@
 //! state is saved when the session ends). Inside the daemon it has no key: the router signs
 //! and verifies for it.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
@@ -57,6 +57,30 @@ pub(crate) struct Shared {
     pub dropped: AtomicUsize,
 }
 
+/// Who the session has heard, for the diagnoses of a command that finds no vehicle or the
+/// wrong one: every vehicle (heartbeat or autopilot telemetry that passed the signing rules),
+/// and the systems whose frames were refused by the signing rules or arrived signed while the
+/// client has no key.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Heard {
+    /// Vehicles heard, by system id.
+    pub vehicles: BTreeSet<u8>,
+    /// Systems whose frames failed signature verification (with a key).
+    pub bad_signature: BTreeSet<u8>,
+    /// Systems whose frames arrived unsigned although the client has a key.
+    pub unsigned: BTreeSet<u8>,
+    /// Systems whose frames arrived signed although the client has no key.
+    pub signed: BTreeSet<u8>,
+}
+
+/// Adds `sys` to the set `pick` chooses, telling the watchers only when it is new.
+fn note(heard: &watch::Sender<Heard>, sys: u8, pick: fn(&mut Heard) -> &mut BTreeSet<u8>) {
+    heard.send_if_modified(|h| pick(h).insert(sys));
+}
+
+/// How often a client on its own link says hello until it hears a vehicle.
+const HELLO_EVERY: Duration = Duration::from_millis(500);
+
 /// What the session task owns besides its channels.
 pub(crate) struct Session {
     /// Our (system, component).
@@ -72,6 +96,27 @@ pub(crate) struct Session {
     pub links_up: watch::Sender<usize>,
     /// Signing, for a client on its own link with a key.
     pub signing: Option<DaemonSigning>,
+    /// Who has been heard.
+    pub heard: watch::Sender<Heard>,
+    /// Speak first: until a vehicle is heard, send [`hello`] on every link as it comes up and
+    /// every [`HELLO_EVERY`] (a client on its own link: a `udpout` link's server learns its
+    /// peer only from what the peer sends).
+    pub hello: bool,
+}
+
+/// What a client sends before it has heard anything: a TIMESYNC request to every system. It
+/// makes a `udpin` server (a daemon's endpoint, a vehicle) learn the client's address, and it
+/// is not a HEARTBEAT: ArduPilot and the twin start their GCS-loss failsafe timer on any
+/// heartbeat from the GCS system id, and a one-off command must not tell the vehicle that an
+/// operator is watching.
+#[must_use]
+pub fn hello() -> MavMessage {
+    MavMessage::TIMESYNC(vtol_link::dialect::TIMESYNC_DATA {
+        tc1: 0,
+        ts1: 1,
+        target_system: 0,
+        target_component: 0,
+    })
 }
 
 impl Session {
@@ -90,7 +135,11 @@ impl Session {
             shared,
             links_up,
             mut signing,
+            heard,
+            hello: speak_first,
         } = self;
+        let mut hello_tick = tokio::time::interval(HELLO_EVERY);
+        hello_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut links: HashMap<LinkId, LinkSender> = HashMap::new();
         let mut seq: u8 = 0;
         let mut beat = tokio::time::interval(Duration::from_secs(1));
@@ -125,45 +174,56 @@ impl Session {
                     Some(LinkEvent::Up { id, tx, .. }) => {
                         links.insert(id, tx);
                         links_up.send_replace(links.len());
+                        if speak_first && heard.borrow().vehicles.is_empty() {
+                            send(&links, &hello(), &mut signing);
+                        }
                     }
                     Some(LinkEvent::Down { id, .. }) => {
                         links.remove(&id);
                         links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
-                        let finds = !fixed_target
-                            && frame.component_id() == AUTOPILOT1
+                        let finds = frame.component_id() == AUTOPILOT1
                             && TELEMETRY.contains(&frame.message_id());
                         if !finds && !WANTED.contains(&frame.message_id()) {
                             continue;
                         }
-                        if let Some(s) = &mut signing
-                            && let Err(refusal) = s.verify_vehicle(&frame)
-                        {
-                            tracing::debug!(%refusal, "frame refused");
-                            continue;
+                        let sys = frame.system_id();
+                        match &mut signing {
+                            Some(s) => if let Err(refusal) = s.verify_vehicle(&frame) {
+                                tracing::debug!(%refusal, "frame refused");
+                                match refusal {
+                                    vtol_link::Refusal::BadSignature => note(&heard, sys, |h| &mut h.bad_signature),
+                                    vtol_link::Refusal::Unsigned { .. } => note(&heard, sys, |h| &mut h.unsigned),
+                                    _ => {}
+                                }
+                                continue;
+                            },
+                            None => if frame.is_signed() {
+                                note(&heard, sys, |h| &mut h.signed);
+                            },
                         }
                         // The autopilot's own telemetry finds the vehicle as surely as its
                         // heartbeat, and arrives many times a second: on a lossy link that
                         // saves waiting for the next 1 Hz heartbeat.
-                        if !fixed_target
-                            && frame.component_id() == AUTOPILOT1
-                            && TELEMETRY.contains(&frame.message_id())
-                            && target.borrow().is_none()
-                        {
-                            target.send_replace(Some((SystemId(frame.system_id()), ComponentId(AUTOPILOT1))));
+                        if finds {
+                            note(&heard, sys, |h| &mut h.vehicles);
+                            if !fixed_target && target.borrow().is_none() {
+                                target.send_replace(Some((SystemId(sys), ComponentId(AUTOPILOT1))));
+                            }
                         }
                         if !WANTED.contains(&frame.message_id()) {
                             continue;
                         }
                         let Ok(msg) = frame.decode() else { continue };
                         let (sys, comp) = frame.sender();
-                        if !fixed_target
-                            && target.borrow().is_none()
-                            && let MavMessage::HEARTBEAT(h) = &msg
+                        if let MavMessage::HEARTBEAT(h) = &msg
                             && is_vehicle(h.autopilot, h.mavtype)
                         {
-                            target.send_replace(Some((sys, comp)));
+                            note(&heard, sys.0, |h| &mut h.vehicles);
+                            if !fixed_target && target.borrow().is_none() {
+                                target.send_replace(Some((sys, comp)));
+                            }
                         }
                         // No receiver is fine: nothing is waiting for an answer right now.
                         let _ = inbound.send(Arc::new(Inbound { sys, comp, msg }));
@@ -173,6 +233,9 @@ impl Session {
                     Some(m) => send(&links, &m, &mut signing),
                     None => break,
                 },
+                _ = hello_tick.tick(), if speak_first && heard.borrow().vehicles.is_empty() => {
+                    send(&links, &hello(), &mut signing);
+                }
                 _ = beat.tick() => {
                     if shared.operators.load(Ordering::Relaxed) > 0 {
                         send(&links, &vtol_link::gcs_heartbeat(), &mut signing);

@@ -11,6 +11,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use crate::tlog::TlogReader;
+use crate::tracker::seq::SenderSeq;
 
 /// Frames of one message type.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -78,8 +79,10 @@ pub struct LogStats {
 #[must_use]
 pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u64)) -> LogStats {
     let mut by_id: BTreeMap<u32, u64> = BTreeMap::new();
-    // (count, lost, last seq) per (sys, comp), indexed flat for speed.
-    let mut sources: Vec<(u64, u64, u8)> = vec![(0, 0, 0); 65_536];
+    // (count, lost, sequences) per (sys, comp), indexed flat for speed. A new session of a
+    // sender (a restart, a second process under its identity) is no loss: see
+    // `tracker::seq`.
+    let mut sources: Vec<(u64, u64, SenderSeq)> = vec![(0, 0, SenderSeq::default()); 65_536];
     let (mut first, mut last) = (None, 0u64);
     let (mut frames, mut to_vehicle) = (0u64, 0u64);
     let mut last_id = u32::MAX;
@@ -104,11 +107,8 @@ pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u
         }
         let key = (usize::from(frame.system_id()) << 8) | usize::from(frame.component_id());
         let s = &mut sources[key];
-        if s.0 > 0 {
-            s.1 += u64::from(frame.seq().wrapping_sub(s.2).wrapping_sub(1));
-        }
+        s.1 += u64::from(s.2.observe(frame.seq(), stamp));
         s.0 += 1;
-        s.2 = frame.seq();
         if frames.is_multiple_of(65_536) {
             progress(reader.bytes_consumed());
         }

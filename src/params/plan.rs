@@ -36,14 +36,17 @@ impl Rules for TwinRules {
             if Params::index_of(n).is_some() {
                 // Values the vehicle holds are accepted as they are (range only, no
                 // cross-checks): the state is the vehicle's, right or wrong.
-                let _ = table.set_internal(n, f64::from(p.value));
+                let _ = table.set_internal(n, decimal(p.value));
             }
         }
-        table
-            .set(name, f64::from(value))
-            .err()
-            .map(|e| e.to_string())
+        table.set(name, decimal(value)).err().map(|e| e.to_string())
     }
+}
+
+/// A float32 as the f64 of its shortest decimal: 1.2f32 is 1.2, not 1.2000000476837158, in
+/// what the rules check and in the reasons they give.
+fn decimal(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or_else(|_| f64::from(v))
 }
 
 /// An order of `changes` in which, by `rules`, every intermediate set is acceptable: a depth-

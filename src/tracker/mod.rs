@@ -7,6 +7,7 @@
 //! compare it with the same [`now`].
 
 pub mod history;
+pub mod seq;
 pub mod state;
 pub mod window;
 

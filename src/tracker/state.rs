@@ -215,7 +215,7 @@ pub struct VehicleState {
     pub links: BTreeMap<LinkId, LinkHealth>,
     /// Every message seen, by (system, component, message id).
     pub messages: BTreeMap<(SystemId, ComponentId, u32), MessageStats>,
-    last_seq: HashMap<(LinkId, SystemId, ComponentId), u8>,
+    last_seq: HashMap<(LinkId, SystemId, ComponentId), super::seq::SenderSeq>,
     /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
     text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
     /// Links that went down: frames of theirs still on the way to the tracker are stale and
@@ -451,15 +451,16 @@ impl VehicleState {
         });
         h.frames += 1;
         h.last_heard = now;
-        let seq = frame.seq();
-        let mut lost = 0;
-        if let Some(last) = self
+        // A new session of the sender (a restart, a second process under its identity) is
+        // no loss: see [`super::seq`].
+        let at_us =
+            u64::try_from(now.saturating_duration_since(epoch).as_micros()).unwrap_or(u64::MAX);
+        let lost = self
             .last_seq
-            .insert((link, frame.sender().0, frame.sender().1), seq)
-        {
-            lost = u32::from(seq.wrapping_sub(last).wrapping_sub(1));
-            h.lost += u64::from(lost);
-        }
+            .entry((link, frame.sender().0, frame.sender().1))
+            .or_default()
+            .observe(frame.seq(), at_us);
+        h.lost += u64::from(lost);
         h.window.add_stamped(stamp, 1, lost);
         lost
     }

@@ -479,8 +479,10 @@ impl Params {
         }
     }
 
-    /// The table as `.parm` text: names sorted, `%-16.16s %f` for floats and `%-16.16s %d` for
-    /// integers (MAVProxy's `mavparm.save`). Volatile parameters are left out.
+    /// The table as `.parm` text: names sorted, `%-16.16s %d` for integers (MAVProxy's
+    /// `mavparm.save`) and floats at their shortest round-trip decimal (no six-decimal
+    /// rounding: a file read back holds exactly what was saved). Volatile parameters are left
+    /// out.
     #[must_use]
     pub fn to_parm_string(&self) -> String {
         let mut sorted: Vec<(&ParamDef, f64)> = TABLE
@@ -496,7 +498,7 @@ impl Params {
             let _ = if d.ty.is_integer() {
                 writeln!(out, "{:<16} {}", d.name, v as i64)
             } else {
-                writeln!(out, "{:<16} {:.6}", d.name, v)
+                writeln!(out, "{:<16} {}", d.name, shortest(v))
             };
         }
         out
@@ -611,6 +613,19 @@ fn gains_of(values: &[f64]) -> Gains {
     }
 }
 
+/// A value at its shortest round-trip decimal: a value that is a float32 (what PARAM_SET
+/// carries) as the float32's shortest decimal (`1.2`, not `1.2000000476837158`), any other at
+/// the f64's.
+fn shortest(v: f64) -> String {
+    #[allow(clippy::cast_possible_truncation)]
+    let single = v as f32;
+    if f64::from(single) == v {
+        single.to_string()
+    } else {
+        v.to_string()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -694,6 +709,24 @@ mod tests {
         assert_eq!(p, before, "a refused set changes nothing");
     }
 
+    /// Values are saved at full precision: a float32 from PARAM_SET as its shortest decimal, a
+    /// finer value given in a file exactly (six decimals would round both).
+    #[test]
+    fn parm_file_keeps_full_precision() {
+        let mut p = Params::new();
+        p.set("ALT_KP", f64::from(1.2345678_f32)).unwrap();
+        p.set("ALT_KD", 0.123_456_789_012).unwrap();
+        let text = p.to_parm_string();
+        assert!(text.contains("ALT_KP           1.2345678\n"), "{text}");
+        assert!(text.contains("ALT_KD           0.123456789012\n"), "{text}");
+        let back = Params::from_parm_str(&text, Path::new("x.parm")).unwrap();
+        // The same float32 on the wire.
+        #[allow(clippy::cast_possible_truncation)]
+        let kp = back.value("ALT_KP") as f32;
+        assert_eq!(kp, 1.2345678_f32);
+        assert_eq!(back.value("ALT_KD"), 0.123_456_789_012);
+    }
+
     #[test]
     fn parm_round_trip() {
         let mut p = Params::new();
@@ -701,7 +734,7 @@ mod tests {
         p.set("SYSID_MYGCS", 250.0).unwrap();
         p.set("SIM_PUSH_ROLL", 0.1).unwrap();
         let text = p.to_parm_string();
-        assert!(text.contains("LAT_SAT_A        1.750000\n"), "{text}");
+        assert!(text.contains("LAT_SAT_A        1.75\n"), "{text}");
         assert!(text.contains("SYSID_MYGCS      250\n"), "{text}");
         assert!(
             !text.contains("SIM_PUSH_ROLL"),

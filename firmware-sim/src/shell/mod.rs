@@ -8,3 +8,4 @@ pub mod serve;
 pub mod signing;
 pub mod simulate;
 pub mod tlog;
+pub(crate) mod vehicle_loop;

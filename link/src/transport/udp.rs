@@ -1024,10 +1024,12 @@ pub(super) async fn spawn_udpout(
     cancel: CancellationToken,
 ) -> Result<(SocketAddr, LinkId, JoinHandle<()>), LinkError> {
     let dest = resolve(host, port).await?[0];
-    let any: SocketAddr = if dest.is_ipv4() {
-        (Ipv4Addr::UNSPECIFIED, 0).into()
-    } else {
-        (Ipv6Addr::UNSPECIFIED, 0).into()
+    // A loopback destination is answered from loopback: the socket binds there, as listeners
+    // bind 127.0.0.1, instead of on every interface.
+    let any: SocketAddr = match (dest.ip().is_loopback(), dest.is_ipv4()) {
+        (true, _) => (dest.ip(), 0).into(),
+        (false, true) => (Ipv4Addr::UNSPECIFIED, 0).into(),
+        (false, false) => (Ipv6Addr::UNSPECIFIED, 0).into(),
     };
     // An inline owner's socket is connected, with a second one for the other senders.
     let pair = match &events {

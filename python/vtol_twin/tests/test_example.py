@@ -1,9 +1,13 @@
 """The README's example: a pymavlink script flown against the twin, the way a user tests one.
-It arms, takes off in QHOVER, checks the altitude, is pushed and recovers, and lands."""
+It arms, takes off in QHOVER, checks the altitude, is pushed and recovers, and lands, in
+lockstep (`advance` moves sim time)."""
 
 import math
 
+import pytest
 from pymavlink import mavutil
+
+pytestmark = pytest.mark.vtol_twin(speed="lockstep")
 
 ACCEPTED = mavutil.mavlink.MAV_RESULT_ACCEPTED
 

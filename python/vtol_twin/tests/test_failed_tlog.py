@@ -6,6 +6,10 @@ from pymavlink import mavutil
 def test_a_failed_test_keeps_its_tlog(pytester):
     pytester.makepyfile(
         """
+        import pytest
+
+        pytestmark = pytest.mark.vtol_twin(speed="lockstep")
+
         def test_passes(vtol_twin):
             vtol_twin.advance(1)
 

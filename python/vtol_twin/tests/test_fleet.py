@@ -15,7 +15,7 @@ def test_a_fleet_has_one_system_id_each(vtol_fleet):
     assert m.target_system == 3
 
 
-@pytest.mark.vtol_twin(initial={"x": 2.0, "y": -1.0, "psi": 0.5}, seed=4)
+@pytest.mark.vtol_twin(initial={"x": 2.0, "y": -1.0, "psi": 0.5}, seed=4, speed="lockstep")
 def test_the_marker_sets_the_start(vtol_twin):
     s = vtol_twin.state()
     # Paper frame (x, y, z up; psi) → NED: (−x, y, −z), yaw = −psi.

@@ -1,7 +1,10 @@
 """Under lockstep the same script gets the same telemetry on every run, and a minute of flight
 takes a fraction of a second."""
 
+import pytest
 from pymavlink import mavutil
+
+pytestmark = pytest.mark.vtol_twin(speed="lockstep")
 
 
 def fly(twin) -> list[bytes]:

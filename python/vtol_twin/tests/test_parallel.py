@@ -4,6 +4,8 @@ off in QHOVER and holds HOVER_ALT."""
 import pytest
 from pymavlink import mavutil
 
+pytestmark = pytest.mark.vtol_twin(speed="lockstep")
+
 
 @pytest.mark.parametrize("seed", range(1, 17))
 def test_one_of_sixteen_twins_hovers(vtol_fleet, seed):

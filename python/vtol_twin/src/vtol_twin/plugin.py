@@ -1,7 +1,7 @@
 """The pytest side: the `vtol_twin` and `vtol_fleet` fixtures, their options, and the tlog of a
 failed test.
 
-Options of a twin, from weakest to strongest: the defaults of `TwinOptions` (lockstep, seed 1,
+Options of a twin, from weakest to strongest: the defaults of `TwinOptions` (real time, seed 1,
 physical model), the `vtol_twin_options` fixture (override it in a conftest.py for a whole
 suite), the `@pytest.mark.vtol_twin(...)` marker of a test, and the keywords of a
 `vtol_fleet(n, ...)` call.

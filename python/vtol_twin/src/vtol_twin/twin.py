@@ -80,7 +80,11 @@ def find_binary(explicit: Optional[Union[str, os.PathLike]] = None,
 class TwinOptions:
     """How to start a twin. Every field has a `firmware-sim serve` flag behind it."""
 
-    speed: Speed = "lockstep"
+    # Real time by default: a script written as tutorials write them (wait for the armed
+    # heartbeat, poll the altitude against a wall-clock deadline) runs unchanged. "lockstep"
+    # holds sim time until `advance` moves it (fast, and the same telemetry on every run);
+    # "fast" runs as fast as the CPU allows; a number is a multiple of real time.
+    speed: Speed = 1
     seed: int = 1
     model: str = "physical"
     # Where it stands at start, on the ground: {"x": m, "y": m, "psi": rad} (paper frame), or the
