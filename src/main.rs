@@ -68,8 +68,7 @@ struct TuiArgs {
 
 #[derive(Debug, Args, Default)]
 struct RunArgs {
-    /// Vehicle link: `embedded` (default: the twin in this process, its parameters in memory
-    /// only, lost when vtol-gcs exits: `params save` keeps them), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
+    /// Vehicle link: `embedded` (default), a URL (tcp:H:P, udpin:H:P, udpout:H:P,
     /// serial:DEV[:BAUD]), a fleet over Zenoh (zenoh:FLEET/* or zenoh:FLEET/VEHICLE) or a tlog
     /// played back as the vehicle: replay:FILE[?speed=N].
     #[arg(long)]

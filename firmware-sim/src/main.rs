@@ -167,10 +167,7 @@ state={:?} armed={} landed={}",
     );
     match args.csv.as_deref() {
         Some("-") => eprintln!("{line}"),
-        Some(path) => {
-            writeln!(std::io::stdout(), "{line}")?;
-            eprintln!("{} CSV rows written to {path}", summary.rows);
-        }
+        Some(_) => writeln!(std::io::stdout(), "{line}")?,
         None => {
             writeln!(std::io::stdout(), "{line}")?;
             eprintln!("no CSV written (give --csv FILE, or --csv - for standard output)");

@@ -18,7 +18,7 @@ embedded twin that this test starts on free ports, one per document:
 - DAEMON_TCP, DAEMON_UDP: its serve ports as pymavlink URLs (tcp:H:P, udpout:H:P);
 - REPO: the repository; the scratch directory also holds a link `config` to its config/.
 
-A document not yet written to the convention fails here with the list of its blocks that are
+A document not written to the convention fails here with the list of its blocks that are
 neither run nor marked. The checker itself is tested on tests/docs_fixture.md and on broken
 copies of it: a changed flag or output must fail.
 """
@@ -38,8 +38,8 @@ from conftest import TWIN_BIN
 from daemon_support import DAEMON_BIN, module_daemon_factory, start_daemon  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
-# Documents whose examples are tested. README.md joins once it follows the convention.
-DOCS = ["tests/docs_fixture.md", "docs/cli.md"]
+# Documents whose examples are tested.
+DOCS = ["tests/docs_fixture.md", "README.md", "docs/cli.md"]
 
 FENCE = re.compile(r"^(?P<fence>```+|~~~+)\s*(?P<lang>[\w+-]*)")
 NOT_RUN = re.compile(r"^<!--\s*not run:\s*\S.*-->\s*$")
