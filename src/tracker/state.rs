@@ -598,6 +598,33 @@ mod tests {
     }
 
     #[test]
+    fn a_restart_on_a_link_that_stays_up_is_no_loss() {
+        // A twin restarted behind a UDP link (which never goes down): its sequence starts at 0
+        // again, and a client's first two frames both carry 0. Neither is a wrap of 255 lost.
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
+        let client = (vtol_link::SystemId(255), vtol_link::ComponentId(190));
+        let frames = [(vehicle, 0u8), (vehicle, 1), (vehicle, 2), (vehicle, 0), (vehicle, 1)];
+        let client_frames = [(client, 0u8), (client, 0), (client, 1)];
+        for ((sys, comp), seq) in frames.into_iter().chain(client_frames) {
+            s.apply(
+                LinkId(1),
+                Side::Vehicle,
+                &Frame::encode_v2(sys, comp, seq, &v),
+                now,
+            );
+        }
+        assert_eq!(s.links[&LinkId(1)].lost, 0);
+        assert_eq!(s.links[&LinkId(1)].frames, 8);
+    }
+
+    #[test]
     fn sequence_gaps_count_as_loss() {
         let mut s = VehicleState::default();
         let now = Instant::now();

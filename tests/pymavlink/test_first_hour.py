@@ -291,3 +291,54 @@ def test_the_twin_saves_parameters_at_full_precision(twin_factory, tmp_path):
     r = gcs("params", "set", "ALT_KP", "1.2345678", "--link", t.tcp)
     assert r.returncode == 0, r.stderr
     assert "ALT_KP           1.2345678\n" in t.param_file.read_text()
+
+
+# --- loss figures that count only losses ----------------------------------------------------
+
+
+def write_tlog(path: Path, frames: list[tuple[int, int, int, float]]) -> None:
+    """A tlog of HEARTBEATs: (system, component, seq, time s) each."""
+    import struct
+
+    out = bytearray()
+    for sysid, compid, seq, t in frames:
+        mav = mavutil.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        mav.seq = seq
+        msg = mav.heartbeat_encode(mavutil.mavlink.MAV_TYPE_VTOL_TILTROTOR,
+                                   mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 3)
+        buf = msg.pack(mav)
+        out += struct.pack(">Q", int(t * 1e6) & ~3) + buf
+    path.write_bytes(out)
+
+
+def loss(path: Path) -> dict[str, int]:
+    r = gcs("log", "stats", "--json", str(path))
+    assert r.returncode == 0, r.stderr
+    import json
+
+    return {f"{s['system_id']}:{s['component_id']}": s["seq_lost"] for s in json.loads(r.stdout)["sources"]}
+
+
+def test_log_stats_counts_a_restart_and_repeated_zeros_as_no_loss(tmp_path):
+    f = tmp_path / "restart.tlog"
+    frames = [(1, 1, i, i * 0.1) for i in range(100)]             # a vehicle, seq 0..99
+    frames += [(1, 1, i, 10.5 + i * 0.1) for i in range(50)]      # restarted at once: 0..49
+    frames += [(255, 190, 0, 0.0), (255, 190, 0, 0.5)]            # a client's first two, both 0
+    frames += [(255, 190, i, 0.5 + i) for i in range(1, 5)]
+    frames += [(1, 2, i, i * 0.1) for i in (0, 1, 2, 5, 6)]         # a real gap: 3, 4 lost
+    frames.sort(key=lambda x: x[3])
+    write_tlog(f, frames)
+    assert loss(f) == {"1:1": 0, "1:2": 2, "255:190": 0}
+
+
+def test_command_line_runs_are_counted_apart_from_the_daemon(daemon_factory, tmp_path):  # noqa: F811
+    """Each run speaks as its own component (not the daemon's 255:190), so the daemon's log
+    shows no phantom loss for any ground-station sender."""
+    d = daemon_factory(serve=["tcpin:127.0.0.1:0"])
+    for _ in range(3):
+        r = gcs("params", "get", "ALT_KP", "--link", d.tcp)
+        assert r.returncode == 0, r.stderr
+    d.assert_clean_exit()
+    ours = {k: v for k, v in loss(d.tlog).items() if k.startswith("255:")}
+    assert ours and "255:190" not in ours, ours
+    assert all(v == 0 for v in ours.values()), ours
