@@ -251,10 +251,19 @@ async fn find_vehicle(c: &ClientHandle, link: &LinkArgs, keyed: bool) -> Result<
         None => !h.vehicles.is_empty(),
     };
     // Frames that fail verification end the wait early: one more heartbeat period for a
-    // rightly signed vehicle, and then the diagnosis.
+    // rightly signed vehicle, and then the diagnosis. So do other vehicles than the target,
+    // once every vehicle on the link has had a heartbeat period to be heard.
     let mut heard = c
-        .wait_heard(find, |h| found(h) || !h.bad_signature.is_empty())
+        .wait_heard(VEHICLES_SETTLE, |h| found(h) || !h.bad_signature.is_empty())
         .await;
+    let others_only = target.is_some() && !found(&heard) && !heard.vehicles.is_empty();
+    if !found(&heard) && heard.bad_signature.is_empty() && !others_only {
+        heard = c
+            .wait_heard(find.saturating_sub(started.elapsed()), |h| {
+                found(h) || !h.bad_signature.is_empty()
+            })
+            .await;
+    }
     if !found(&heard) && !heard.bad_signature.is_empty() {
         heard = c.wait_heard(VEHICLES_SETTLE, found).await;
     }

@@ -610,7 +610,13 @@ mod tests {
         );
         let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
         let client = (vtol_link::SystemId(255), vtol_link::ComponentId(190));
-        let frames = [(vehicle, 0u8), (vehicle, 1), (vehicle, 2), (vehicle, 0), (vehicle, 1)];
+        let frames = [
+            (vehicle, 0u8),
+            (vehicle, 1),
+            (vehicle, 2),
+            (vehicle, 0),
+            (vehicle, 1),
+        ];
         let client_frames = [(client, 0u8), (client, 0), (client, 1)];
         for ((sys, comp), seq) in frames.into_iter().chain(client_frames) {
             s.apply(

@@ -9,9 +9,11 @@ or input error, 3 no vehicle or link failure, 4 a rollback that could not comple
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import socket
+import struct
 import subprocess
 from pathlib import Path
 
@@ -98,6 +100,27 @@ def test_the_cli_speaks_first_to_a_daemon_udpin(daemon_factory):  # noqa: F811
     assert r.returncode == 0 and r.stdout.split()[0] == "HOVER_ALT", r.stdout + r.stderr
 
 
+def udp_sockets(pid: int) -> list[tuple[str, int]]:
+    """The local (address, port) of every IPv4 UDP socket process `pid` holds (/proc)."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:["):-1])
+    out = []
+    with open("/proc/net/udp") as f:
+        for line in f.readlines()[1:]:
+            cols = line.split()
+            if cols[9] in inodes:
+                ip_hex, port_hex = cols[1].split(":")
+                ip = socket.inet_ntoa(struct.pack("<I", int(ip_hex, 16)))
+                out.append((ip, int(port_hex, 16)))
+    return out
+
+
 def test_the_daemon_speaks_first_on_a_udpout_vehicle_link_without_a_heartbeat(tmp_path):
     """What the daemon sends to open the link is no HEARTBEAT (ArduPilot and the twin take any
     heartbeat from SYSID_MYGCS as the operator's), and it leaves from loopback for a loopback
@@ -116,6 +139,9 @@ def test_the_daemon_speaks_first_on_a_udpout_vehicle_link_without_a_heartbeat(tm
         msgs = parser.parse_buffer(data) or []
         assert msgs, data
         assert all(m.get_type() != "HEARTBEAT" for m in msgs), msgs
+        # Its socket binds loopback, not every interface (only the udpout link uses UDP here).
+        bound = udp_sockets(d.proc.pid)
+        assert bound and all(ip == "127.0.0.1" for ip, _ in bound), bound
     finally:
         vehicle.close()
         d.assert_clean_exit()
@@ -298,8 +324,6 @@ def test_the_twin_saves_parameters_at_full_precision(twin_factory, tmp_path):
 
 def write_tlog(path: Path, frames: list[tuple[int, int, int, float]]) -> None:
     """A tlog of HEARTBEATs: (system, component, seq, time s) each."""
-    import struct
-
     out = bytearray()
     for sysid, compid, seq, t in frames:
         mav = mavutil.mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
@@ -314,8 +338,6 @@ def write_tlog(path: Path, frames: list[tuple[int, int, int, float]]) -> None:
 def loss(path: Path) -> dict[str, int]:
     r = gcs("log", "stats", "--json", str(path))
     assert r.returncode == 0, r.stderr
-    import json
-
     return {f"{s['system_id']}:{s['component_id']}": s["seq_lost"] for s in json.loads(r.stdout)["sources"]}
 
 

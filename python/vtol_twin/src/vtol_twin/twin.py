@@ -335,6 +335,10 @@ class VtolTwin:
         When it returns, every frame of those seconds is on its way to its link. Wait for the
         replies to what you sent (COMMAND_ACK, PARAM_VALUE) before you advance: then every run
         is the same."""
+        if not self.options.lockstep:
+            raise TwinError(
+                f"advance needs a lockstep twin; this one runs at speed {self.options.speed!r} "
+                "(the default is real time): mark the test @pytest.mark.vtol_twin(speed=\"lockstep\")")
         d = self._call(f"advance {float(seconds)!r}", timeout=REPLY_TIMEOUT_S + float(seconds) / 100.0)
         return d["t_us"] / 1e6
 
