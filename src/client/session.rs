@@ -183,50 +183,11 @@ impl Session {
                         links_up.send_replace(links.len());
                     }
                     Some(LinkEvent::Frame { frame, .. }) => {
-                        let finds = frame.component_id() == AUTOPILOT1
-                            && TELEMETRY.contains(&frame.message_id());
-                        if !finds && !WANTED.contains(&frame.message_id()) {
-                            continue;
+                        let finder = Finder { fixed_target, target: &target, heard: &heard };
+                        if let Some(inb) = finder.take(&frame, &mut signing) {
+                            // No receiver is fine: nothing is waiting for an answer right now.
+                            let _ = inbound.send(Arc::new(inb));
                         }
-                        let sys = frame.system_id();
-                        match &mut signing {
-                            Some(s) => if let Err(refusal) = s.verify_vehicle(&frame) {
-                                tracing::debug!(%refusal, "frame refused");
-                                match refusal {
-                                    vtol_link::Refusal::BadSignature => note(&heard, sys, |h| &mut h.bad_signature),
-                                    vtol_link::Refusal::Unsigned { .. } => note(&heard, sys, |h| &mut h.unsigned),
-                                    _ => {}
-                                }
-                                continue;
-                            },
-                            None => if frame.is_signed() {
-                                note(&heard, sys, |h| &mut h.signed);
-                            },
-                        }
-                        // The autopilot's own telemetry finds the vehicle as surely as its
-                        // heartbeat, and arrives many times a second: on a lossy link that
-                        // saves waiting for the next 1 Hz heartbeat.
-                        if finds {
-                            note(&heard, sys, |h| &mut h.vehicles);
-                            if !fixed_target && target.borrow().is_none() {
-                                target.send_replace(Some((SystemId(sys), ComponentId(AUTOPILOT1))));
-                            }
-                        }
-                        if !WANTED.contains(&frame.message_id()) {
-                            continue;
-                        }
-                        let Ok(msg) = frame.decode() else { continue };
-                        let (sys, comp) = frame.sender();
-                        if let MavMessage::HEARTBEAT(h) = &msg
-                            && is_vehicle(h.autopilot, h.mavtype)
-                        {
-                            note(&heard, sys.0, |h| &mut h.vehicles);
-                            if !fixed_target && target.borrow().is_none() {
-                                target.send_replace(Some((sys, comp)));
-                            }
-                        }
-                        // No receiver is fine: nothing is waiting for an answer right now.
-                        let _ = inbound.send(Arc::new(Inbound { sys, comp, msg }));
                     }
                 },
                 msg = out_rx.recv() => match msg {
@@ -247,6 +208,74 @@ impl Session {
             && let Err(e) = s.save()
         {
             tracing::warn!("{e}");
+        }
+    }
+}
+
+/// What the session does with each frame it receives: the signing rules, who has been heard,
+/// the vehicle found, and the decoded message for the waiting requests.
+struct Finder<'a> {
+    fixed_target: bool,
+    target: &'a watch::Sender<Option<(SystemId, ComponentId)>>,
+    heard: &'a watch::Sender<Heard>,
+}
+
+impl Finder<'_> {
+    /// The decoded message for the requests, when the frame carries one they read.
+    fn take(&self, frame: &Frame, signing: &mut Option<DaemonSigning>) -> Option<Inbound> {
+        let heard = self.heard;
+        let finds = frame.component_id() == AUTOPILOT1 && TELEMETRY.contains(&frame.message_id());
+        if !finds && !WANTED.contains(&frame.message_id()) {
+            return None;
+        }
+        let sys = frame.system_id();
+        match signing {
+            Some(s) => {
+                if let Err(refusal) = s.verify_vehicle(frame) {
+                    tracing::debug!(%refusal, "frame refused");
+                    match refusal {
+                        vtol_link::Refusal::BadSignature => {
+                            note(heard, sys, |h| &mut h.bad_signature);
+                        }
+                        vtol_link::Refusal::Unsigned { .. } => {
+                            note(heard, sys, |h| &mut h.unsigned);
+                        }
+                        _ => {}
+                    }
+                    return None;
+                }
+            }
+            None => {
+                if frame.is_signed() {
+                    note(heard, sys, |h| &mut h.signed);
+                }
+            }
+        }
+        // The autopilot's own telemetry finds the vehicle as surely as its heartbeat, and
+        // arrives many times a second: on a lossy link that saves waiting for the next 1 Hz
+        // heartbeat.
+        if finds {
+            note(heard, sys, |h| &mut h.vehicles);
+            self.found((SystemId(sys), ComponentId(AUTOPILOT1)));
+        }
+        if !WANTED.contains(&frame.message_id()) {
+            return None;
+        }
+        let msg = frame.decode().ok()?;
+        let (sys, comp) = frame.sender();
+        if let MavMessage::HEARTBEAT(h) = &msg
+            && is_vehicle(h.autopilot, h.mavtype)
+        {
+            note(heard, sys.0, |h| &mut h.vehicles);
+            self.found((sys, comp));
+        }
+        Some(Inbound { sys, comp, msg })
+    }
+
+    /// The first vehicle heard is the target, unless one was given.
+    fn found(&self, vehicle: (SystemId, ComponentId)) {
+        if !self.fixed_target && self.target.borrow().is_none() {
+            self.target.send_replace(Some(vehicle));
         }
     }
 }
