@@ -35,7 +35,7 @@ use crate::model::mode::{FlightMode, Guidance};
 use crate::model::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
 use crate::model::plant::battery::{Battery, BatteryConfig, BatteryState};
 use crate::model::plant::rigid_body::{EulerTrig, RigidBody};
-use crate::model::plant::{self, PlantInput, PlantState, ground};
+use crate::model::plant::{self, PlantInput, PlantState, aero, ground};
 use crate::model::sensors::{self, Sensors};
 
 /// The default physics step: the plant is integrated at 1 kHz.
@@ -207,6 +207,22 @@ pub struct Telemetry {
     pub state: SystemState,
     /// The flight battery.
     pub battery: BatteryState,
+    /// The body's true velocity relative to the air (wind and gusts included), in B, m/s.
+    pub air_velocity_body_m_s: Vector3<f64>,
+}
+
+impl Telemetry {
+    /// True airspeed, m/s.
+    #[must_use]
+    pub fn airspeed_m_s(&self) -> f64 {
+        self.air_velocity_body_m_s.norm()
+    }
+
+    /// Angle of attack of the plate ([`aero::angle_of_attack_rad`]), rad.
+    #[must_use]
+    pub fn angle_of_attack_rad(&self) -> f64 {
+        aero::angle_of_attack_rad(&self.air_velocity_body_m_s)
+    }
 }
 
 /// Steady wind plus a seeded first-order Gauss–Markov gust (inertial frame).
@@ -408,6 +424,12 @@ impl Vehicle {
             Vector3::zeros()
         };
         self.input.wind_m_s = self.wind.step();
+        if model == ModelMode::Physical {
+            // The airframe's aerodynamics, held over the step like the actuators (its time
+            // constants are hundreds of steps long).
+            let v_air = self.air_velocity_body_m_s();
+            self.input.aero = aero::loads(af, &v_air, &self.input.actuators.rotor_speed_rad_s);
+        }
 
         if self.on_ground {
             let trig = EulerTrig::new(&self.plant.euler);
@@ -621,8 +643,17 @@ impl Vehicle {
         }
     }
 
+    /// The body's velocity relative to the air (wind and gust included), in B, m/s.
+    fn air_velocity_body_m_s(&self) -> Vector3<f64> {
+        let wind_body = self.input.wind_m_s.map_or_else(Vector3::zeros, |w| {
+            self.plant_trig.rotation_body_to_inertial().tr_mul(&w)
+        });
+        aero::air_velocity_body(&self.plant.vel_body_m_s, &wind_body)
+    }
+
     /// Copies the true state into the telemetry.
     fn refresh_truth(&mut self) {
+        self.telemetry.air_velocity_body_m_s = self.air_velocity_body_m_s();
         let t = &mut self.telemetry;
         t.pos_m = self.plant.pos_m;
         t.vel_m_s = self

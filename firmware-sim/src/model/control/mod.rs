@@ -46,6 +46,9 @@ pub const PILOT_YAW_RATE_MAX_RAD_S: f64 = 1.0;
 /// vehicle cannot follow).
 pub const YAW_LEASH_RAD: f64 = 0.5;
 
+/// Cancel the modelled aerodynamic moment in the input change (`physical` mode).
+const CANCEL_AERO_MOMENT: bool = true;
+
 /// Time scale λ of the attitude-hold law τ̃ = −σa(λ ė) − σb(λ ė + λ² e) in the pilot modes,
 /// rad/s: both poles at −λ. Twice the chains' inner poles (−1): crisper under the pilot, still
 /// well below the motor (0.04 s) and servo (0.02 s) lags.
@@ -434,22 +437,36 @@ impl Controller {
                 };
                 let mut err = pos.xy() - target;
                 let mut v = vel.xy();
-                if model == ModelMode::Physical {
+                if model == ModelMode::Paper {
+                    (
+                        chains::longitudinal_tau(
+                            &gains.longitudinal,
+                            model,
+                            g,
+                            err.x,
+                            v.x,
+                            euler.theta,
+                            theta_dot,
+                        ),
+                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
+                    )
+                } else {
                     err = chains::to_heading_frame(euler.psi, err);
                     v = chains::to_heading_frame(euler.psi, v);
-                }
-                (
-                    chains::longitudinal_tau(
-                        &gains.longitudinal,
-                        model,
+                    let damping = crate::model::plant::aero::hover_damping_per_kg(
+                        &self.airframe,
+                        &rotor_start,
+                    );
+                    chains::physical_position_taus(
+                        gains,
                         g,
-                        err.x,
-                        v.x,
-                        euler.theta,
-                        theta_dot,
-                    ),
-                    chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                )
+                        damping,
+                        err,
+                        v,
+                        (euler.theta, theta_dot),
+                        (euler.phi, phi_dot),
+                    )
+                }
             }
             FlightMode::QStabilize | FlightMode::QHover => (
                 chains::attitude_hold_tau(
@@ -532,7 +549,7 @@ impl Controller {
         };
 
         // 4. Input change (33) with the rotor-speed loop [I19].
-        let (torque, _) = input_change::solve_input_change(
+        let (mut torque, _) = input_change::solve_input_change(
             a,
             model,
             &kin,
@@ -542,6 +559,12 @@ impl Controller {
             fz,
             rotor_start,
         );
+        if model == ModelMode::Physical && CANCEL_AERO_MOMENT {
+            // The airframe's aerodynamic moment is cancelled like Γg and Γq in (33), from the
+            // model and the velocity the controller knows (the wind is unknown to it).
+            let v_body = kin.rotation_body_to_inertial().tr_mul(&vel);
+            torque -= crate::model::plant::aero::loads(a, &v_body, &rotor_start).torque_body_nm;
+        }
 
         // 5. Mixer and PWM (§5).
         let actuators = mixer::mix(a, model, fz, &torque);

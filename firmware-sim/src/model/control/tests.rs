@@ -432,7 +432,23 @@ proptest! {
             let act = &out.actuators;
             let a = Airframe::default();
             prop_assume!(act.rotor_speed_rad_s.iter().all(|w| *w > 1.0 && *w < a.rotor_speed_max_rad_s));
-            let edd = eta_ddot(model, &euler, &omega, &out.torque_body_nm, act.rotor_speed_rad_s);
+            // `physical`: the plant adds the aerodynamic moment the controller cancels (at the
+            // velocity and rotor speeds it was given).
+            let aero = match model {
+                ModelMode::Paper => Vector3::zeros(),
+                ModelMode::Physical => {
+                    let v_body = euler.rotation_body_to_inertial().tr_mul(&input.vel_m_s);
+                    crate::model::plant::aero::loads(&a, &v_body, &input.rotor_speed_rad_s)
+                        .torque_body_nm
+                }
+            };
+            let edd = eta_ddot(
+                model,
+                &euler,
+                &omega,
+                &(out.torque_body_nm + aero),
+                act.rotor_speed_rad_s,
+            );
             prop_assert!((edd - out.tau_tilde).norm() < 1e-9, "{model:?}: {edd} vs {}", out.tau_tilde);
             // And the commanded actuators really produce Γc and f_z (§5 force model).
             let (fz, tq, _) = forces_from_actuators(&a, act);
@@ -658,9 +674,16 @@ fn rigid_deriv(
     let a = Airframe::default();
     let e = Euler::from_vector(&s.eta);
     let r = e.rotation_body_to_inertial();
-    let acc = r * Vector3::new(fx, 0.0, fz) / a.mass_kg - Vector3::new(0.0, 0.0, a.gravity_m_s2);
+    // `physical`: the airframe's aerodynamics, which the controller expects.
+    let aero = match model {
+        ModelMode::Paper => crate::model::plant::Loads::default(),
+        ModelMode::Physical => crate::model::plant::aero::loads(&a, &r.tr_mul(&s.vel), &w),
+    };
+    let acc = r * (Vector3::new(fx, 0.0, fz) + aero.force_body_n) / a.mass_kg
+        - Vector3::new(0.0, 0.0, a.gravity_m_s2);
     let i = inertia_matrix(&a);
     let total = torque
+        + aero.torque_body_nm
         + gyroscopic_torque_nm(a.rotor_inertia_kg_m2, &s.omega, w)
         + rotor_drag_torque_nm(&a, model, w)
         - s.omega.cross(&(i * s.omega));

@@ -10,6 +10,7 @@
 //! between integration steps; the flight [`battery`] drains with the rotors' shaft power.
 
 pub mod actuators;
+pub mod aero;
 pub mod battery;
 pub mod disturbances;
 pub mod ground;
@@ -121,12 +122,15 @@ pub struct PlantInput {
     pub fx_paper_n: f64,
     /// External torque in B (a push), N·m.
     pub disturbance_torque_body_nm: Vector3<f64>,
-    /// Wind in I, m/s, when the wind perturbation is active: the airframe then feels the drag
-    /// −c (v − w) of `airframe.body_drag_n_s_per_m`. `None` is the paper's model, which has no
-    /// aerodynamic drag on the airframe at all (the coefficient is documented as a perturbation
-    /// model only); applying it always would add damping the paper's design does not expect and
-    /// move the chains' poles.
+    /// Wind in I, m/s, when the wind perturbation is active. In `paper` mode the airframe then
+    /// feels the drag −c (v − w) of `airframe.body_drag_n_s_per_m`; `None` is the paper's model,
+    /// which has no aerodynamic drag on the airframe at all. In `physical` mode the wind acts
+    /// only through the air-relative velocity of [`aero`], which the vehicle evaluates into
+    /// [`PlantInput::aero`]; this field is then ignored.
     pub wind_m_s: Option<Vector3<f64>>,
+    /// The airframe's aerodynamic loads ([`aero::loads`]), held over the step; applied in
+    /// `physical` mode only.
+    pub aero: Loads,
 }
 
 /// Sum of all non-gravitational forces and of all torques on the airframe, both in B.
@@ -161,19 +165,25 @@ impl HeldLoads {
         let thrusts = rotors::thrusts_n(af, w);
         let drags = rotors::drags_n(af, w);
         let lifts = surfaces::lifts(af, &u.actuators);
-        let surface_force = match model {
+        let force_body_n = rotors::thrust_force_body_n(&thrusts);
+        let torque_body_nm = rotors::thrust_torque_body_nm(af, &thrusts)
+            + surfaces::torque_body_nm(af, &lifts)
+            + rotors::drag_torque_body_nm(af, model, &drags)
+            + u.disturbance_torque_body_nm;
+        match model {
             // [I16]: the paper's design applies f_x of (43) in place of the surfaces' force.
-            ModelMode::Paper => Vector3::new(u.fx_paper_n, 0.0, 0.0),
-            ModelMode::Physical => surfaces::force_body_n(&lifts),
-        };
-        Self {
-            force_body_n: rotors::thrust_force_body_n(&thrusts) + surface_force,
-            torque_body_nm: rotors::thrust_torque_body_nm(af, &thrusts)
-                + surfaces::torque_body_nm(af, &lifts)
-                + rotors::drag_torque_body_nm(af, model, &drags)
-                + u.disturbance_torque_body_nm,
-            rotor_speed_rad_s: *w,
-            wind_m_s: u.wind_m_s,
+            ModelMode::Paper => Self {
+                force_body_n: force_body_n + Vector3::new(u.fx_paper_n, 0.0, 0.0),
+                torque_body_nm,
+                rotor_speed_rad_s: *w,
+                wind_m_s: u.wind_m_s,
+            },
+            ModelMode::Physical => Self {
+                force_body_n: force_body_n + surfaces::force_body_n(&lifts) + u.aero.force_body_n,
+                torque_body_nm: torque_body_nm + u.aero.torque_body_nm,
+                rotor_speed_rad_s: *w,
+                wind_m_s: None,
+            },
         }
     }
 

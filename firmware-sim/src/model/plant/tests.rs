@@ -284,6 +284,8 @@ fn input_change_33_gives_eta_ddot_equal_to_gamma_tilde() {
 }
 
 #[test]
+/// `paper` mode's wind perturbation: a linear drag, only when the wind is on. (`physical` mode
+/// feels the wind through the air-relative velocity of `aero` instead.)
 fn wind_drag_only_with_the_wind_perturbation() {
     let af = Airframe::default();
     let s = PlantState {
@@ -291,7 +293,7 @@ fn wind_drag_only_with_the_wind_perturbation() {
         vel_body_m_s: Vector3::new(0.0, 1.0, 0.0),
         ..Default::default()
     };
-    let still = derivative(&af, ModelMode::Physical, &s, &hover_input(&af));
+    let still = derivative(&af, ModelMode::Paper, &s, &hover_input(&af));
     assert!(
         still.vel_body_dot_m_s2.norm() < 1e-12,
         "no drag without the perturbation model"
@@ -300,9 +302,22 @@ fn wind_drag_only_with_the_wind_perturbation() {
         wind_m_s: Some(Vector3::zeros()),
         ..hover_input(&af)
     };
-    let d = derivative(&af, ModelMode::Physical, &s, &u);
+    let d = derivative(&af, ModelMode::Paper, &s, &u);
     let expect = -af.body_drag_n_s_per_m / af.mass_kg;
     assert!((d.vel_body_dot_m_s2.y - expect).abs() < 1e-12);
+    // `physical` ignores the perturbation model: its drag comes in `PlantInput::aero`.
+    let d = derivative(&af, ModelMode::Physical, &s, &u);
+    assert!(d.vel_body_dot_m_s2.norm() < 1e-12);
+    let v = PlantInput {
+        aero: aero::loads(&af, &s.vel_body_m_s, &u.actuators.rotor_speed_rad_s),
+        ..u
+    };
+    assert!(
+        derivative(&af, ModelMode::Physical, &s, &v)
+            .vel_body_dot_m_s2
+            .y
+            < 0.0
+    );
 }
 
 /// The vehicle's form of an RK4 step (loads held over the step, the stages' sines and cosines
