@@ -105,7 +105,7 @@ pub fn drag_compensated(
 }
 
 /// Largest tilt shift of [`drag_compensated`], rad.
-pub const DRAG_SHIFT_LIMIT_RAD: f64 = 0.15;
+pub const DRAG_SHIFT_LIMIT_RAD: f64 = 0.3;
 /// Largest torque term of [`drag_compensated`], rad/s² (about half a chain's own bound).
 pub const DRAG_TORQUE_LIMIT: f64 = 1.0;
 
