@@ -19,24 +19,27 @@
 //! construction), so the telemetry of time t always carries the controller's output at t.
 
 use nalgebra::Vector3;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 
 use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::control::{
     ActuatorCommand, ControlInput, ControlOutput, Controller, GainError, Gains, PilotInput,
-    PwmOutputs,
 };
 use crate::model::estimator::Estimator;
 use crate::model::frames::Euler;
 use crate::model::integrator::rk4_step;
 use crate::model::mode::{FlightMode, Guidance};
 use crate::model::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
-use crate::model::plant::battery::{Battery, BatteryConfig, BatteryState};
+use crate::model::plant::battery::{Battery, BatteryConfig};
 use crate::model::plant::rigid_body::{EulerTrig, RigidBody};
 use crate::model::plant::{self, PlantInput, PlantState, aero, ground};
 use crate::model::sensors::{self, Sensors};
+
+mod telemetry;
+mod wind;
+
+pub use telemetry::{ArmError, SystemState, Telemetry};
+pub use wind::GUST_TIME_CONSTANT_S;
+use wind::Wind;
 
 /// The default physics step: the plant is integrated at 1 kHz.
 pub const PHYSICS_DT_S: f64 = 0.001;
@@ -52,13 +55,9 @@ pub const CRASH_SINK_RATE_M_S: f64 = 3.0;
 pub const LAND_DISARM_DELAY_S: f64 = 0.5;
 /// Largest estimated tilt at which arming is allowed, rad.
 pub const ARM_MAX_TILT_RAD: f64 = 0.2;
-/// Correlation time of the gust model (first-order Gauss–Markov per axis), s.
-pub const GUST_TIME_CONSTANT_S: f64 = 1.0;
 /// Period of the battery model, s: it drains slowly, so 10 Hz is plenty and costs the control
 /// loop nothing.
 const BATTERY_PERIOD_S: f64 = 0.1;
-/// Seed offset of the wind RNG, so that turning wind on leaves the sensor noise unchanged.
-const WIND_SEED_SALT: u64 = 0x5749_4e44;
 
 /// Rigid-body state in the paper's frames (z up). See `plant` for the equations.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -133,133 +132,6 @@ impl Default for VehicleConfig {
             rc_us: [0; 8],
             battery: BatteryConfig::default(),
         }
-    }
-}
-
-/// System state as the heartbeat reports it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SystemState {
-    /// Gyro calibration at rest after power-up.
-    #[default]
-    Calibrating,
-    /// Ready, disarmed.
-    Standby,
-    /// Armed.
-    Active,
-    /// A failsafe is active.
-    Critical,
-    /// Crashed (hit the ground hard or tipped over).
-    Emergency,
-}
-
-/// Why an arm or disarm request was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum ArmError {
-    /// Pre-arm check failed.
-    #[error("pre-arm check failed: {0}")]
-    PreArm(&'static str),
-    /// Disarming in flight needs force.
-    #[error("refusing to disarm in flight (use force)")]
-    InFlight,
-    /// The mode can only come down.
-    #[error("mode {0} cannot take off")]
-    Mode(FlightMode),
-}
-
-/// Snapshot of everything the twin can report.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Telemetry {
-    /// Simulation time, µs since power-up.
-    pub t_us: u64,
-    /// True position (paper frame, z up), m.
-    pub pos_m: Vector3<f64>,
-    /// True inertial velocity (paper frame), m/s.
-    pub vel_m_s: Vector3<f64>,
-    /// True attitude.
-    pub euler: Euler,
-    /// True body rates (p, q, r), rad/s.
-    pub omega_body_rad_s: Vector3<f64>,
-    /// Estimated attitude (what the firmware flies on).
-    pub euler_est: Euler,
-    /// Estimated body rates, rad/s (gyro after bias removal).
-    pub omega_est_rad_s: Vector3<f64>,
-    /// Gyro readings in rad/s (x, y, z), after the ADC.
-    pub gyro_rad_s: [f64; 3],
-    /// Accelerometer readings in m/s² (x, y; the ADXL203 has two axes), after the ADC.
-    pub accel_m_s2: [f64; 2],
-    /// Raw 12-bit ADC counts: gyro x, y, z, accel x, y.
-    pub adc_counts: [u16; 5],
-    /// RC receiver pulse widths, µs (channels 1–8).
-    pub rc_us: [u16; 8],
-    /// Actual rotor speeds, rad/s.
-    pub rotor_speed_rad_s: [f64; 2],
-    /// Last control tick's output (τ̃, Γc, f_z, PWM).
-    pub control: ControlOutput,
-    /// PWM outputs, µs.
-    pub pwm_us: PwmOutputs,
-    /// On the ground (weight on the landing gear).
-    pub landed: bool,
-    /// Armed.
-    pub armed: bool,
-    /// Flight mode.
-    pub mode: FlightMode,
-    /// System state.
-    pub state: SystemState,
-    /// The flight battery.
-    pub battery: BatteryState,
-    /// The body's true velocity relative to the air (wind and gusts included), in B, m/s.
-    pub air_velocity_body_m_s: Vector3<f64>,
-}
-
-impl Telemetry {
-    /// True airspeed, m/s.
-    #[must_use]
-    pub fn airspeed_m_s(&self) -> f64 {
-        self.air_velocity_body_m_s.norm()
-    }
-
-    /// Angle of attack of the plate ([`aero::angle_of_attack_rad`]), rad.
-    #[must_use]
-    pub fn angle_of_attack_rad(&self) -> f64 {
-        aero::angle_of_attack_rad(&self.air_velocity_body_m_s)
-    }
-}
-
-/// Steady wind plus a seeded first-order Gauss–Markov gust (inertial frame).
-#[derive(Debug, Clone)]
-struct Wind {
-    mean_m_s: Vector3<f64>,
-    gust_sigma_m_s: f64,
-    gust_m_s: Vector3<f64>,
-    keep: f64,
-    rng: ChaCha8Rng,
-}
-
-impl Wind {
-    fn new(seed: u64, dt_s: f64) -> Self {
-        Self {
-            mean_m_s: Vector3::zeros(),
-            gust_sigma_m_s: 0.0,
-            gust_m_s: Vector3::zeros(),
-            keep: (-dt_s / GUST_TIME_CONSTANT_S).exp(),
-            rng: ChaCha8Rng::seed_from_u64(seed ^ WIND_SEED_SALT),
-        }
-    }
-
-    /// Advances the gust one physics step and returns the wind, m/s, or `None` when the wind
-    /// perturbation is off (the paper's drag-free model).
-    fn step(&mut self) -> Option<Vector3<f64>> {
-        if self.gust_sigma_m_s == 0.0 && self.mean_m_s == Vector3::zeros() {
-            return None;
-        }
-        if self.gust_sigma_m_s > 0.0 {
-            let drive = self.gust_sigma_m_s * (1.0 - self.keep * self.keep).sqrt();
-            for i in 0..3 {
-                let n: f64 = self.rng.sample(StandardNormal);
-                self.gust_m_s[i] = self.keep * self.gust_m_s[i] + drive * n;
-            }
-        }
-        Some(self.mean_m_s + self.gust_m_s)
     }
 }
 

@@ -27,6 +27,8 @@ pub mod saturation;
 pub mod yaw;
 
 #[cfg(test)]
+mod closed_loop_tests;
+#[cfg(test)]
 mod tests;
 
 use nalgebra::{Vector2, Vector3};

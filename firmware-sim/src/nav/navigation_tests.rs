@@ -1,0 +1,246 @@
+//! The navigator's unit tests: take-off, AUTO missions, landing items, GUIDED holds.
+
+use super::*;
+use crate::nav::globe::Origin;
+use crate::nav::mission::{MissionItem, frame};
+
+fn limits() -> Limits {
+    Limits {
+        origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
+        home_ned_m: Vector3::zeros(),
+        radius_max_m: 100.0,
+        alt_max_m: 50.0,
+    }
+}
+
+struct World {
+    nav: Navigator,
+    mission: Mission,
+    limits: Limits,
+    mode: FlightMode,
+    armed: bool,
+    pos: Vector3<f64>,
+    now_us: u64,
+    events: Vec<NavEvent>,
+}
+
+impl World {
+    fn new(mission: Mission) -> Self {
+        Self {
+            nav: Navigator::new(),
+            mission,
+            limits: limits(),
+            mode: FlightMode::QStabilize,
+            armed: false,
+            pos: Vector3::zeros(),
+            now_us: 0,
+            events: Vec::new(),
+        }
+    }
+
+    fn input(&self) -> NavInput<'_> {
+        NavInput {
+            now_us: self.now_us,
+            mode: self.mode,
+            armed: self.armed,
+            landed: self.pos.z >= 0.0,
+            pos_ned_m: self.pos,
+            mission: &self.mission,
+            limits: &self.limits,
+            wp_radius_m: 0.3,
+            speed_up_m_s: 1.0,
+            speed_dn_m_s: 0.5,
+        }
+    }
+
+    /// Flies `seconds` with a perfect vehicle: it is wherever the guidance says (a landing
+    /// sinks at 0.5 m/s and disarms on touchdown, as the vehicle's QLAND does).
+    fn fly(&mut self, seconds: f64) -> Vec<Guidance> {
+        let mut out = Vec::new();
+        let steps = (seconds * 1e6 / NAV_PERIOD_US as f64) as usize;
+        for _ in 0..steps {
+            self.now_us += NAV_PERIOD_US;
+            let mut ev = Vec::new();
+            let inp = self.input();
+            let mut nav = self.nav.clone();
+            let g = nav.step(&inp, &mut ev);
+            self.nav = nav;
+            for e in &ev {
+                if let NavEvent::SetMode(m) = e {
+                    self.mode = *m;
+                }
+            }
+            self.events.extend(ev);
+            match g {
+                Guidance::Position(p) => self.pos = crate::model::frames::paper_to_ned(&p),
+                Guidance::Land => {
+                    self.pos.z = (self.pos.z + 0.5 * NAV_PERIOD_US as f64 * 1e-6).min(0.0);
+                    if self.pos.z >= 0.0 {
+                        self.armed = false;
+                    }
+                }
+                Guidance::Idle => {}
+            }
+            out.push(g);
+        }
+        out
+    }
+
+    /// Calls the navigator as the endpoint does (a command between steps).
+    fn call<R>(
+        &mut self,
+        f: impl FnOnce(&mut Navigator, &NavInput<'_>, &mut Vec<NavEvent>) -> R,
+    ) -> R {
+        let mut nav = self.nav.clone();
+        let mut ev = Vec::new();
+        let r = f(&mut nav, &self.input(), &mut ev);
+        self.nav = nav;
+        self.events.extend(ev);
+        r
+    }
+
+    fn reached(&self) -> Vec<u16> {
+        self.events
+            .iter()
+            .filter_map(|e| match e {
+                NavEvent::Reached(s) => Some(*s),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+fn item(command: u16, north_m: f64, alt: f32, hold: f32) -> MissionItem {
+    let l = limits();
+    let p = l.origin.to_global(&Vector3::new(north_m, 0.0, 0.0));
+    MissionItem {
+        params: [hold, 0.0, 0.0, 0.0],
+        x: if north_m == 0.0 { 0 } else { p.lat_e7 },
+        y: if north_m == 0.0 { 0 } else { p.lon_e7 },
+        z: alt,
+        command,
+        frame: frame::GLOBAL_RELATIVE_ALT_INT,
+        current: 0,
+        autocontinue: 1,
+    }
+}
+
+#[test]
+fn guided_takeoff_climbs_at_the_climb_rate_then_holds() {
+    let mut w = World::new(Mission::default());
+    w.mode = FlightMode::Guided;
+    let e = w.call(|n, i, e| n.takeoff(2.0, i, e)).unwrap_err();
+    assert_eq!(e, Refused::NotNow("Takeoff: must be armed".into()));
+    w.armed = true;
+    assert_eq!(w.fly(0.1), vec![Guidance::Idle; 5], "idle until take-off");
+    let e = w.call(|n, i, e| n.takeoff(60.0, i, e)).unwrap_err();
+    assert!(
+        matches!(&e, Refused::Invalid(t) if t.contains("NAV_ALT_MAX")),
+        "{e}"
+    );
+    w.call(|n, i, e| n.takeoff(2.0, i, e)).unwrap();
+    w.fly(1.0);
+    assert!((w.pos.z + 1.0).abs() < 0.03, "1 m/s climb: {}", w.pos.z);
+    w.fly(1.5);
+    assert!((w.pos.z + 2.0).abs() < 1e-9, "{}", w.pos.z);
+    assert!(
+        w.events
+            .iter()
+            .any(|e| matches!(e, NavEvent::Info(t) if t.starts_with("Takeoff complete")))
+    );
+    let flying = w.call(|n, i, e| n.takeoff(2.0, i, e));
+    assert!(flying.is_err(), "already flying");
+    // Reposition 5 m north, then a refused one 150 m away.
+    w.call(|n, i, e| n.reposition(Vector3::new(5.0, 0.0, -2.0), i, e))
+        .unwrap();
+    w.fly(0.1);
+    assert_eq!(w.pos, Vector3::new(5.0, 0.0, -2.0));
+    let e = w
+        .call(|n, i, e| n.reposition(Vector3::new(150.0, 0.0, -2.0), i, e))
+        .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "Reposition refused: 150.0 m from home, beyond NAV_RADIUS_MAX 100 m"
+    );
+    assert!(e.to_string().len() > 60);
+}
+
+#[test]
+fn auto_flies_each_item_then_qrtl_lands_home() {
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0), // home slot
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+        item(cmd::NAV_LOITER_TIME, 8.0, 2.0, 2.0),
+        item(cmd::NAV_WAYPOINT, 6.0, 2.5, 0.0),
+    ]);
+    let mut w = World::new(m);
+    w.mode = FlightMode::Auto;
+    w.fly(0.5);
+    assert!(w.reached().is_empty(), "nothing happens disarmed");
+    w.armed = true;
+    w.fly(4.0);
+    assert_eq!(w.reached(), vec![1, 2], "take-off, then the first waypoint");
+    w.fly(1.0);
+    assert_eq!(w.reached(), vec![1, 2], "holding 2 s at the loiter point");
+    w.fly(1.5);
+    assert_eq!(w.reached(), vec![1, 2, 3, 4]);
+    assert_eq!(w.mode, FlightMode::QRtl, "mission complete in the air");
+    assert!(w.events.contains(&NavEvent::Info(
+        "Mission complete, changing mode to QRTL".into()
+    )));
+    w.fly(10.0);
+    assert!(!w.armed, "landed and disarmed");
+    assert!(w.pos.xy().norm() < 1e-9, "at home: {}", w.pos);
+    assert_eq!(
+        w.nav.mission_state(w.mission.count()),
+        MissionState::Complete
+    );
+}
+
+#[test]
+fn landing_items_and_current_item() {
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 2.0, 0.0),
+        item(cmd::NAV_WAYPOINT, 3.0, 2.0, 0.0),
+        item(cmd::NAV_VTOL_LAND, 5.0, 0.0, 0.0),
+    ]);
+    let mut w = World::new(m);
+    assert!(w.call(|n, i, e| n.set_current(9, i, e)).is_err());
+    w.call(|n, i, e| n.set_current(2, i, e)).unwrap();
+    assert_eq!(w.events, vec![NavEvent::Current(2)]);
+    w.mode = FlightMode::Auto;
+    w.armed = true;
+    w.fly(20.0);
+    assert_eq!(
+        w.reached(),
+        vec![2, 3],
+        "started at item 2, landed at item 3"
+    );
+    assert!(!w.armed);
+    assert!(
+        (w.pos.x - 5.0).abs() < 0.02,
+        "landed at the item's point: {}",
+        w.pos
+    );
+    assert_eq!(w.mode, FlightMode::Auto, "a landed mission stays in AUTO");
+}
+
+#[test]
+fn guided_entered_in_flight_holds_and_empty_auto_returns() {
+    let mut w = World::new(Mission::default());
+    w.armed = true;
+    w.pos = Vector3::new(1.0, 2.0, -3.0);
+    w.mode = FlightMode::Guided;
+    let g = w.fly(0.04);
+    assert_eq!(
+        g.last(),
+        Some(&Guidance::Position(ned_to_paper(&Vector3::new(
+            1.0, 2.0, -3.0
+        ))))
+    );
+    w.mode = FlightMode::Auto;
+    w.fly(0.04);
+    assert_eq!(w.mode, FlightMode::QRtl, "nothing to fly: home");
+}
