@@ -123,15 +123,17 @@ fn paper_mode_first_row_carries_the_controllers_output_at_t0() {
 
 #[test]
 fn physical_mode_with_noise_converges_then_holds() {
+    // The airframe's drag (physical mode, docs/model.md) adds a pole near −0.08 /s to the x
+    // chain: the approach's tail takes tens of seconds, so the hold is measured from 60 s.
     let mut v = flying(ModelMode::Physical, 1);
-    fly_until(&mut v, 25.0, |_| {});
+    fly_until(&mut v, 60.0, |_| {});
     let (mut pos, mut tilt, mut psi) = (0.0_f64, 0.0_f64, 0.0_f64);
-    fly_until(&mut v, 60.0, |t| {
+    fly_until(&mut v, 90.0, |t| {
         pos = pos.max((t.pos_m - Vector3::new(0.0, 0.0, 1.0)).amax());
         tilt = tilt.max(t.euler.phi.abs()).max(t.euler.theta.abs());
         psi = psi.max(t.euler.psi.abs());
     });
-    assert!(pos < 0.03, "position band ±{pos} m over 25–60 s");
+    assert!(pos < 0.03, "position band ±{pos} m over 60–90 s");
     assert!(
         tilt < 1f64.to_radians(),
         "tilt band ±{}°",
@@ -154,14 +156,15 @@ fn physical_mode_with_ideal_sensors_settles_without_a_limit_cycle() {
         ..flying(ModelMode::Physical, 1).config().clone()
     });
     v.set_position_setpoint(Vector3::new(0.0, 0.0, 1.0));
-    fly_until(&mut v, 30.0, |_| {});
+    // From 70 s: the drag's slow pole (see above) has decayed.
+    fly_until(&mut v, 70.0, |_| {});
     let mut pos = 0.0_f64;
-    fly_until(&mut v, 60.0, |t| {
+    fly_until(&mut v, 100.0, |t| {
         pos = pos.max((t.pos_m - Vector3::new(0.0, 0.0, 1.0)).amax());
     });
     assert!(
         pos < 0.005,
-        "position band ±{pos} m over 30–60 s with ideal sensors"
+        "position band ±{pos} m over 70–100 s with ideal sensors"
     );
 }
 

@@ -55,26 +55,32 @@ def test_wind_pushes_downwind_by_what_the_control_law_predicts(loiter):
         0, 1, 1, MAV_FRAME_LOCAL_NED, TYPE_MASK_POSITION_ONLY, *target, 0, 0, 0, 0, 0, 0, 0, 0
     )
     wait_near(g, target, tol=0.05)
-    wind_m_s = 0.5
+    wind_m_s = 0.2
     g.param_set("SIM_WIND_DIR", 0.0)  # from the north: pushes south (−x)
     g.param_set("SIM_WIND_SPD", wind_m_s)
     # The chain has no integrator, so a steady force F leaves a steady offset. At rest the law
     # reads 0 = −θ − 2θ − (3θ + x/g) (levels unsaturated), with tilt θ = F/(m g) holding the
-    # wind off: x = −6 g θ = −6 F / m. F = drag 0.15 N·s/m × wind, m = 0.5 kg.
-    predicted_x = -6.0 * 0.15 * wind_m_s / 0.5
+    # wind off: x = −6 g θ = −6 F / m, m = 0.5 kg. The wind meets the plate's face: F is the
+    # slipstream's crossflow force (its mass flow, 0.55 kg/s) plus the rotors' H-force
+    # (0.177 N·s/m at hover), times the wind (docs/model.md).
+    predicted_x = -6.0 * (0.551 + 0.177) * wind_m_s / 0.5
     first = g.recv("LOCAL_POSITION_NED")
     samples = []
     while True:
         p = g.recv("LOCAL_POSITION_NED")
         elapsed = p.time_boot_ms - first.time_boot_ms
-        if elapsed >= 15000:
+        # The same drag slows the chain (a pole near −0.08 /s): settled after a minute.
+        if elapsed >= 60000:
             samples.append(p)
-        if elapsed >= 20000:
+        if elapsed >= 65000:
             break
     g.param_set("SIM_WIND_SPD", 0.0)
     mean_x = statistics.fmean(p.x for p in samples)
     mean_z = statistics.fmean(p.z for p in samples)
-    assert abs(mean_x - predicted_x) < 0.2, f"offset {mean_x:+.3f} m, law predicts {predicted_x:+.3f} m"
+    # Within 25 %: F is the aerodynamic model's slope at hover, not its exact value in flight.
+    assert abs(mean_x - predicted_x) < 0.25 * abs(predicted_x), (
+        f"offset {mean_x:+.3f} m, law predicts {predicted_x:+.3f} m"
+    )
     assert abs(mean_z - target[2]) < 0.1, f"altitude lost in the wind: z {mean_z:+.3f} m"
     # And it comes back once the wind stops.
     wait_near(g, target, tol=0.05)

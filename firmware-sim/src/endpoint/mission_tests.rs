@@ -579,8 +579,9 @@ fn guided_take_off_reposition_and_auto_mission() {
         "Reposition refused: 150.0 m from home, beyond NAV_RADIUS_MAX 100 m"
     );
     assert!(t.len() == 2 && t[0].id != 0 && t[0].id == t[1].id);
-    // 12 s for 3 m: the airframe's drag (physical mode) lengthens the approach's tail.
-    run_until(&mut ep, 18_000_000);
+    // 3 m broadside: the slipstream's crossflow drag (physical mode, docs/model.md) gives the
+    // position chain a slow pole near −0.08 /s, so the approach's tail takes tens of seconds.
+    run_until(&mut ep, 40_000_000);
     let pos = ep.vehicle().telemetry().pos_m;
     // Paper frame: x is south.
     assert!((pos.x + 3.0).abs() < 0.3 && pos.y.abs() < 0.3, "{pos}");
@@ -588,12 +589,13 @@ fn guided_take_off_reposition_and_auto_mission() {
     let mut out = set_mode(&mut ep, FlightMode::Auto);
     assert_eq!(acks(&out), vec![(176, 0)]);
     // Already at the take-off altitude: item 1 is reached at once.
-    out.extend(run_until(&mut ep, 60_000_000));
+    out.extend(run_until(&mut ep, 120_000_000));
     assert_eq!(reached(&out), vec![1, 2, 3, 4]);
     let t = ep.vehicle().telemetry();
     assert!(!t.armed && t.landed, "landed and disarmed");
+    // Within 0.3 m: the broadside drag's slow pole leaves part of the last leg's tail to QLAND.
     assert!(
-        (t.pos_m.y - 2.0).abs() < 0.15 && t.pos_m.x.abs() < 0.15,
+        (t.pos_m.y - 2.0).abs() < 0.3 && t.pos_m.x.abs() < 0.3,
         "{}",
         t.pos_m
     );

@@ -16,8 +16,8 @@
 
 use nalgebra::Vector2;
 
+use super::SaturationLevels;
 use super::saturation::{attitude_law, chain_law};
-use super::{Gains, SaturationLevels};
 use crate::model::airframe::ModelMode;
 
 /// Largest |θ| used in the f_x formula (43): keeps 1/cos θ finite. The paper's loop never gets
@@ -71,66 +71,6 @@ pub fn longitudinal_tau(
             theta_dot_rad_s,
         ],
     )
-}
-
-/// A chain's states with a linear drag compensated (`physical` mode). With the drag the plant is
-/// X″ = α − D X′ (X = x/g or −y/g, α = θ or φ, D per unit mass), not the chain's X″ = α. The
-/// shifted angle α′ = α − D X′ restores X″ = α′ exactly, and with
-/// α̇′ = α̇ − D (α − D X′) the chain runs on (X, X′, α′, α̇′). Returns (α′, α̇′) and the torque
-/// term D α̇ − D² α′ to add to the chain's output so that α̈′ is the chain's u.
-///
-/// The shift D X′ is the tilt that balances the drag at the current speed; it is compensated
-/// up to [`DRAG_SHIFT_LIMIT_RAD`] only (about 0.4 m/s here), beyond which it is held: a fast
-/// vehicle must not be allowed the large tilt its drag could balance.
-#[must_use]
-pub fn drag_compensated(
-    damping_per_s: f64,
-    x_dot_scaled: f64,
-    angle_rad: f64,
-    angle_rate_rad_s: f64,
-) -> (f64, f64, f64) {
-    let d = damping_per_s;
-    let shift = d * x_dot_scaled;
-    if shift.abs() > DRAG_SHIFT_LIMIT_RAD {
-        return (
-            angle_rad - DRAG_SHIFT_LIMIT_RAD.copysign(shift),
-            angle_rate_rad_s,
-            0.0,
-        );
-    }
-    let angle = angle_rad - shift;
-    let rate = angle_rate_rad_s - d * angle;
-    let extra = (d * angle_rate_rad_s - d * d * angle).clamp(-DRAG_TORQUE_LIMIT, DRAG_TORQUE_LIMIT);
-    (angle, rate, extra)
-}
-
-/// Largest tilt shift of [`drag_compensated`], rad.
-pub const DRAG_SHIFT_LIMIT_RAD: f64 = 0.3;
-/// Largest torque term of [`drag_compensated`], rad/s² (about half a chain's own bound).
-pub const DRAG_TORQUE_LIMIT: f64 = 1.0;
-
-/// The two position chains of `physical` mode in the heading frame, with the airframe's linear
-/// aerodynamic drag (`damping_per_s` = (D_x, D_y) per unit mass, [`drag_compensated`])
-/// compensated: (τ̃θ, τ̃φ). `err` and `vel` are the heading-frame position error and velocity,
-/// `theta` and `phi` each (angle, Euler rate).
-#[must_use]
-pub fn physical_position_taus(
-    gains: &Gains,
-    gravity_m_s2: f64,
-    damping_per_s: (f64, f64),
-    err: Vector2<f64>,
-    vel: Vector2<f64>,
-    theta: (f64, f64),
-    phi: (f64, f64),
-) -> (f64, f64) {
-    let g = gravity_m_s2;
-    // x: X = x/g, X″ = θ − D_x X′.
-    let (th, th_dot, th_extra) = drag_compensated(damping_per_s.0, vel.x / g, theta.0, theta.1);
-    let tau_theta = chain_law(&gains.longitudinal, [err.x / g, vel.x / g, th, th_dot]) + th_extra;
-    // y: X̄ = −y/g, X̄″ = φ − D_y X̄′.
-    let (ph, ph_dot, ph_extra) = drag_compensated(damping_per_s.1, -vel.y / g, phi.0, phi.1);
-    let tau_phi = chain_law(&gains.lateral, [-err.y / g, -vel.y / g, ph, ph_dot]) + ph_extra;
-    (tau_theta, tau_phi)
 }
 
 /// f_x of (43) with the mass restored ([I8]): f_x = m (θ − g sin θ)/cos θ, N. Applied as an

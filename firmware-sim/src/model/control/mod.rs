@@ -455,18 +455,17 @@ impl Controller {
                 } else {
                     err = chains::to_heading_frame(euler.psi, err);
                     v = chains::to_heading_frame(euler.psi, v);
-                    let damping = crate::model::plant::aero::hover_damping_per_kg(
-                        &self.airframe,
-                        &rotor_start,
-                    );
-                    chains::physical_position_taus(
-                        gains,
-                        g,
-                        damping,
-                        err,
-                        v,
-                        (euler.theta, theta_dot),
-                        (euler.phi, phi_dot),
+                    (
+                        chains::longitudinal_tau(
+                            &gains.longitudinal,
+                            model,
+                            g,
+                            err.x,
+                            v.x,
+                            euler.theta,
+                            theta_dot,
+                        ),
+                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
                     )
                 }
             }

@@ -51,9 +51,14 @@ pub const FLAT_PLATE_SHAPE_B: f64 = 0.44;
 /// Skin-friction drag of both faces, on the wing area (Pelletier & Mueller, J. Aircraft 37(5),
 /// 2000: 0.015–0.025 for thin flat plates at Re 0.6–2·10⁵).
 pub const FRICTION_DRAG_COEFF: f64 = 0.02;
-/// Fraction of the span in the slipstream: two 10" rotors with a far-wake diameter D/√2
-/// (momentum theory), 2 × 0.18 m of the 0.6 m span.
-pub const WASHED_SPAN_FRACTION: f64 = 0.6;
+/// Fraction of the wing that works in the slipstream. A wing in a slipstream cannot turn more
+/// air than the slipstream carries: momentum theory gives each 10" rotor a mass flow
+/// ṁ = ρ A v_i (A = 0.0507 m², v_i = 4.4 m/s at hover: 0.55 kg/s for two), so the slipstream's
+/// crossflow force is at most ṁ u. The washed part's attached-flow slope ½ ρ κ S C_Lα ῡ equals
+/// that bound for κ = 2 ṁ / (ρ S C_Lα ῡ) = 0.22, the same at every rotor speed (v_i and ῡ both
+/// scale with ω). (The slipstream's geometric share of the span, 2 × 0.18 m of 0.6 m, would
+/// give three times the momentum bound.)
+pub const WASHED_SPAN_FRACTION: f64 = 0.22;
 /// Rotor H-force per rotor: F = −λ_h ω v_⊥, N·s/(m·rad): the in-plane drag of a translating
 /// propeller (Martin & Salaün, ICRA 2010), sized so that at hover it is 0.35 /s per unit mass,
 /// the rotor drag Faessler, Franchi & Scaramuzza (RA-L 2018) identify on a small quadrotor.

@@ -144,9 +144,16 @@ fn the_slipstream_damps_broadside_motion_in_hover() {
     let af = Airframe::default();
     let w = af.hover_rotor_speed_rad_s();
     let l = loads(&af, &Vector3::new(0.2, 0.0, 0.0), &[w, w]);
-    // About ½ ρ κ S C_Lα ῡ u plus the H-force: ≈ 1.6 N per m/s at 8 m/s of wash.
+    // ½ ρ κ S C_Lα ῡ u, the slipstream's mass flow (0.55 kg/s) times u, plus the H-force.
     let per_m_s = -l.force_body_n.x / 0.2;
-    assert!((1.2..2.0).contains(&per_m_s), "{per_m_s}");
+    assert!((0.65..0.85).contains(&per_m_s), "{per_m_s}");
+    let mass_flow = 2.0 * AIR_DENSITY_KG_M3 * 0.0507 * 4.44;
+    let washed = 0.5 * AIR_DENSITY_KG_M3 * WASHED_SPAN_FRACTION * WING_AREA_M2 * LIFT_SLOPE_PER_RAD;
+    let washed = washed * af.k_wash_m_per_rad * w;
+    assert!(
+        (washed - mass_flow).abs() < 0.02 * mass_flow,
+        "{washed} vs {mass_flow}"
+    );
     // The slipstream's centre of pressure (quarter chord) is on the CG: almost no moment.
     assert!(l.torque_body_nm.y.abs() < 0.002, "{}", l.torque_body_nm.y);
     // Edgewise in hover: friction and the rotors' H-force, 0.35 /s per unit mass.

@@ -195,3 +195,39 @@ fn rc_loss_in_qstabilize_is_critical() {
     run(&mut v, 0.05);
     assert_eq!(v.telemetry().state, SystemState::Critical);
 }
+
+/// `physical` mode feels the wind through the air-relative velocity. The paper's chains have no
+/// integrator, so QLOITER settles downwind of its point, tilted into the wind, and stays there:
+/// 0.5 m/s on the plate's face (broadside, the slipstream's crossflow force) and along its
+/// span (edgewise). The telemetry's airspeed is the wind's, not the (zero) ground speed.
+#[test]
+fn qloiter_in_steady_wind_settles_downwind() {
+    for (wind, edge) in [
+        (Vector3::new(0.5, 0.0, 0.0), "broadside"),
+        (Vector3::new(0.0, 0.5, 0.0), "edgewise"),
+    ] {
+        let cfg = VehicleConfig {
+            initial: InitialState {
+                pos_m: Vector3::new(0.0, 0.0, 1.0),
+                ..Default::default()
+            },
+            armed: true,
+            mode: FlightMode::QLoiter,
+            ..VehicleConfig::default()
+        };
+        let mut v = Vehicle::new(cfg);
+        v.set_wind(wind, 0.0);
+        run(&mut v, 90.0);
+        let before = v.telemetry().pos_m;
+        run(&mut v, 10.0);
+        let t = v.telemetry();
+        assert_eq!(t.state, SystemState::Active, "{edge}");
+        let downwind = (t.pos_m - Vector3::new(0.0, 0.0, 1.0)).dot(&wind.normalize());
+        assert!(
+            (0.1..8.0).contains(&downwind),
+            "{edge}: {downwind} m downwind"
+        );
+        assert!((t.pos_m - before).norm() < 0.05, "{edge}: still moving");
+        assert!((t.airspeed_m_s() - wind.norm()).abs() < 0.05, "{edge}");
+    }
+}
