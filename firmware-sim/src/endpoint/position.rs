@@ -153,9 +153,9 @@ impl GlobeView<'_> {
         // Collective as a percentage of the ESC range.
         let esc = (f64::from(t.pwm_us[0]) + f64::from(t.pwm_us[1])) / 2.0;
         apm::MavMessage::VFR_HUD(apm::VFR_HUD_DATA {
-            // No airspeed sensor: the ground speed stands in, as ArduPlane's synthetic airspeed
-            // does in still air.
-            airspeed: ground as f32,
+            // True airspeed: the body's speed relative to the air, wind and gusts included
+            // (the aerodynamic model's, docs/model.md).
+            airspeed: t.airspeed_m_s() as f32,
             groundspeed: ground as f32,
             alt: alt as f32,
             climb: (-v.z) as f32,
