@@ -41,26 +41,41 @@ fn prose_lines(text: &str) -> Vec<(usize, &str)> {
     out
 }
 
-/// The line with its code spans blanked out, so that a link written in backticks is not one.
-fn without_code_spans(line: &str) -> String {
-    let mut out = String::with_capacity(line.len());
+/// The prose lines with their code spans blanked out, so that a link written in backticks is
+/// not one. A code span may run on over a line break; a blank line ends the paragraph, and
+/// with it any span left open.
+fn without_code_spans<'a>(
+    lines: impl IntoIterator<Item = (usize, &'a str)>,
+) -> Vec<(usize, String)> {
     let mut in_code = false;
-    for c in line.chars() {
-        if c == '`' {
-            in_code = !in_code;
-            out.push(' ');
-        } else {
-            out.push(if in_code { ' ' } else { c });
+    let mut out = Vec::new();
+    for (n, line) in lines {
+        if line.trim().is_empty() {
+            in_code = false;
         }
+        let blanked: String = line
+            .chars()
+            .map(|c| {
+                if c == '`' {
+                    in_code = !in_code;
+                    ' '
+                } else if in_code {
+                    ' '
+                } else {
+                    c
+                }
+            })
+            .collect();
+        out.push((n, blanked));
     }
     out
 }
 
-/// The targets of the inline links and images of one line: `[text](target "title")`.
+/// The targets of the inline links and images of one line, code spans already blanked out:
+/// `[text](target "title")`.
 fn link_targets(line: &str) -> Vec<String> {
-    let line = without_code_spans(line);
     let mut targets = Vec::new();
-    let mut rest = line.as_str();
+    let mut rest = line;
     while let Some(i) = rest.find("](") {
         let after = &rest[i + 2..];
         // The target ends at the parenthesis that closes the one the link opened.
@@ -152,8 +167,8 @@ fn broken_links(file: &Path) -> Vec<String> {
         .display()
         .to_string();
     let mut broken = Vec::new();
-    for (n, line) in prose_lines(&text) {
-        for target in link_targets(line) {
+    for (n, line) in without_code_spans(prose_lines(&text)) {
+        for target in link_targets(&line) {
             if target.is_empty() || target.contains("://") || target.starts_with("mailto:") {
                 continue;
             }
@@ -220,9 +235,20 @@ fn slugs_are_github_s() {
 
 #[test]
 fn the_scanner_sees_links_and_skips_code() {
+    let prose = |text: &'static str| -> Vec<String> {
+        without_code_spans(prose_lines(text))
+            .iter()
+            .flat_map(|(_, line)| link_targets(line))
+            .collect()
+    };
     assert_eq!(
-        link_targets("see [a](docs/a.md#x) and ![f](fig.png \"title\") but not `[b](c.md)`"),
+        prose("see [a](docs/a.md#x) and ![f](fig.png \"title\") but not `[b](c.md)`"),
         vec!["docs/a.md#x", "fig.png"]
+    );
+    assert_eq!(
+        prose("a span `that runs\non [b](c.md)` ends; [d](e.md)\n\n`open\n\n[f](g.md)"),
+        vec!["e.md", "g.md"],
+        "a code span runs on over a line break, and ends with its paragraph"
     );
     assert_eq!(
         link_targets("[q](<with space.md>) [p](f(1).md)"),
