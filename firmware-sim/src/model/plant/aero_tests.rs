@@ -4,8 +4,9 @@
 use super::*;
 
 /// Reference ranges for a thin rectangular flat plate of aspect ratio 1–1.5 at Re ≈ 10⁵, flow
-/// along the chord. Each range is the spread of the cited measurements (the model must fall
-/// inside it):
+/// along the chord. Each range is a summary of the spread the cited works report (the model must
+/// fall inside it). The ranges are summarised from the papers' text and figures, not digitised
+/// from their data: a finer check would read the published curves point by point.
 ///
 /// * [PM] Pelletier & Mueller, "Low Reynolds number aerodynamics of low-aspect-ratio,
 ///   thin/flat/cambered-plate wings", J. Aircraft 37(5), 2000: minimum C_D of the thin flat
