@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, lints, the Rust tests and the pymavlink suite, with every fuzz
 # target running beside the tests.
-# On a fresh machine it installs what it needs itself (socat, tmux, a venv with the pinned Python
-# packages in .venv, the vtol_twin pytest plugin into that venv).
+# On a fresh machine it installs what it needs itself (socat, tmux, iproute2 and nftables, a venv
+# with the pinned Python packages in .venv, the vtol_twin pytest plugin into that venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -28,6 +28,14 @@ setup() {
         export DEBIAN_FRONTEND=noninteractive
         apt-get update
         apt-get install -y tmux
+    fi
+
+    # The network test bed (tests/netbed, docs/network.md): namespaces and tc from iproute2,
+    # loss, duplication and partitions from nftables.
+    if ! command -v nft >/dev/null 2>&1 || ! command -v ip >/dev/null 2>&1 || ! command -v tc >/dev/null 2>&1; then
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update
+        apt-get install -y iproute2 nftables
     fi
 
     # The Python venv with the pinned requirements.
