@@ -67,6 +67,17 @@ table ip bed {
 }
 """
 
+# The ground namespace counts what reaches the daemon's vehicle link (after the delay stage).
+GROUND_RULESET = """
+table ip bed {
+    counter to_daemon {}
+    chain input {
+        type filter hook input priority 0; policy accept;
+        iifname "g" meta l4proto udp counter name to_daemon
+    }
+}
+"""
+
 
 def why_unsupported() -> str | None:
     """Why the bed cannot run here, or None."""
@@ -130,6 +141,7 @@ class Bed:
                 run(["ip", "addr", "add", f"{addr}/24", "dev", dev], ns)
                 run(["ip", "link", "set", dev, "up"], ns)
         run(["nft", "-f", "-"], self.link, stdin=LINK_RULESET)
+        run(["nft", "-f", "-"], self.ground, stdin=GROUND_RULESET)
 
     def close(self) -> None:
         self.stop_relay()
@@ -227,10 +239,20 @@ class Bed:
             run(["tc", "qdisc", "replace", "dev", dev, "root", "tbf", "rate", f"{bits_per_s}bit",
                  "burst", str(burst_bytes), "limit", str(queue_bytes)], self.link)
 
+    def client_tcp_loss(self, port: int, percent: int) -> None:
+        """Drops `percent` % of the TCP segments to local `port` in the client namespace: one
+        client's lossy link."""
+        run(["nft", "-f", "-"], self.client, stdin=(
+            "table ip client {\n chain input {\n  type filter hook input priority 0; policy accept;\n"
+            f"  tcp dport {port} numgen random mod 100 < {percent} drop\n }}\n}}\n"))
+
     def counters(self) -> dict[str, int]:
-        """Packets counted by the link's named counters."""
-        out = json.loads(run(["nft", "-j", "list", "counters", "table", "ip", "bed"], self.link))
-        return {c["counter"]["name"]: c["counter"]["packets"] for c in out["nftables"] if "counter" in c}
+        """Packets counted by the named counters of the link and ground namespaces."""
+        got = {}
+        for ns in (self.link, self.ground):
+            out = json.loads(run(["nft", "-j", "list", "counters", "table", "ip", "bed"], ns))
+            got.update({c["counter"]["name"]: c["counter"]["packets"] for c in out["nftables"] if "counter" in c})
+        return got
 
 
 def wait_for(cond, timeout: float, what: str, step: float = 0.05):
