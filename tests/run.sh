@@ -76,27 +76,39 @@ rm -f "$SETUP_LOG"
 
 # --- fuzzing, in the background while the tests run -------------------------------------------
 # Every fuzz target runs for 60 s of wall time, in eight streams of at most two targets, at the
-# idle scheduling class: they take only the CPU the tests leave, so they add no delay to a test,
-# and the streams end before the pymavlink suite does. A crash fails the run and leaves its
-# input in fuzz/regressions/.
+# idle scheduling class: they take only the CPU the tests leave, so they add no delay to a test.
+# Where the nightly toolchain and cargo-fuzz are installed the targets run under libFuzzer, with
+# coverage feedback (fuzz/libfuzzer/fuzz.sh builds them first, also at idle priority); elsewhere,
+# or with FUZZ_ENGINE=stable, under the stable seeded runner `vtol-fuzz`. A crash fails the run
+# and leaves its input in fuzz/regressions/, which `cargo test` replays from then on.
 FUZZ_LOGS="$(mktemp -d)"
 FUZZ_PIDS=()
+FUZZ_SCHED=(nice -n 19)
+if command -v chrt >/dev/null 2>&1; then FUZZ_SCHED=(chrt --idle 0); fi
+FUZZ_ENGINE="${FUZZ_ENGINE:-auto}"
+if [ "$FUZZ_ENGINE" = auto ]; then
+    FUZZ_ENGINE=stable
+    if fuzz/libfuzzer/fuzz.sh available; then FUZZ_ENGINE=libfuzzer; fi
+fi
 fuzz_stream() {
     local name="$1"; shift
-    local sched=(nice -n 19)
-    if command -v chrt >/dev/null 2>&1; then sched=(chrt --idle 0); fi
     # exec: the stream's process is the fuzzer itself, so the trap above can stop it.
-    exec "${sched[@]}" "$TARGET/debug/vtol-fuzz" run \
+    exec "${FUZZ_SCHED[@]}" "$TARGET/debug/vtol-fuzz" run \
         --seconds "${FUZZ_SECONDS:-60}" "$@" > "$FUZZ_LOGS/$name.log" 2>&1
 }
-fuzz_stream a tlog link_url & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream b param_file statustext & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream c twin_endpoint vehicle_source & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream d twin_param_file signing_state & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream e frame_decoder daemon_config & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream f mission_file sim_cli_values & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream g router tracker & FUZZ_PIDS+=($!); BG_PIDS+=($!)
-fuzz_stream h signing_verify & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+if [ "$FUZZ_ENGINE" = libfuzzer ]; then
+    "${FUZZ_SCHED[@]}" fuzz/libfuzzer/fuzz.sh ci "${FUZZ_SECONDS:-60}" > "$FUZZ_LOGS/libfuzzer.log" 2>&1 &
+    FUZZ_PIDS+=($!); BG_PIDS+=($!)
+else
+    fuzz_stream a tlog link_url & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream b param_file statustext & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream c twin_endpoint vehicle_source & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream d twin_param_file signing_state & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream e frame_decoder daemon_config & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream f mission_file sim_cli_values & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream g router tracker & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+    fuzz_stream h signing_verify & FUZZ_PIDS+=($!); BG_PIDS+=($!)
+fi
 
 stage "cargo test"
 cargo test --workspace
@@ -124,7 +136,7 @@ stage "pytest $PLUGIN/tests"
 "$VENV/bin/python" -m pytest -n 16 "$PLUGIN/tests"
 
 # --- the fuzz streams' results ---------------------------------------------------------------
-stage "waiting for the fuzz streams"
+stage "waiting for the fuzz streams ($FUZZ_ENGINE)"
 FUZZ_RC=0
 for pid in "${FUZZ_PIDS[@]}"; do
     wait "$pid" || FUZZ_RC=1
