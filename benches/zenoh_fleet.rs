@@ -1,31 +1,40 @@
-//! Fleet telemetry over Zenoh into one ground daemon.
+//! Fleet telemetry over Zenoh into one ground daemon, or a larger fleet into several.
 //!
 //! ```text
 //! cargo bench --bench zenoh_fleet                # 100 vehicles, 10 s measured, prints a table
 //! cargo bench --bench zenoh_fleet -- --runs 3    # three runs; every figure is the median
 //! cargo test  --bench zenoh_fleet                # smoke run: 5 vehicles, 1 s
+//! ZENOH_FLEET_VEHICLES=1000 ZENOH_FLEET_DAEMONS=4 ZENOH_FLEET_SECONDS=60 \
+//!     cargo bench --bench zenoh_fleet            # a thousand vehicles over four daemons
 //! ```
-//! (`ZENOH_FLEET_VEHICLES=N` and `ZENOH_FLEET_SECONDS=S` change the size and the length.)
+//! (`ZENOH_FLEET_VEHICLES=N` and `ZENOH_FLEET_SECONDS=S` change the size and the length;
+//! `ZENOH_FLEET_DAEMONS=D` splits the vehicles over D ground daemons, at most 250 each.)
+//!
+//! MAVLink system ids stop at 255, so a fleet larger than that is served by several daemons,
+//! each selecting its part by key expression: daemon K runs `--vehicle 'zenoh:bench-dK/*'`
+//! (the key expression `vtol/bench-dK/*`) and its vehicles are `bench-dK/v1` … `bench-dK/v250`,
+//! system ids 1 to 250 within each part, all on the one router.
 //!
 //! Set-up, all on loopback TCP:
 //! - a Zenoh router: this executable re-run as `--router ENDPOINT`, its own process (a session
 //!   in router mode, what `zenohd` runs);
-//! - the ground daemon, the real binary: `vtol-gcs run --vehicle 'zenoh:bench/*' --zenoh-mode
-//!   client --zenoh-connect ROUTER --serve udpout:127.0.0.1:SINK --log-dir TMP --headless`
-//!   (tlog on);
+//! - each ground daemon, the real binary: `vtol-gcs run --vehicle 'zenoh:bench-dK/*'
+//!   --zenoh-mode client --zenoh-connect ROUTER --serve udpout:127.0.0.1:SINK --log-dir TMP
+//!   --headless` (tlog on);
 //! - the vehicles' ends, in this process: one client session of the router with, per vehicle,
-//!   a liveliness token on `vtol/bench/vN` and a publisher on `vtol/bench/vN/from_vehicle`
-//!   (what `vtol-gcs run --serve zenoh:bench/vN` declares). Each vehicle (system id N)
+//!   a liveliness token on `vtol/bench-dK/vN` and a publisher on `vtol/bench-dK/vN/from_vehicle`
+//!   (what `vtol-gcs run --serve zenoh:bench-dK/vN` declares). Each vehicle (system id N)
 //!   publishes ATTITUDE at 50 Hz, SERVO_OUTPUT_RAW at 10 Hz and HEARTBEAT at 1 Hz, one frame per
 //!   publication, on a fixed schedule with the vehicles spread over each 20 ms tick;
-//! - the client: a UDP socket in this process, where the daemon sends everything.
+//! - the clients: a UDP socket per daemon in this process, where that daemon sends everything.
 //!
 //! After a warm-up (every vehicle heard at the client, then 1 s), a measured window: delivered
 //! rate = telemetry frames (ATTITUDE and SERVO_OUTPUT_RAW) published in the window and received
 //! by the client / window; loss = 1 − received / published; latency = receive time − publication
 //! time per frame (both in this process, matched by system id, message and sequence number);
-//! CPU = the ground daemon's CPU time over the window (`/proc/<pid>/task/*/schedstat`, all
-//! threads) per second (100 % = one core) and per delivered frame; the router's likewise.
+//! CPU = the ground daemons' CPU time over the window (`/proc/<pid>/task/*/schedstat`, all
+//! threads) per second (100 % = one core) and per delivered frame, and the busiest daemon's;
+//! the router's likewise.
 
 use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
@@ -80,8 +89,9 @@ impl Sent {
                 .collect(),
         )
     }
-    fn slot(&self, sys: u8, seq: u8) -> &AtomicU64 {
-        &self.0[usize::from(sys) - 1][usize::from(seq)]
+    /// Vehicle `v` (0-based over the whole fleet).
+    fn slot(&self, v: usize, seq: u8) -> &AtomicU64 {
+        &self.0[v][usize::from(seq)]
     }
 }
 
@@ -90,11 +100,21 @@ struct Received {
     window: Option<(u64, u64)>,
     frames: u64,
     latencies_ns: Vec<u64>,
-    vehicles_heard: std::collections::HashSet<u8>,
+    /// Vehicles (0-based over the whole fleet) heard at their daemon's client.
+    vehicles_heard: std::collections::HashSet<usize>,
 }
 
-/// The client: receives the daemon's UDP copies and matches telemetry to its publication.
-fn sink(sock: &UdpSocket, sent: &Sent, vehicles: usize, acc: &Mutex<Received>, stop: &AtomicBool) {
+/// Which part of the fleet a client's daemon serves: vehicles `first ..= first + per - 1`
+/// (0-based), system ids 1 to `per`.
+#[derive(Clone, Copy)]
+struct Part {
+    first: usize,
+    per: usize,
+    vehicles: usize,
+}
+
+/// A client: receives its daemon's UDP copies and matches telemetry to its publication.
+fn sink(sock: &UdpSocket, part: Part, sent: &Sent, acc: &Mutex<Received>, stop: &AtomicBool) {
     sock.set_read_timeout(Some(Duration::from_millis(50)))
         .unwrap();
     let mut buf = [0u8; 2048];
@@ -108,15 +128,16 @@ fn sink(sock: &UdpSocket, sent: &Sent, vehicles: usize, acc: &Mutex<Received>, s
         }
         let (seq, sys) = (d[4], d[5]);
         let msgid = u32::from(d[7]) | u32::from(d[8]) << 8 | u32::from(d[9]) << 16;
-        if sys == 0 || usize::from(sys) > vehicles {
+        let v = part.first + usize::from(sys).wrapping_sub(1);
+        if sys == 0 || usize::from(sys) > part.per || v >= part.vehicles {
             continue;
         }
         let mut a = acc.lock().unwrap();
-        a.vehicles_heard.insert(sys);
+        a.vehicles_heard.insert(v);
         if !matches!(msgid, ATTITUDE | SERVO_OUTPUT_RAW) {
             continue;
         }
-        let t0 = sent.slot(sys, seq).load(Ordering::Acquire);
+        let t0 = sent.slot(v, seq).load(Ordering::Acquire);
         if let Some((start, end)) = a.window
             && t0 >= start
             && t0 < end
@@ -225,6 +246,7 @@ struct RunResult {
     p99_ms: f64,
     max_ms: f64,
     daemon_cpu_pct: f64,
+    busiest_daemon_cpu_pct: f64,
     daemon_ns_per_frame: f64,
     router_cpu_pct: f64,
 }
@@ -237,40 +259,54 @@ fn percentile(sorted: &[u64], p: f64) -> f64 {
     sorted[i] as f64 / 1e6
 }
 
-fn one_run(vehicles: usize, seconds: f64) -> RunResult {
+/// One measured run of `vehicles` over `daemons` ground daemons.
+// Over 80 lines: one sequence of set-up, publication schedule and tear-down; split, its parts
+// would pass half a dozen handles between them.
+fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
+    let per = vehicles.div_ceil(daemons);
     let port = free_tcp_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut rcmd = Command::new(std::env::current_exe().unwrap());
     rcmd.args(["--router", &endpoint]);
     let router = spawn_ready(rcmd, "ready");
 
-    let sink_sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let sink_addr = sink_sock.local_addr().unwrap();
     let log_dir = tempfile::tempdir().unwrap();
-    let mut dcmd = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"));
-    dcmd.args([
-        "run",
-        "--vehicle",
-        "zenoh:bench/*",
-        "--zenoh-mode",
-        "client",
-        "--zenoh-connect",
-        &endpoint,
-        "--serve",
-        &format!("udpout:{sink_addr}"),
-        "--headless",
-        "--log-dir",
-    ])
-    .arg(log_dir.path());
-    let daemon = spawn_ready(dcmd, "logging ");
-
     let sent = Arc::new(Sent::new(vehicles));
     let acc = Arc::new(Mutex::new(Received::default()));
     let stop = Arc::new(AtomicBool::new(false));
-    let sink_thread = {
+    let mut ground = Vec::new();
+    let mut sink_threads = Vec::new();
+    for d in 0..daemons {
+        let sink_sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let sink_addr = sink_sock.local_addr().unwrap();
+        let mut dcmd = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"));
+        dcmd.args([
+            "run",
+            "--vehicle",
+            &format!("zenoh:bench-d{d}/*"),
+            "--zenoh-mode",
+            "client",
+            "--zenoh-connect",
+            &endpoint,
+            "--serve",
+            &format!("udpout:{sink_addr}"),
+            "--headless",
+            "--log-dir",
+        ])
+        .arg(log_dir.path().join(format!("d{d}")));
+        ground.push(spawn_ready(dcmd, "logging "));
+        let part = Part {
+            first: d * per,
+            per,
+            vehicles,
+        };
         let (sent, acc, stop) = (Arc::clone(&sent), Arc::clone(&acc), Arc::clone(&stop));
-        std::thread::spawn(move || sink(&sink_sock, &sent, vehicles, &acc, &stop))
-    };
+        sink_threads.push(std::thread::spawn(move || {
+            sink(&sink_sock, part, &sent, &acc, &stop);
+        }));
+    }
+    let ground_cpu =
+        |ground: &[Proc]| -> Vec<u64> { ground.iter().map(|p| cpu_ns(p.0.id())).collect() };
 
     let rt = tokio::runtime::Runtime::new().unwrap();
     let result = rt.block_on(async {
@@ -284,20 +320,18 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
             .expect("vehicles' session");
         let mut publishers = Vec::new();
         let mut tokens = Vec::new();
-        for v in 1..=vehicles {
-            let name = format!("v{v}");
+        for v in 0..vehicles {
+            let (fleet, name) = (format!("bench-d{}", v / per), format!("v{}", v % per + 1));
             tokens.push(
                 session
                     .liveliness()
-                    .declare_token(vtol_link::transport::zenoh::liveliness_key("bench", &name))
+                    .declare_token(vtol_link::transport::zenoh::liveliness_key(&fleet, &name))
                     .await
                     .unwrap(),
             );
             publishers.push(
                 session
-                    .declare_publisher(vtol_link::transport::zenoh::from_vehicle_key(
-                        "bench", &name,
-                    ))
+                    .declare_publisher(vtol_link::transport::zenoh::from_vehicle_key(&fleet, &name))
                     .congestion_control(zenoh::qos::CongestionControl::Block)
                     .await
                     .unwrap(),
@@ -310,7 +344,7 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
         let mut ticks = 0u64;
         let mut warm_until: Option<u64> = None;
         let mut window: Option<(u64, u64)> = None;
-        let mut cpu0 = (0, 0);
+        let mut cpu0 = (Vec::new(), 0);
         loop {
             // Phase control at each tick start.
             let t = now_ns();
@@ -324,7 +358,7 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
                 let end = t + (seconds * 1e9) as u64;
                 window = Some((t, end));
                 acc.lock().unwrap().window = window;
-                cpu0 = (cpu_ns(daemon.0.id()), cpu_ns(router.0.id()));
+                cpu0 = (ground_cpu(&ground), cpu_ns(router.0.id()));
             }
             if let Some((_, end)) = window
                 && t >= end
@@ -342,7 +376,7 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
                 // Spread the vehicles over the tick.
                 let due = start + tick * ticks as u32 + tick * i as u32 / vehicles as u32;
                 tokio::time::sleep_until(due).await;
-                let sys = u8::try_from(i + 1).unwrap();
+                let sys = u8::try_from(i % per + 1).unwrap();
                 let mut frames = vec![(0usize, attitude(t_ms))];
                 if ticks.is_multiple_of(5) {
                     frames.push((1, servo(t_ms)));
@@ -360,7 +394,7 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
                         &msg,
                     );
                     let t_send = now_ns();
-                    sent.slot(sys, s).store(t_send, Ordering::Release);
+                    sent.slot(i, s).store(t_send, Ordering::Release);
                     if kind < 2 && window.is_some_and(|(a, b)| t_send >= a && t_send < b) {
                         published += 1;
                     }
@@ -370,20 +404,25 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
             ticks += 1;
         }
         let (w0, w1) = window.unwrap();
-        let cpu1 = (cpu_ns(daemon.0.id()), cpu_ns(router.0.id()));
+        let cpu1 = (ground_cpu(&ground), cpu_ns(router.0.id()));
         // Stragglers: wait up to 1 s for the window's last frames.
         let deadline = Instant::now() + Duration::from_secs(1);
         while Instant::now() < deadline && acc.lock().unwrap().frames < published {
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
         drop(tokens);
-        (published, w1 - w0, cpu1.0 - cpu0.0, cpu1.1 - cpu0.1)
+        let daemon_cpu: Vec<u64> = cpu1.0.iter().zip(&cpu0.0).map(|(b, a)| b - a).collect();
+        (published, w1 - w0, daemon_cpu, cpu1.1 - cpu0.1)
     });
     stop.store(true, Ordering::Relaxed);
-    sink_thread.join().unwrap();
-    drop(daemon);
+    for t in sink_threads {
+        t.join().unwrap();
+    }
+    drop(ground);
     drop(router);
-    let (published, window_ns, daemon_cpu, router_cpu) = result;
+    let (published, window_ns, daemon_cpus, router_cpu) = result;
+    let daemon_cpu: u64 = daemon_cpus.iter().sum();
+    let busiest = daemon_cpus.iter().copied().max().unwrap_or(0);
     let mut a = acc.lock().unwrap();
     a.latencies_ns.sort_unstable();
     let window_s = window_ns as f64 / 1e9;
@@ -395,6 +434,7 @@ fn one_run(vehicles: usize, seconds: f64) -> RunResult {
         p99_ms: percentile(&a.latencies_ns, 0.99),
         max_ms: percentile(&a.latencies_ns, 1.0),
         daemon_cpu_pct: 100.0 * daemon_cpu as f64 / window_ns as f64,
+        busiest_daemon_cpu_pct: 100.0 * busiest as f64 / window_ns as f64,
         daemon_ns_per_frame: daemon_cpu as f64 / a.frames.max(1) as f64,
         router_cpu_pct: 100.0 * router_cpu as f64 / window_ns as f64,
     }
@@ -416,28 +456,41 @@ fn main() {
     let quick = !args.iter().any(|a| a == "--bench");
     let vehicles = env("ZENOH_FLEET_VEHICLES").map_or(if quick { 5 } else { 100 }, |v| v as usize);
     let seconds = env("ZENOH_FLEET_SECONDS").unwrap_or(if quick { 1.0 } else { 10.0 });
+    let daemons = env("ZENOH_FLEET_DAEMONS").map_or(1, |v| v as usize);
     let runs = args
         .iter()
         .position(|a| a == "--runs")
         .and_then(|i| args.get(i + 1)?.parse::<usize>().ok())
         .unwrap_or(1)
         .max(1);
-    assert!((1..=255).contains(&vehicles), "1 to 255 vehicles");
+    assert!(daemons >= 1, "ZENOH_FLEET_DAEMONS: at least 1");
+    assert!(
+        vehicles >= 1 && vehicles.div_ceil(daemons) <= 250,
+        "1 to 250 vehicles per daemon (MAVLink system ids stop at 255)"
+    );
     let mut results = Vec::new();
     for r in 0..runs {
-        eprintln!("run {}/{runs}: {vehicles} vehicles for {seconds} s…", r + 1);
-        let res = one_run(vehicles, seconds);
         eprintln!(
-            "  published {} received {} p99 {:.2} ms daemon {:.1} % router {:.1} %",
-            res.published, res.received, res.p99_ms, res.daemon_cpu_pct, res.router_cpu_pct
+            "run {}/{runs}: {vehicles} vehicles over {daemons} daemon(s) for {seconds} s…",
+            r + 1
+        );
+        let res = one_run(vehicles, daemons, seconds);
+        eprintln!(
+            "  published {} received {} p99 {:.2} ms daemons {:.1} % (busiest {:.1} %) router {:.1} %",
+            res.published,
+            res.received,
+            res.p99_ms,
+            res.daemon_cpu_pct,
+            res.busiest_daemon_cpu_pct,
+            res.router_cpu_pct
         );
         results.push(res);
     }
     let m = |f: fn(&RunResult) -> f64| median(results.iter().map(f).collect());
     let expected = vehicles as f64 * 60.0;
     println!(
-        "\n## Zenoh fleet: {vehicles} vehicles × (50 Hz ATTITUDE + 10 Hz SERVO_OUTPUT_RAW), \
-         {seconds} s measured, {runs} run(s), medians\n"
+        "\n## Zenoh fleet: {vehicles} vehicles × (50 Hz ATTITUDE + 10 Hz SERVO_OUTPUT_RAW) \
+         over {daemons} ground daemon(s), {seconds} s measured, {runs} run(s), medians\n"
     );
     println!("| figure | value | target |");
     println!("|---|---|---|");
@@ -453,9 +506,13 @@ fn main() {
     println!("| latency p99 | {:.2} ms | < 10 ms |", m(|r| r.p99_ms));
     println!("| latency max | {:.2} ms | |", m(|r| r.max_ms));
     println!(
-        "| ground daemon CPU | {:.1} % of a core, {:.0} ns/frame | |",
+        "| ground daemon CPU | {:.1} % of a core in all, {:.0} ns/frame | |",
         m(|r| r.daemon_cpu_pct),
         m(|r| r.daemon_ns_per_frame)
+    );
+    println!(
+        "| busiest ground daemon | {:.1} % of a core | < 50 % |",
+        m(|r| r.busiest_daemon_cpu_pct)
     );
     println!(
         "| Zenoh router CPU | {:.1} % of a core | |",
