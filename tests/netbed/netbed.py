@@ -20,6 +20,7 @@ import ctypes
 import itertools
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -238,6 +239,11 @@ class Bed:
         for dev in ("mv", "mg"):
             run(["tc", "qdisc", "replace", "dev", dev, "root", "tbf", "rate", f"{bits_per_s}bit",
                  "burst", str(burst_bytes), "limit", str(queue_bytes)], self.link)
+
+    def rate_limit_drops(self) -> int:
+        """Packets the link's tbf queues dropped (both directions)."""
+        out = "".join(run(["tc", "-s", "qdisc", "show", "dev", dev], self.link) for dev in ("mv", "mg"))
+        return sum(int(m) for m in re.findall(r"dropped (\d+)", out))
 
     def client_tcp_loss(self, port: int, percent: int) -> None:
         """Drops `percent` % of the TCP segments to local `port` in the client namespace: one
