@@ -77,6 +77,20 @@ fn cpu_ns(pid: u32) -> u64 {
         .sum()
 }
 
+/// Resident memory (kB) and open descriptors of a process: what a soak watches stay flat.
+fn footprint(pid: u32) -> (u64, u64) {
+    let rss = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmRSS:"))
+                .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0);
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count() as u64);
+    (rss, fds)
+}
+
 /// Publication times (ns) by vehicle and sequence number (a vehicle's frames share one
 /// sequence, as on a real link; it wraps every 4 s, far beyond any latency).
 struct Sent(Vec<[AtomicU64; 256]>);
@@ -249,6 +263,9 @@ struct RunResult {
     busiest_daemon_cpu_pct: f64,
     daemon_ns_per_frame: f64,
     router_cpu_pct: f64,
+    /// The daemons' resident memory (MB) and descriptors, summed, at the window's start and end.
+    rss_mb: (f64, f64),
+    fds: (u64, u64),
 }
 
 fn percentile(sorted: &[u64], p: f64) -> f64 {
@@ -307,6 +324,13 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
     }
     let ground_cpu =
         |ground: &[Proc]| -> Vec<u64> { ground.iter().map(|p| cpu_ns(p.0.id())).collect() };
+    let ground_footprint = |ground: &[Proc]| -> (u64, u64) {
+        ground
+            .iter()
+            .map(|p| footprint(p.0.id()))
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    };
+    let mut foot0 = (0, 0);
 
     let rt = tokio::runtime::Runtime::new().unwrap();
     let result = rt.block_on(async {
@@ -359,6 +383,7 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
                 window = Some((t, end));
                 acc.lock().unwrap().window = window;
                 cpu0 = (ground_cpu(&ground), cpu_ns(router.0.id()));
+                foot0 = ground_footprint(&ground);
             }
             if let Some((_, end)) = window
                 && t >= end
@@ -405,6 +430,7 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
         }
         let (w0, w1) = window.unwrap();
         let cpu1 = (ground_cpu(&ground), cpu_ns(router.0.id()));
+        let foot1 = ground_footprint(&ground);
         // Stragglers: wait up to 1 s for the window's last frames.
         let deadline = Instant::now() + Duration::from_secs(1);
         while Instant::now() < deadline && acc.lock().unwrap().frames < published {
@@ -412,7 +438,7 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
         }
         drop(tokens);
         let daemon_cpu: Vec<u64> = cpu1.0.iter().zip(&cpu0.0).map(|(b, a)| b - a).collect();
-        (published, w1 - w0, daemon_cpu, cpu1.1 - cpu0.1)
+        (published, w1 - w0, daemon_cpu, cpu1.1 - cpu0.1, foot1)
     });
     stop.store(true, Ordering::Relaxed);
     for t in sink_threads {
@@ -420,7 +446,7 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
     }
     drop(ground);
     drop(router);
-    let (published, window_ns, daemon_cpus, router_cpu) = result;
+    let (published, window_ns, daemon_cpus, router_cpu, foot1) = result;
     let daemon_cpu: u64 = daemon_cpus.iter().sum();
     let busiest = daemon_cpus.iter().copied().max().unwrap_or(0);
     let mut a = acc.lock().unwrap();
@@ -437,6 +463,8 @@ fn one_run(vehicles: usize, daemons: usize, seconds: f64) -> RunResult {
         busiest_daemon_cpu_pct: 100.0 * busiest as f64 / window_ns as f64,
         daemon_ns_per_frame: daemon_cpu as f64 / a.frames.max(1) as f64,
         router_cpu_pct: 100.0 * router_cpu as f64 / window_ns as f64,
+        rss_mb: (foot0.0 as f64 / 1024.0, foot1.0 as f64 / 1024.0),
+        fds: (foot0.1, foot1.1),
     }
 }
 
@@ -517,6 +545,15 @@ fn main() {
     println!(
         "| Zenoh router CPU | {:.1} % of a core | |",
         m(|r| r.router_cpu_pct)
+    );
+    let last = results.last().expect("a run");
+    println!(
+        "| ground daemons' resident memory, window start → end (last run) | {:.1} → {:.1} MB | flat |",
+        last.rss_mb.0, last.rss_mb.1
+    );
+    println!(
+        "| ground daemons' open descriptors, window start → end (last run) | {} → {} | flat |",
+        last.fds.0, last.fds.1
     );
     // Smoke check: the fleet's telemetry arrives.
     for r in &results {
