@@ -6,6 +6,7 @@ serve ports facing the client namespace), the clients in the client namespace.
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -17,6 +18,7 @@ import pytest
 
 from conftest import ROOT, TWIN_BIN, VEHICLE_COMPID, VEHICLE_SYSID, Gcs, Twin
 from daemon_support import DAEMON_BIN, Daemon, frame_ids, raw_records, script
+from procs import STDOUT_TAIL
 
 sys.path.insert(0, str(ROOT / "tests" / "netbed"))
 import netbed  # noqa: E402
@@ -37,8 +39,6 @@ class NetDaemon(Daemon):
     total = 0
 
     def _drain_stdout(self, rest: bytes) -> None:
-        import os
-
         with self._new_lines:
             self.total = len(self.stdout_lines)
         fd = self.proc.stdout.fileno()
@@ -47,7 +47,7 @@ class NetDaemon(Daemon):
             *lines, rest = rest.split(b"\n")
             with self._new_lines:
                 self.stdout_lines.extend(x.decode(errors="replace") for x in lines)
-                del self.stdout_lines[:-200]
+                del self.stdout_lines[:-STDOUT_TAIL]
                 self.total += len(lines)
                 self._new_lines.notify_all()
         with self._new_lines:
