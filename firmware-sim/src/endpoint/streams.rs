@@ -354,9 +354,11 @@ impl Schedule {
             if now_us >= self.next_due_us[k] {
                 out.push(def.msgid);
                 // Keep the average rate exact; after a gap restart from now instead of bursting.
-                self.next_due_us[k] += iv;
+                // Saturating: an interval of ~1e19 µs (SET_MESSAGE_INTERVAL of 3e38, found by
+                // fuzzing) means never again, not a wrap to "due at every tick".
+                self.next_due_us[k] = self.next_due_us[k].saturating_add(iv);
                 if self.next_due_us[k] <= now_us {
-                    self.next_due_us[k] = now_us + iv;
+                    self.next_due_us[k] = now_us.saturating_add(iv);
                 }
             }
         }
@@ -638,6 +640,16 @@ mod tests {
             t += 7_000;
         }
         assert!((200..=201).contains(&count), "{count}");
+    }
+
+    #[test]
+    fn an_interval_beyond_the_clock_is_never_due_again() {
+        let mut s = Schedule::new([None; Group::ALL.len()]);
+        assert!(s.set_interval(id::ATTITUDE, 3.4e38, 5));
+        assert!(s.due(5).contains(&id::ATTITUDE));
+        for t in [6, 1_000_000, u64::MAX / 2] {
+            assert!(!s.due(t).contains(&id::ATTITUDE), "due again at {t}");
+        }
     }
 
     #[test]
