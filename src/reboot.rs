@@ -16,8 +16,39 @@ use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{ComponentId, SystemId};
 
-use crate::client::ClientHandle;
+use vtol_link::dialect::{MavCmd, MavResult};
+
+use crate::client::{ClientError, ClientHandle};
 use crate::tracker::VehicleState;
+
+/// Asks the vehicle's autopilot to restart (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, p1 = 1), which
+/// is also how a crashed vehicle is cleared. ArduPilot accepts it only disarmed.
+///
+/// # Errors
+/// [`ClientError::Refused`] with the reason (armed, unsupported), or a link error.
+pub async fn reboot(client: &ClientHandle) -> Result<(), ClientError> {
+    let o = client
+        .command_long(
+            MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN,
+            [1.0, 0., 0., 0., 0., 0., 0.],
+        )
+        .await?;
+    if o.accepted() {
+        return Ok(());
+    }
+    let what = match o.result {
+        MavResult::MAV_RESULT_DENIED => "denied (a vehicle reboots only disarmed)",
+        MavResult::MAV_RESULT_UNSUPPORTED => "unsupported",
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED => "temporarily rejected",
+        _ => "failed",
+    };
+    Err(ClientError::Refused {
+        reason: match o.reason {
+            Some(r) => format!("reboot {what}: {r}"),
+            None => format!("reboot {what}"),
+        },
+    })
+}
 
 /// The daemon's parameter downloads, as the status line shows them.
 #[derive(Debug, Default)]

@@ -431,3 +431,21 @@ fn messages_view_charts_array_elements() {
     assert_eq!(app.messages.charts[0][0].path, "repr_offset_q[1]");
     insta::assert_snapshot!(render(&mut app, &rec, 20_000, (120, 40)));
 }
+
+#[test]
+fn qstabilize_in_the_air_asks_and_names_the_fall() {
+    let mut rec = hover();
+    rec.feed(
+        19_990,
+        &MavMessage::EXTENDED_SYS_STATE(dialect::EXTENDED_SYS_STATE_DATA {
+            vtol_state: dialect::MavVtolState::MAV_VTOL_STATE_MC,
+            landed_state: dialect::MavLandedState::MAV_LANDED_STATE_IN_AIR,
+        }),
+    );
+    let mut app = app_with_params();
+    let reqs = app.on_key(key(KeyCode::Char('s')), &rec.state, rec.at(20_000));
+    assert!(reqs.is_empty(), "nothing sent before y: {reqs:?}");
+    let frame = render(&mut app, &rec, 20_000, (80, 24));
+    assert!(frame.contains("falls"), "{frame}");
+    insta::assert_snapshot!(frame);
+}

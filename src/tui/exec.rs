@@ -184,6 +184,8 @@ impl Control for ClientControl {
                 c.arm(force).await,
             ),
             Request::Disarm => command("disarm".into(), c.disarm(false).await),
+            Request::ForceDisarm => command("force disarm".into(), c.disarm(true).await),
+            Request::Reboot => command("reboot".into(), crate::reboot::reboot(c).await),
             Request::SetMode(name) => command(format!("mode {name}"), c.set_mode(name).await),
             Request::PositionTarget(ned) => {
                 let r = match c.target() {

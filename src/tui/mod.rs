@@ -10,6 +10,7 @@ pub mod app;
 pub mod exec;
 pub mod fields;
 pub mod view;
+pub mod vitals;
 
 use std::future::Future;
 use std::sync::Arc;

@@ -4,7 +4,7 @@ use ratatui::Frame;
 use ratatui::layout::{Constraint, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
-use ratatui::widgets::{Block, Cell, Clear, Paragraph, Row, Table};
+use ratatui::widgets::{Block, Cell, Clear, Paragraph, Row, Table, Wrap};
 
 use crate::tui::app::{App, Confirm};
 
@@ -21,16 +21,17 @@ pub(super) fn centered(area: Rect, w: u16, h: u16) -> Rect {
 
 pub(super) fn draw_confirm(f: &mut Frame<'_>, app: &App, c: &Confirm, area: Rect) {
     let mut lines = Vec::new();
-    let title = match c {
-        Confirm::Arm { force: false } => "Arm the vehicle?",
-        Confirm::Arm { force: true } => "FORCE arm (skip pre-arm checks)?",
-        Confirm::Disarm => "Disarm the vehicle (motors stop, even in the air)?",
-        Confirm::Upload => "Upload these gains as one transaction?",
-    };
+    let (title, consequence) = c.text();
     lines.push(Line::from(Span::styled(
         title,
         Style::new().add_modifier(Modifier::BOLD),
     )));
+    if let Some(text) = consequence {
+        lines.push(Line::from(Span::styled(
+            text,
+            Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+        )));
+    }
     if let (Confirm::Upload, Some(diff)) = (c, &app.params.diff) {
         for (name, now, wanted) in diff {
             let now = now.map_or_else(|| "(missing)".to_owned(), |v| v.to_string());
@@ -39,11 +40,16 @@ pub(super) fn draw_confirm(f: &mut Frame<'_>, app: &App, c: &Confirm, area: Rect
     }
     lines.push(Line::raw(""));
     lines.push(Line::raw("y: yes    any other key: cancel"));
-    let h = (lines.len() as u16 + 2).min(area.height);
+    // The consequence wraps inside the 60-column box: count its rows.
+    let rows: u16 = lines
+        .iter()
+        .map(|l| (l.width() as u16).div_ceil(58).max(1))
+        .sum();
+    let h = (rows + 2).min(area.height);
     let r = centered(area, 60, h);
     f.render_widget(Clear, r);
     f.render_widget(
-        Paragraph::new(lines).block(
+        Paragraph::new(lines).wrap(Wrap { trim: false }).block(
             Block::bordered()
                 .title(" Confirm ")
                 .border_style(Style::new().fg(Color::Yellow)),
@@ -57,10 +63,12 @@ pub(super) const HELP: &[(&str, &str)] = &[
     ("v / V", "next / previous vehicle (when several)"),
     ("?", "this help (any key closes it)"),
     ("q, Ctrl-C", "quit"),
-    ("a / A / d", "arm / force arm / disarm (then y to confirm)"),
+    ("a / A", "arm / force arm (then y to confirm)"),
+    ("d / D", "disarm / FORCE disarm (y confirms, n cancels)"),
+    ("R", "reboot the autopilot (disarmed; clears a crash)"),
     ("t", "take off: QHOVER (climbs to HOVER_ALT when armed)"),
     ("l", "land: QLAND"),
-    ("p / s", "QLOITER / QSTABILIZE"),
+    ("p / s", "QLOITER / QSTABILIZE (asks first in the air)"),
     (
         "arrows",
         "QLOITER: move the target 0.5 m north/south/east/west",

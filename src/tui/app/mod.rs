@@ -11,6 +11,10 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 use vtol_link::{ComponentId, SystemId};
 
 use crate::tracker::{VehicleState, VehicleView};
+use crate::tui::vitals::with_recovery;
+
+mod guard;
+mod lists;
 
 /// Step of the QLOITER position target per arrow key, m.
 pub const TARGET_STEP_M: f32 = 0.5;
@@ -81,8 +85,24 @@ pub enum Confirm {
         /// Force.
         force: bool,
     },
-    /// Disarm.
+    /// Disarm on the ground.
     Disarm,
+    /// Disarm while the vehicle reports it is in the air (it will refuse).
+    DisarmInAir,
+    /// Force disarm: the motors stop, in the air too.
+    ForceDisarm {
+        /// The vehicle was in the air when asked.
+        airborne: bool,
+    },
+    /// A mode that drops altitude control in the air.
+    Mode {
+        /// The mode.
+        name: &'static str,
+        /// What it would do, in words.
+        consequence: String,
+    },
+    /// Reboot the autopilot (disarmed only).
+    Reboot,
     /// Upload the loaded gains file (the diff is shown).
     Upload,
 }
@@ -97,6 +117,10 @@ pub enum Request {
     },
     /// Disarm the vehicle.
     Disarm,
+    /// Disarm even in flight.
+    ForceDisarm,
+    /// Reboot the autopilot.
+    Reboot,
     /// Switch mode by name.
     SetMode(&'static str),
     /// SET_POSITION_TARGET_LOCAL_NED to this north, east, down position, m.
@@ -399,218 +423,19 @@ impl App {
         self.on_command_key(key, state)
     }
 
-    fn on_confirm(&mut self, c: Confirm, key: KeyEvent) -> Vec<Request> {
-        let yes = matches!(key.code, KeyCode::Char('y' | 'Y'));
-        match (c, yes) {
-            (Confirm::Arm { force }, true) => {
-                self.note(
-                    Level::Info,
-                    if force { "force arm sent" } else { "arm sent" },
-                );
-                vec![Request::Arm { force }]
-            }
-            (Confirm::Disarm, true) => {
-                self.note(Level::Info, "disarm sent");
-                vec![Request::Disarm]
-            }
-            (Confirm::Upload, true) => {
-                self.params.progress = Some(("upload".into(), 0, 0));
-                vec![Request::PushGains]
-            }
-            (Confirm::Upload, false) => {
-                self.params.diff = None;
-                self.note(Level::Info, "upload cancelled");
-                Vec::new()
-            }
-            (_, false) => {
-                self.note(Level::Info, "cancelled");
-                Vec::new()
-            }
-        }
-    }
-
-    /// Text entry: filters, a parameter value, a file path.
-    fn on_text(&mut self, key: KeyEvent) -> Vec<Request> {
-        let is_filter = self.params.edit.is_none() && self.params.file_prompt.is_none();
-        let view = self.view;
-        let buf: &mut String = if let Some(e) = self.params.edit.as_mut() {
-            e
-        } else if let Some(p) = self.params.file_prompt.as_mut() {
-            p
-        } else if view == View::Params {
-            &mut self.params.filter
-        } else {
-            &mut self.messages.filter
-        };
-        match key.code {
-            KeyCode::Char(c) => {
-                buf.push(c);
-                // The list under a filter changes: start from its top.
-                if is_filter {
-                    match view {
-                        View::Params => self.params.selected = 0,
-                        _ => self.messages.selected = 0,
-                    }
-                }
-                Vec::new()
-            }
-            KeyCode::Backspace => {
-                buf.pop();
-                Vec::new()
-            }
-            KeyCode::Esc => {
-                if is_filter {
-                    buf.clear();
-                }
-                self.typing = false;
-                self.params.edit = None;
-                self.params.file_prompt = None;
-                Vec::new()
-            }
-            KeyCode::Enter => {
-                self.typing = false;
-                if let Some(text) = self.params.edit.take() {
-                    return self.submit_param(&text);
-                }
-                if let Some(path) = self.params.file_prompt.take() {
-                    let path = path.trim().to_owned();
-                    if path.is_empty() {
-                        return Vec::new();
-                    }
-                    self.note(Level::Info, format!("reading {path}"));
-                    return vec![Request::LoadGains(path)];
-                }
-                Vec::new()
-            }
-            _ => Vec::new(),
-        }
-    }
-
-    /// Validates a typed value for the selected parameter and asks for the write.
-    fn submit_param(&mut self, text: &str) -> Vec<Request> {
-        let rows = self.params.filtered();
-        let Some((_, (name, _))) = rows.get(self.params.selected) else {
-            return Vec::new();
-        };
-        let name = name.clone();
-        match text.trim().parse::<f32>() {
-            Ok(v) if v.is_finite() => {
-                self.params
-                    .status
-                    .insert(name.clone(), ParamStatus::Pending(v));
-                vec![Request::ParamSet { name, value: v }]
-            }
-            _ => {
-                let reason = format!("{text:?} is not a finite number");
-                self.note(Level::Error, format!("{name}: {reason}"));
-                self.params
-                    .status
-                    .insert(name, ParamStatus::Refused(reason));
-                Vec::new()
-            }
-        }
-    }
-
-    fn on_params_key(&mut self, key: KeyEvent) -> Option<Vec<Request>> {
-        let n = self.params.filtered().len();
-        match key.code {
-            KeyCode::Up => self.params.selected = self.params.selected.saturating_sub(1),
-            KeyCode::Down => {
-                self.params.selected = (self.params.selected + 1).min(n.saturating_sub(1));
-            }
-            KeyCode::PageUp => self.params.selected = self.params.selected.saturating_sub(10),
-            KeyCode::PageDown => {
-                self.params.selected = (self.params.selected + 10).min(n.saturating_sub(1));
-            }
-            KeyCode::Char('/') => {
-                self.params.filter.clear();
-                self.typing = true;
-            }
-            KeyCode::Esc => self.params.filter.clear(),
-            KeyCode::Enter if n > 0 => {
-                self.params.edit = Some(String::new());
-                self.typing = true;
-            }
-            KeyCode::Char('f') => {
-                self.params.file_prompt = Some("config/gains.param".into());
-                self.typing = true;
-            }
-            KeyCode::Char('r') => {
-                self.params.progress = Some(("download".into(), 0, 0));
-                return Some(vec![Request::ParamsPull]);
-            }
-            _ => return None,
-        }
-        Some(Vec::new())
-    }
-
-    fn on_messages_key(&mut self, key: KeyEvent) -> Option<Vec<Request>> {
-        let m = &mut self.messages;
-        match key.code {
-            KeyCode::Up if m.in_fields => m.field = m.field.saturating_sub(1),
-            KeyCode::Down if m.in_fields => {
-                m.field = (m.field + 1).min(m.listed_fields.len().saturating_sub(1));
-            }
-            KeyCode::Up => {
-                m.selected = m.selected.saturating_sub(1);
-                m.field = 0;
-            }
-            KeyCode::Down => {
-                m.selected = (m.selected + 1).min(m.listed.len().saturating_sub(1));
-                m.field = 0;
-            }
-            KeyCode::Right => m.in_fields = true,
-            KeyCode::Left => m.in_fields = false,
-            KeyCode::Char('/') => {
-                m.filter.clear();
-                self.typing = true;
-            }
-            KeyCode::Esc => m.filter.clear(),
-            KeyCode::Enter => {
-                let (Some(&(system, component, message)), Some(path)) =
-                    (m.listed.get(m.selected), m.listed_fields.get(m.field))
-                else {
-                    return Some(Vec::new());
-                };
-                let key = SeriesKey {
-                    system,
-                    component,
-                    message,
-                    path: path.clone(),
-                };
-                if m.charts.is_empty() {
-                    m.charts.push(Vec::new());
-                }
-                let chart = m.charts.last_mut().unwrap_or_else(|| unreachable!());
-                if !chart.contains(&key) {
-                    chart.push(key);
-                }
-            }
-            KeyCode::Char('n') => m.charts.push(Vec::new()),
-            KeyCode::Delete | KeyCode::Backspace => {
-                if let Some(chart) = m.charts.last_mut() {
-                    chart.pop();
-                    if chart.is_empty() {
-                        m.charts.pop();
-                    }
-                }
-            }
-            _ => return None,
-        }
-        Some(Vec::new())
-    }
-
     /// Flight commands: arm, modes, QLOITER target, pushes, chart window.
     fn on_command_key(&mut self, key: KeyEvent, state: &VehicleState) -> Vec<Request> {
         let vehicle = self.vehicle(state);
         match key.code {
             KeyCode::Char('a') => self.confirm = Some(Confirm::Arm { force: false }),
             KeyCode::Char('A') => self.confirm = Some(Confirm::Arm { force: true }),
-            KeyCode::Char('d') => self.confirm = Some(Confirm::Disarm),
-            KeyCode::Char('t') => return self.mode("QHOVER"),
-            KeyCode::Char('l') => return self.mode("QLAND"),
-            KeyCode::Char('p') => return self.mode("QLOITER"),
-            KeyCode::Char('s') => return self.mode("QSTABILIZE"),
+            KeyCode::Char('d') => self.guarded_disarm(state),
+            KeyCode::Char('D') => self.guarded_force_disarm(state),
+            KeyCode::Char('R') => self.guarded_reboot(state),
+            KeyCode::Char('t') => return self.guarded_mode("QHOVER", state),
+            KeyCode::Char('l') => return self.guarded_mode("QLAND", state),
+            KeyCode::Char('p') => return self.guarded_mode("QLOITER", state),
+            KeyCode::Char('s') => return self.guarded_mode("QSTABILIZE", state),
             KeyCode::Char(c @ ('x' | 'X' | 'c' | 'C' | 'z' | 'Z')) => {
                 let (axis, sign) = match c {
                     'x' => ("ROLL", 1.0),
@@ -688,7 +513,7 @@ impl App {
         match outcome {
             Outcome::Command { what, result } => match result {
                 Ok(()) => self.note(Level::Ok, format!("{what}: done")),
-                Err(e) => self.note(Level::Error, format!("{what}: {e}")),
+                Err(e) => self.note(Level::Error, format!("{what}: {}", with_recovery(&e))),
             },
             Outcome::Params(table) => {
                 self.params.table = table;
