@@ -1,5 +1,5 @@
 //! The client commands of the binary: `params pull|push|get|set|diff|save`, `arm`, `disarm`,
-//! `mode`, each on its own link (`--link`, default the daemon's serve port).
+//! `mode`, `reboot`, each on its own link (`--link`, default the daemon's serve port).
 //!
 //! Exit status (docs/cli.md): 0 done; 1 refused by the vehicle (nothing left changed; for
 //! `params diff`: the vehicle differs from the file); 2 a usage or input error (bad file,
@@ -175,7 +175,8 @@ impl From<ClientError> for Failure {
         };
         Failure {
             code,
-            message: e.to_string(),
+            // A crash is cleared by a reboot: every refusal that names one says so.
+            message: vtol_gcs::tui::vitals::with_recovery(&e.to_string()),
         }
     }
 }
@@ -387,6 +388,22 @@ pub fn arm(args: ArmArgs, arm: bool) -> ExitCode {
             c.disarm(force).await?
         }
         println!("{}", if arm { "armed" } else { "disarmed" });
+        Ok(())
+    })
+}
+
+/// `vtol-gcs reboot`.
+#[derive(Debug, Args)]
+pub struct RebootArgs {
+    #[command(flatten)]
+    link: LinkArgs,
+}
+
+/// `reboot`: restarts the vehicle's autopilot (disarmed only), which clears a crash.
+pub fn reboot(args: RebootArgs) -> ExitCode {
+    with_client(&args.link, |c| async move {
+        vtol_gcs::reboot::reboot(&c).await?;
+        println!("rebooting");
         Ok(())
     })
 }

@@ -50,6 +50,8 @@ enum Command {
     Disarm(client_cli::ArmArgs),
     /// Change the flight mode (QSTABILIZE, QHOVER, QLOITER, QLAND, ...).
     Mode(client_cli::ModeArgs),
+    /// Reboot the vehicle's autopilot (disarmed only); clears a crash.
+    Reboot(client_cli::RebootArgs),
     /// Look at flight logs: stats, export (CSV, MCAP), plot (PNG).
     #[command(subcommand)]
     Log(log_cli::LogCommand),
@@ -198,6 +200,7 @@ fn main() -> std::process::ExitCode {
         Some(Command::Arm(a)) => return client_cli::arm(a, true),
         Some(Command::Disarm(a)) => return client_cli::arm(a, false),
         Some(Command::Mode(a)) => return client_cli::mode(a),
+        Some(Command::Reboot(a)) => return client_cli::reboot(a),
         Some(Command::Log(cmd)) => log_cli::run(cmd),
         Some(Command::Run(args)) => run(args),
         Some(Command::Tui(t)) => ui(t.run, t.connect),

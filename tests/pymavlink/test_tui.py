@@ -315,3 +315,43 @@ def test_a_zenoh_fleet_in_the_terminal(screen_factory, twin_factory, daemon_fact
 
     s.keys("q")
     s.assert_exited_cleanly()
+
+
+def test_qstabilize_in_the_air_asks_first_and_reboot_clears_the_crash(screen_factory):
+    """`s` while hovering asks first, naming the fall, and `n` leaves the vehicle hovering in
+    QHOVER; confirmed, the vehicle falls and crashes. Arming is then refused with the way out,
+    and `R` (confirmed) reboots the vehicle, which arms again."""
+    s = screen_factory(f"{shlex.quote(str(GCS_BIN))} tui --serve tcpin:127.0.0.1:0 --no-log")
+    s.wait(r"STANDBY", 30)
+    s.keys("t")
+    s.wait(r"mode QHOVER: done")
+    s.keys("a")
+    s.wait(r"Arm the vehicle\?")
+    s.keys("y")
+    s.wait_value(ALT, lambda a: a > 0.8, 30, "climbing")
+    s.keys("s")
+    s.wait(r"Switch to QSTABILIZE in the air\?")
+    s.wait(r"vehicle falls")
+    s.keys("n")
+    s.wait(r"mode QSTABILIZE cancelled: nothing sent")
+    s.wait_value(ALT, lambda a: a > 0.8, 5, "still hovering after n")
+    assert "QHOVER ARMED" in s.text()
+
+    s.keys("s")
+    s.wait(r"Switch to QSTABILIZE")
+    s.keys("y")
+    s.wait(r"EMERGENCY", 30)
+    s.wait(r"Crash detected")
+    s.keys("a")
+    s.keys("y")
+    s.wait(r"vtol-gcs reboot", 15)
+    s.keys("R")
+    s.wait(r"Reboot the autopilot\?")
+    s.keys("y")
+    s.wait(r"reboot: done", 15)
+    s.wait(r"STANDBY", 40)
+    s.keys("a")
+    s.keys("y")
+    s.wait(r"arm: done", 15)
+    s.keys("q")
+    s.assert_exited_cleanly()
