@@ -10,6 +10,7 @@ use crate::tap::{LinkInfo, Side};
 use crate::tracker::VehicleState;
 use crate::trust::policy::EndpointPolicy;
 use crate::trust::signing::SigningSnapshot;
+use crate::tui::vitals::{Severity, Vitals, vitals};
 
 /// Formats the status line for the first vehicle (or says none is heard yet).
 #[must_use]
@@ -52,6 +53,7 @@ pub fn line(
                 " | pwm {} {} {} {} {}",
                 v.servo_us[0], v.servo_us[1], v.servo_us[2], v.servo_us[3], v.servo_us[4]
             );
+            s.push_str(&vitals_part(&vitals(state, v), v.system_status));
         }
     }
     if let Some(v) = state.vehicles.values().next()
@@ -108,6 +110,48 @@ pub fn line(
                 let _ = write!(s, " | tlog {records} rec");
             }
         }
+    }
+    s
+}
+
+/// The status line's health part, as the UI's header shows it: the state with its reason, a
+/// failsafe, battery, GPS, home and unhealthy sensors.
+#[must_use]
+pub fn vitals_part(v: &Vitals, state: vtol_link::dialect::MavState) -> String {
+    use vtol_link::dialect::MavState as S;
+    let mut s = String::new();
+    match (state, &v.reason) {
+        (S::MAV_STATE_CRITICAL | S::MAV_STATE_EMERGENCY, Some(r)) => {
+            let name = if state == S::MAV_STATE_CRITICAL {
+                "CRITICAL"
+            } else {
+                "EMERGENCY"
+            };
+            let _ = write!(s, " | {name}: {r}");
+        }
+        (S::MAV_STATE_CRITICAL, None) => s.push_str(" | CRITICAL"),
+        (S::MAV_STATE_EMERGENCY, None) => s.push_str(" | EMERGENCY"),
+        _ => {}
+    }
+    if let Some(fs) = &v.failsafe {
+        let _ = write!(s, " | FAILSAFE {fs}");
+    }
+    if let Some(b) = &v.battery {
+        let flag = match b.severity {
+            Severity::Ok => "",
+            Severity::Warn => " LOW",
+            Severity::Bad => " CRITICAL",
+        };
+        let _ = write!(s, " | bat {}{flag}", b.summary());
+    }
+    if let Some((fix, sats, _)) = v.gps {
+        let _ = write!(s, " | gps {fix} {sats} sats");
+    }
+    if let Some((d, b)) = v.home {
+        let _ = write!(s, " | home {d:.1} m {b:03.0}°");
+    }
+    if !v.unhealthy.is_empty() {
+        let _ = write!(s, " | unhealthy {}", v.unhealthy.join(", "));
     }
     s
 }

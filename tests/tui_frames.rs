@@ -449,3 +449,72 @@ fn qstabilize_in_the_air_asks_and_names_the_fall() {
     assert!(frame.contains("falls"), "{frame}");
     insta::assert_snapshot!(frame);
 }
+
+/// The vitals row from what a vehicle reports: battery (low, in yellow), GPS, home, a failed
+/// sensor, and the reason for an EMERGENCY.
+#[test]
+fn vitals_row_battery_gps_home_and_the_reason_for_an_emergency() {
+    let mut rec = hover();
+    let mut voltages = [u16::MAX; 10];
+    voltages[..3].copy_from_slice(&[3610, 3610, 3610]);
+    rec.feed(
+        19_900,
+        &MavMessage::BATTERY_STATUS(dialect::BATTERY_STATUS_DATA {
+            voltages,
+            current_battery: 512,
+            current_consumed: 1100,
+            battery_remaining: 15,
+            time_remaining: 95,
+            charge_state: dialect::MavBatteryChargeState::MAV_BATTERY_CHARGE_STATE_LOW,
+            ..Default::default()
+        }),
+    );
+    rec.feed(
+        19_900,
+        &MavMessage::GPS_RAW_INT(dialect::GPS_RAW_INT_DATA {
+            fix_type: dialect::GpsFixType::GPS_FIX_TYPE_3D_FIX,
+            satellites_visible: 12,
+            ..Default::default()
+        }),
+    );
+    rec.feed(
+        19_900,
+        &MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
+            x: -3.0,
+            y: -3.0,
+            ..Default::default()
+        }),
+    );
+    use dialect::MavSysStatusSensor as S;
+    let present = S::MAV_SYS_STATUS_SENSOR_3D_GYRO | S::MAV_SYS_STATUS_AHRS;
+    rec.feed(
+        19_900,
+        &MavMessage::SYS_STATUS(dialect::SYS_STATUS_DATA {
+            onboard_control_sensors_present: present,
+            onboard_control_sensors_enabled: present,
+            onboard_control_sensors_health: S::MAV_SYS_STATUS_SENSOR_3D_GYRO,
+            voltage_battery: 10830,
+            current_battery: 512,
+            battery_remaining: 15,
+            ..Default::default()
+        }),
+    );
+    rec.status(
+        19_950,
+        dialect::MavSeverity::MAV_SEVERITY_CRITICAL,
+        "Crash detected",
+    );
+    let MavMessage::HEARTBEAT(mut hb) = heartbeat(18, false) else {
+        unreachable!()
+    };
+    hb.system_status = MavState::MAV_STATE_EMERGENCY;
+    rec.feed(19_990, &MavMessage::HEARTBEAT(hb));
+    let mut app = app_with_params();
+    let frame = render(&mut app, &rec, 20_000, (80, 24));
+    assert!(frame.contains("EMERGENCY"), "{frame}");
+    assert!(frame.contains("why: Crash detected"), "{frame}");
+    assert!(frame.contains("BAT 10.8V 15% 5.1A 1:35"), "{frame}");
+    assert!(frame.contains("home 4.3 m 044°"), "{frame}");
+    assert!(frame.contains("bad: EKF"), "{frame}");
+    insta::assert_snapshot!(frame);
+}

@@ -199,15 +199,35 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
                     .map(|_| "battery critical".to_owned())
             });
     }
+    let failsafe = v
+        .status_texts
+        .iter()
+        .rev()
+        .find(|(_, t)| is_failsafe(t))
+        .map(|(_, t)| t.clone());
+    // The vehicle's battery failsafe outranks its charge estimate.
+    if let (Some(b), Some(text)) = (out.battery.as_mut(), &failsafe) {
+        let lower = text.to_ascii_lowercase();
+        if lower.starts_with("battery") {
+            let sev = if lower.contains("critical") || lower.contains("terminate") {
+                Severity::Bad
+            } else {
+                Severity::Warn
+            };
+            b.severity = b.severity.max(sev);
+        }
+    }
     if v.armed {
-        out.failsafe = v
-            .status_texts
-            .iter()
-            .rev()
-            .find(|(_, t)| t.to_ascii_lowercase().contains("failsafe"))
-            .map(|(_, t)| t.clone());
+        out.failsafe = failsafe;
     }
     out
+}
+
+/// A failsafe's STATUSTEXT: ArduPilot's "Battery 1 is low …" or any "failsafe".
+fn is_failsafe(text: &str) -> bool {
+    let t = text.to_ascii_lowercase();
+    t.contains("failsafe")
+        || (t.starts_with("battery") && (t.contains(" is low") || t.contains(" is critical")))
 }
 
 /// Formats seconds as `m:ss`.

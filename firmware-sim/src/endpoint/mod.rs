@@ -20,6 +20,7 @@
 //! (commands, PARAM_SET, mission items) are read from the frame's zero-filled payload.
 
 pub mod commands;
+mod failsafe;
 pub mod ftp;
 pub mod guided;
 pub mod heartbeat;
@@ -120,6 +121,8 @@ pub struct Endpoint {
     commands: commands::CommandMemory,
     manual: manual::ManualState,
     failsafe: heartbeat::Failsafe,
+    /// The battery failsafe's level this boot.
+    battery_failsafe: crate::nav::failsafe::BatteryFailsafe,
     /// One-shot `SIM_PUSH_*` parameters to reset to 0 at a sim time, µs.
     push_resets: Vec<(&'static str, u64)>,
     last_armed: bool,
@@ -189,6 +192,7 @@ impl Endpoint {
             commands: commands::CommandMemory::default(),
             manual: manual::ManualState::default(),
             failsafe: heartbeat::Failsafe::default(),
+            battery_failsafe: crate::nav::failsafe::BatteryFailsafe::default(),
             push_resets: Vec::new(),
             last_armed,
             last_state,
@@ -321,6 +325,7 @@ impl Endpoint {
         self.push_resets.clear();
         self.manual = manual::ManualState::default();
         self.failsafe = heartbeat::Failsafe::default();
+        self.battery_failsafe = crate::nav::failsafe::BatteryFailsafe::default();
         self.commands = commands::CommandMemory::default();
         self.prearm = readiness::PreArmReport::default();
         let groups = self.group_rates_from_params();
@@ -380,6 +385,7 @@ impl Endpoint {
         self.manual.expire(self.now_us, &mut self.vehicle);
         self.expire_pushes();
         self.check_failsafe();
+        self.check_battery_failsafe();
         self.report_vehicle_events();
         self.report_prearm();
         self.mission_timeouts();

@@ -113,7 +113,7 @@ pub struct VehicleConfig {
     pub position_setpoint_m: Option<Vector3<f64>>,
     /// RC receiver pulse widths at start, µs (0 = no signal), as [`Vehicle::set_rc_input`].
     pub rc_us: [u16; 8],
-    /// The flight battery (full at start).
+    /// The flight battery (full at start); by default a bench supply that never runs flat.
     pub battery: BatteryConfig,
 }
 
@@ -135,7 +135,7 @@ impl Default for VehicleConfig {
             calibrated: false,
             position_setpoint_m: None,
             rc_us: [0; 8],
-            battery: BatteryConfig::default(),
+            battery: BatteryConfig::bench_supply(),
         }
     }
 }
@@ -508,6 +508,7 @@ impl Vehicle {
             );
             self.battery_pending_s = 0.0;
             self.telemetry.battery = *self.battery.state();
+            self.actuators.set_supply(self.battery.supply_ratio());
         }
         if self.telemetry.armed && self.telemetry.state != SystemState::Emergency {
             // Failsafe: flying on pilot throttle with no receiver signal.

@@ -1,6 +1,7 @@
 //! The onboard navigator and configuration: geodesy, missions and their files, the guidance that
 //! turns a mode and a mission into setpoints, and the vehicle's parameter table.
 
+pub mod failsafe;
 pub mod globe;
 pub mod mission;
 pub mod navigation;

@@ -189,6 +189,13 @@ pub static TABLE: &[ParamDef] = &[
     def("NAV_ALT_MAX", F32, "m", (1.0, 1000.0), 50.0, RW, "Targets higher above home are refused"),
     def("BATT_CAPACITY", I32, "mAh", (100.0, 100_000.0), 1300.0, RW, "Battery capacity (after restart)"),
     def("SIM_BATT_VOLTAGE", F32, "V", (1.0, 60.0), 12.6, RW, "Voltage of the full battery at rest (after restart)"),
+    def("BATT_LOW_VOLT", F32, "V", (0.0, 60.0), 10.5, RW, "Low battery below this voltage for BATT_LOW_TIMER; 0 = off"),
+    def("BATT_CRT_VOLT", F32, "V", (0.0, 60.0), 0.0, RW, "Critical battery below this voltage for BATT_LOW_TIMER; 0 = off"),
+    def("BATT_LOW_MAH", F32, "mAh", (0.0, 100_000.0), 0.0, RW, "Low battery below this remaining capacity; 0 = off"),
+    def("BATT_CRT_MAH", F32, "mAh", (0.0, 100_000.0), 0.0, RW, "Critical battery below this remaining capacity; 0 = off"),
+    def("BATT_LOW_TIMER", I16, "s", (0.0, 120.0), 10.0, RW, "Seconds the voltage must stay low before the failsafe"),
+    def("BATT_FS_LOW_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Low battery action: 0 none, 1 RTL (QRTL), 2 Land, 3 Terminate, 4 QLand, 6 Loiter to QLand"),
+    def("BATT_FS_CRT_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Critical battery action: as BATT_FS_LOW_ACT"),
     def("ARMING_CHECK", I32, "", (0.0, 1.0), 1.0, RO, "Pre-arm checks (calibration, crash, mode, landed, level): 1 = all, always on"),
 ];
 

@@ -6,9 +6,12 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::Paragraph;
 
+use vtol_link::dialect::MavState;
+
 use super::{Snapshot, level_style, status_name};
 use crate::tap::Side;
 use crate::tui::app::{App, View};
+use crate::tui::vitals::{Severity, Vitals, vitals};
 
 pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
     let now = snap.now;
@@ -37,7 +40,11 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
             } else {
                 Span::styled("disarmed", Style::new().fg(Color::Green))
             });
-            spans.push(Span::raw(format!(" {}", status_name(v.system_status))));
+            spans.push(Span::raw(" "));
+            spans.push(Span::styled(
+                status_name(v.system_status),
+                status_style(v.system_status),
+            ));
             let flight = v
                 .armed_since
                 .map_or(0, |t| now.saturating_duration_since(t).as_secs());
@@ -103,10 +110,110 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         "  Tab: next view  ?: help  q: quit",
         Style::new().fg(Color::DarkGray),
     ));
-    f.render_widget(
-        Paragraph::new(vec![Line::from(spans), Line::from(tabs)]),
-        area,
-    );
+    let mut lines = vec![Line::from(spans)];
+    lines.extend(vitals_lines(app, snap, area.width));
+    lines.push(Line::from(tabs));
+    f.render_widget(Paragraph::new(lines), area);
+}
+
+/// The vitals rows of the shown vehicle, as many as `width` needs (one on a wide terminal).
+pub(super) fn vitals_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> Vec<Line<'static>> {
+    match app.vehicle(snap.state) {
+        None => vec![Line::raw("")],
+        Some(v) if v.is_lost(snap.now) => vec![Line::styled(
+            " no live figures: the link is lost",
+            Style::new().fg(Color::DarkGray),
+        )],
+        Some(v) => pack(vitals_items(&vitals(snap.state, v)), width),
+    }
+}
+
+/// Lays items out left to right with separators, starting a new row where the next would not
+/// fit.
+fn pack(items: Vec<Vec<Span<'static>>>, width: u16) -> Vec<Line<'static>> {
+    let width = usize::from(width);
+    let mut lines = Vec::new();
+    let mut row: Vec<Span<'static>> = vec![Span::raw(" ")];
+    let mut used = 1;
+    for item in items {
+        let w: usize = item.iter().map(Span::width).sum();
+        if used > 1 && used + 3 + w > width {
+            lines.push(Line::from(std::mem::replace(
+                &mut row,
+                vec![Span::raw(" ")],
+            )));
+            used = 1;
+        }
+        if used > 1 {
+            row.push(Span::raw(" │ "));
+            used += 3;
+        }
+        row.extend(item);
+        used += w;
+    }
+    lines.push(Line::from(row));
+    lines
+}
+
+fn status_style(s: MavState) -> Style {
+    match s {
+        MavState::MAV_STATE_CRITICAL => Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
+        MavState::MAV_STATE_EMERGENCY | MavState::MAV_STATE_FLIGHT_TERMINATION => {
+            Style::new().fg(Color::Red).add_modifier(Modifier::BOLD)
+        }
+        _ => Style::new(),
+    }
+}
+
+/// The colour of a severity.
+pub(super) fn severity_colour(s: Severity) -> Style {
+    match s {
+        Severity::Ok => Style::new().fg(Color::Green),
+        Severity::Warn => Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
+        Severity::Bad => Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+    }
+}
+
+/// The vitals: a failsafe banner and the reason for a CRITICAL/EMERGENCY state first, then
+/// battery, GPS, home and health, each coloured by its severity.
+pub(super) fn vitals_items(v: &Vitals) -> Vec<Vec<Span<'static>>> {
+    let alarm = Style::new()
+        .fg(Color::White)
+        .bg(Color::Red)
+        .add_modifier(Modifier::BOLD);
+    let grey = Style::new().fg(Color::DarkGray);
+    let mut items = Vec::new();
+    if let Some(fs) = &v.failsafe {
+        items.push(vec![Span::styled(format!(" {fs} "), alarm)]);
+    }
+    if let Some(r) = &v.reason {
+        items.push(vec![Span::styled(format!("why: {r}"), alarm)]);
+    }
+    items.push(vec![match &v.battery {
+        Some(b) => Span::styled(format!("BAT {}", b.summary()), severity_colour(b.severity)),
+        None => Span::styled("BAT -", grey),
+    }]);
+    items.push(vec![match v.gps {
+        Some((fix, sats, sev)) => {
+            Span::styled(format!("GPS {fix} {sats} sats"), severity_colour(sev))
+        }
+        None => Span::styled("GPS -", grey),
+    }]);
+    if let Some((d, b)) = v.home {
+        items.push(vec![Span::raw(format!("home {d:.1} m {b:03.0}°"))]);
+    }
+    items.push(vec![if v.unhealthy.is_empty() {
+        Span::styled("health ok", severity_colour(Severity::Ok))
+    } else {
+        Span::styled(
+            format!("bad: {}", v.unhealthy.join(", ")),
+            severity_colour(Severity::Bad),
+        )
+    }]);
+    if v.rc == Some(false) {
+        items.push(vec![Span::styled("no RC", grey)]);
+    }
+    items
 }
 
 /// One line per fleet: each vehicle with its link health, the selected one highlighted.

@@ -27,7 +27,7 @@ mod params;
 use charts::draw_charts;
 use flight::draw_flight;
 pub use flight::heading_tape;
-use header::{draw_footer, draw_header, vehicle_list_lines};
+use header::{draw_footer, draw_header, vehicle_list_lines, vitals_lines};
 use links::draw_links;
 use messages::draw_messages;
 use overlay::{draw_confirm, draw_help};
@@ -238,8 +238,9 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         Vec::new()
     };
     let list_rows = u16::try_from(fleet.len()).unwrap_or(u16::MAX);
+    let vitals_rows = u16::try_from(vitals_lines(app, snap, area.width).len()).unwrap_or(1);
     let [header, body, footer] = Layout::vertical([
-        Constraint::Length(2 + list_rows),
+        Constraint::Length(2 + vitals_rows + list_rows),
         Constraint::Min(10),
         Constraint::Length(1),
     ])
@@ -249,7 +250,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         f.render_widget(
             Paragraph::new(fleet),
             Rect {
-                y: header.y + 2,
+                y: header.y + 2 + vitals_rows,
                 height: list_rows,
                 ..header
             },

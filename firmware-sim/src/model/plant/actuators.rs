@@ -70,6 +70,8 @@ pub struct ActuatorModel {
     targets_for: Option<PwmOutputs>,
     /// Rotor speeds and deflections those outputs command.
     targets: [f64; 5],
+    /// Fraction of the full rotor speed the pack's voltage can drive (1 = a healthy pack).
+    supply: f64,
 }
 
 impl ActuatorModel {
@@ -85,7 +87,14 @@ impl ActuatorModel {
             surface_limit_rad: af.surface_limit_rad,
             targets_for: None,
             targets: [0.0; 5],
+            supply: 1.0,
         }
+    }
+
+    /// Sets the fraction of the commanded rotor speed the battery can drive
+    /// ([`super::battery::Battery::supply_ratio`]): a brushed motor's speed follows its voltage.
+    pub fn set_supply(&mut self, ratio: f64) {
+        self.supply = ratio.clamp(0.0, 1.0);
     }
 
     /// Advances every actuator one step toward the position its PWM pulse asks for.
@@ -102,7 +111,8 @@ impl ActuatorModel {
             ];
         }
         let t = self.targets;
-        for (w, target) in self.state.rotor_speed_rad_s.iter_mut().zip([t[0], t[1]]) {
+        let rotors = [t[0] * self.supply, t[1] * self.supply];
+        for (w, target) in self.state.rotor_speed_rad_s.iter_mut().zip(rotors) {
             *w = target + (*w - target) * self.motor_keep;
         }
         let s = &mut self.state;

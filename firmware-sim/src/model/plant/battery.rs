@@ -9,7 +9,11 @@
 //! internal resistance; hover draws about 5 A from a 3-cell 1300 mAh pack, so a full pack hovers
 //! for about a quarter of an hour.
 //!
-//! The battery only reports: a flat pack does not weaken the motors.
+//! The motors weaken with the pack: a brushed motor's speed follows its voltage. The autopilot
+//! compensates for sag down to [`COMPENSATION_CELL_V`] a cell under load (ArduPilot's
+//! `MOT_BAT_VOLT_MIN`), so a healthy pack flies as a full one; below it the rotors reach only
+//! [`Battery::supply_ratio`] of the speed commanded. Past empty the cells collapse (the open-circuit
+//! voltage falls to zero over the next [`OVER_DISCHARGE`] of the capacity): a flat pack does not fly.
 
 /// Fraction of the electric power that reaches the propeller shafts (brushed motor, 1:6
 /// gearbox, ESC).
@@ -20,6 +24,11 @@ pub const AVIONICS_CURRENT_A: f64 = 0.3;
 pub const INTERNAL_RESISTANCE_OHM: f64 = 0.06;
 /// Number of cells in series.
 pub const CELLS: u16 = 3;
+/// Loaded cell voltage down to which the autopilot keeps the full thrust, V (scaled with the
+/// pack's full voltage for other packs).
+pub const COMPENSATION_CELL_V: f64 = 3.3;
+/// Charge drawn past empty, as a fraction of the capacity, at which a cell reads 0 V.
+pub const OVER_DISCHARGE: f64 = 0.05;
 
 /// Open-circuit cell voltage against state of charge (0 = empty, 1 = full), V: a typical LiPo
 /// curve, steep at both ends and flat around 3.8 V.
@@ -40,6 +49,19 @@ pub struct BatteryConfig {
     pub capacity_mah: f64,
     /// Voltage of the full pack at rest, V (scales the cell curve; 12.6 V = 3 × 4.2 V).
     pub full_voltage_v: f64,
+}
+
+impl BatteryConfig {
+    /// A bench supply: the full voltage less the sag, for ever (infinite capacity). What the
+    /// pure model flies by default, so that its long-endurance runs measure the controller and
+    /// not the pack; the served twin's pack comes from `BATT_CAPACITY`.
+    #[must_use]
+    pub fn bench_supply() -> Self {
+        Self {
+            capacity_mah: f64::INFINITY,
+            ..Self::default()
+        }
+    }
 }
 
 impl Default for BatteryConfig {
@@ -88,9 +110,14 @@ impl Battery {
         b
     }
 
-    /// Open-circuit voltage of the pack at a state of charge, V.
+    /// Open-circuit voltage of the pack at a state of charge, V; below 0 (drawn past empty) the
+    /// cells collapse linearly to 0 V at −[`OVER_DISCHARGE`].
     fn open_circuit_v(&self, soc: f64) -> f64 {
-        let soc = soc.clamp(0.0, 1.0);
+        if soc < 0.0 {
+            let at_empty = self.open_circuit_v(0.0);
+            return (at_empty * (1.0 + soc / OVER_DISCHARGE)).max(0.0);
+        }
+        let soc = soc.min(1.0);
         let cell = CELL_OCV.windows(2).find(|w| soc <= w[1].0).map_or(
             CELL_OCV[CELL_OCV.len() - 1].1,
             |w| {
@@ -109,7 +136,7 @@ impl Battery {
             .iter()
             .map(|w| rotor_arm_m * k_drag * w.abs().powi(3))
             .sum();
-        let soc = self.state.remaining;
+        let soc = 1.0 - self.state.consumed_mah / self.config.capacity_mah.max(1.0);
         let ocv = self.open_circuit_v(soc);
         // P = V·I with V = ocv − R·I: the smaller root of R·I² − ocv·I + P = 0.
         let p = shaft_w / DRIVE_EFFICIENCY;
@@ -123,6 +150,15 @@ impl Battery {
         s.consumed_mah += current * dt_s / 3.6;
         s.consumed_j += voltage * current * dt_s;
         s.remaining = (1.0 - s.consumed_mah / self.config.capacity_mah.max(1.0)).clamp(0.0, 1.0);
+    }
+
+    /// Fraction of the commanded rotor speed the pack can drive now: 1 while the loaded voltage
+    /// stays above the compensation floor, then in proportion to the voltage.
+    #[must_use]
+    pub fn supply_ratio(&self) -> f64 {
+        let floor =
+            COMPENSATION_CELL_V / CELL_OCV[CELL_OCV.len() - 1].1 * self.config.full_voltage_v;
+        (self.state.voltage_v / floor).clamp(0.0, 1.0)
     }
 
     /// What the battery reports now.
@@ -166,6 +202,11 @@ mod tests {
             b.step(0.01, [w, w], af.rotor_arm_m, af.k_drag_n_per_rad2_s2);
         }
         let s = *b.state();
+        assert_eq!(
+            b.supply_ratio(),
+            1.0,
+            "a healthy pack drives the motors fully"
+        );
         assert!((4.0..6.5).contains(&s.current_a), "{s:?}");
         assert!(s.voltage_v < 12.6 && s.voltage_v > 11.0, "{s:?}");
         // ≈ 5 A for 60 s is ≈ 83 mAh of 1300.
@@ -192,6 +233,8 @@ mod tests {
         }
         assert_eq!(b.state().remaining, 0.0);
         assert!(b.state().voltage_v < 10.5);
+        // Drawn past empty the cells collapse: the motors can no longer be driven.
+        assert!(b.supply_ratio() < 0.05, "{}", b.supply_ratio());
         // Absurd power never gives a NaN: the sag is capped at the open-circuit voltage.
         b.step(1.0, [1e6, 1e6], 0.15, 1.25e-6);
         assert!(b.state().current_a.is_finite() && b.state().voltage_v >= 0.0);

@@ -231,3 +231,27 @@ fn qloiter_in_steady_wind_settles_downwind() {
         assert!((t.airspeed_m_s() - wind.norm()).abs() < 0.05, "{edge}");
     }
 }
+
+#[test]
+fn a_flat_pack_does_not_fly() {
+    // A 20 mAh pack hovers for about 14 s (5 A), then its cells collapse.
+    let mut v = Vehicle::new(VehicleConfig {
+        calibrated: true,
+        battery: crate::model::plant::battery::BatteryConfig {
+            capacity_mah: 20.0,
+            ..Default::default()
+        },
+        ..on_ground()
+    });
+    v.arm(false).expect("ready");
+    run(&mut v, 6.0);
+    assert!(v.telemetry().pos_m.z > 0.5, "hovers on a charged pack");
+    run(&mut v, 20.0);
+    let t = v.telemetry();
+    assert_eq!(t.battery.remaining, 0.0);
+    assert!(
+        t.pos_m.z < 0.05,
+        "a flat pack holds no altitude: {}",
+        t.pos_m.z
+    );
+}
