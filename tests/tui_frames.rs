@@ -518,3 +518,19 @@ fn vitals_row_battery_gps_home_and_the_reason_for_an_emergency() {
     assert!(frame.contains("bad: EKF"), "{frame}");
     insta::assert_snapshot!(frame);
 }
+
+/// QLOITER holds where it was entered: the Flight view shows that point as the setpoint on
+/// every axis (not "-").
+#[test]
+fn qloiter_shows_the_entry_point_as_its_target() {
+    let mut rec = Recording::new();
+    rec.fly(0, 5_000, |_| (18, true, 0.0, 0.0, 0.3, 1.0));
+    let mut app = app_with_params();
+    render(&mut app, &rec, 5_000, (80, 24));
+    rec.fly(5_000, 8_000, |_| (19, true, 0.0, 0.0, 0.3, 1.2));
+    let frame = render(&mut app, &rec, 8_000, (80, 24));
+    assert!(frame.contains("North   +0.05 m  setpoint   +0.05 m"), "{frame}");
+    assert!(frame.contains("East    -0.02 m  setpoint   -0.02 m"), "{frame}");
+    assert!(frame.contains("Alt     +1.20 m  setpoint   +1.20 m"), "{frame}");
+    insta::assert_snapshot!(frame);
+}

@@ -186,10 +186,13 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
         v.system_status,
         MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY
     ) {
+        // The newest urgent text since the vehicle last armed or booted: older ones are
+        // about an earlier flight.
         out.reason = v
             .status_texts
             .iter()
             .rev()
+            .take_while(|(_, t)| t != "Arming motors" && t != "Rebooted")
             .find(|(sev, _)| *sev <= URGENT)
             .map(|(_, t)| t.clone())
             .or_else(|| {

@@ -27,7 +27,9 @@ use crate::model::frames::paper_to_ned;
 use crate::model::mode::FlightMode;
 use crate::nav::globe::{deg_to_e7, valid_lat_lon};
 use crate::nav::mission::{Limits, frame};
-use crate::nav::navigation::{NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused};
+use crate::nav::navigation::{
+    NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused, loiter_entry_point,
+};
 
 /// Home moves (and is announced) only by more than this, m.
 const HOME_MOVE_M: f64 = 0.01;
@@ -92,7 +94,11 @@ impl Endpoint {
         self.next_nav_us = self.now_us + NAV_PERIOD_US;
         let t = self.vehicle.telemetry();
         if !t.mode.is_autonomous() {
+            if t.mode == FlightMode::QLoiter && self.navigator.is_entering(t.mode) {
+                self.hold_here();
+            }
             // Nothing to navigate in the pilot and hover modes.
+            let t = self.vehicle.telemetry();
             self.navigator.note_pilot_mode(t.mode, t.armed);
             return;
         }
@@ -107,6 +113,19 @@ impl Endpoint {
                 return;
             }
         }
+    }
+
+    /// QLOITER entered: hold where the vehicle is ([`loiter_entry_point`]), not where an
+    /// earlier target was.
+    fn hold_here(&mut self) {
+        let t = self.vehicle.telemetry();
+        let p = loiter_entry_point(
+            &paper_to_ned(&t.pos_m),
+            t.landed,
+            self.params.value("HOVER_ALT"),
+        );
+        self.vehicle
+            .set_position_setpoint(crate::model::frames::ned_to_paper(&p));
     }
 
     /// The stored mission changed: the navigator starts it over.

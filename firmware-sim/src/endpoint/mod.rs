@@ -613,6 +613,13 @@ impl Endpoint {
             if t.state == SystemState::Emergency {
                 self.announce(apm::MavSeverity::MAV_SEVERITY_CRITICAL, "Crash detected");
             }
+            if t.state == SystemState::Critical {
+                // The only CRITICAL the vehicle model raises: say why.
+                self.announce(
+                    apm::MavSeverity::MAV_SEVERITY_CRITICAL,
+                    "No RC receiver: throttle at zero in QSTABILIZE",
+                );
+            }
         }
     }
 }

@@ -249,6 +249,12 @@ impl Navigator {
         }
     }
 
+    /// Whether `mode` is new since the navigator's last call (it was entered just now).
+    #[must_use]
+    pub fn is_entering(&self, mode: FlightMode) -> bool {
+        self.mode != Some(mode)
+    }
+
     /// Takes note of a mode the navigator does not fly (the pilot and hover modes), as
     /// [`Navigator::sync`] would, without the vehicle's state: the endpoint's cheap path for the
     /// modes where there is nothing to navigate.
@@ -601,6 +607,15 @@ impl Navigator {
 }
 
 /// A landing where the vehicle stands (already on the ground, or told to land here).
+/// Where QLOITER holds when it is entered (local NED), as ArduPlane's QLOITER does: the
+/// position and altitude at entry; on the ground, `hover_alt_m` above the spot (the twin takes
+/// off to it when armed).
+#[must_use]
+pub fn loiter_entry_point(here: &Vector3<f64>, landed: bool, hover_alt_m: f64) -> Vector3<f64> {
+    let z = if landed { -hover_alt_m } else { here.z };
+    Vector3::new(here.x, here.y, z)
+}
+
 fn landing_here(here: &Vector3<f64>) -> Leg {
     Leg::Landing {
         xy: here.xy(),

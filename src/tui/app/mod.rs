@@ -289,6 +289,8 @@ pub struct App {
     pub target_ned: Option<[f32; 3]>,
     /// What the operator did and what came of it, newest last.
     pub log: VecDeque<(Level, String)>,
+    /// The shown vehicle's mode at the last frame (to see QLOITER being entered).
+    pub last_mode: Option<String>,
     /// The vehicle the UI shows and commands (`v`/`V` switch); `None` = the first listed.
     pub selected: Option<(SystemId, ComponentId)>,
     /// Set by `q`.
@@ -306,6 +308,7 @@ impl Default for App {
             params: ParamsState::default(),
             messages: MessagesState::default(),
             target_ned: None,
+            last_mode: None,
             log: VecDeque::new(),
             selected: None,
             quit: false,
@@ -355,7 +358,32 @@ impl App {
         self.params.selected = 0;
         self.params.progress = Some(("download".into(), 0, 0));
         self.target_ned = None;
+        self.last_mode = None;
         vec![Request::ParamsPull]
+    }
+
+    /// Follows the shown vehicle between frames: entering QLOITER, it holds where it was
+    /// entered (at `HOVER_ALT` when on the ground), so that is the target shown and the one the
+    /// arrows move; another mode drops the target.
+    pub fn observe(&mut self, state: &VehicleState) {
+        let Some(v) = self.vehicle(state) else {
+            return;
+        };
+        let mode = v.mode_name();
+        let entered = self.last_mode.as_deref() != Some(mode.as_str());
+        if entered {
+            self.target_ned = match (mode.as_str(), v.position) {
+                ("QLOITER", Some(p)) => {
+                    let airborne = crate::tui::vitals::vitals(state, v).airborne;
+                    let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
+                    let [n, e, d] = p.pos_ned_m;
+                    Some([n, e, if airborne { d } else { -hover }])
+                }
+                ("QLOITER", None) => self.target_ned,
+                _ => None,
+            };
+        }
+        self.last_mode = Some(mode);
     }
 
     /// Adds a line to the event log.

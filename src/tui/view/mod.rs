@@ -232,6 +232,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         );
         return;
     }
+    app.observe(snap.state);
     let fleet = if snap.state.vehicles.len() > 1 {
         vehicle_list_lines(app, snap, area.width)
     } else {
