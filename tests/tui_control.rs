@@ -97,8 +97,11 @@ fn a_typed_value_that_is_not_a_number_is_refused_without_sending() {
     );
     assert!(matches!(
         app.params.status.get("HOVER_ALT"),
-        Some(ParamStatus::Refused(r)) if r.contains("not a finite number")
+        Some(ParamStatus::NotSent(r)) if r.contains("not a finite number")
     ));
+    // A later value from the vehicle clears the local error.
+    app.on_outcome(Outcome::Params(vec![("HOVER_ALT".into(), 1.5)]));
+    assert_eq!(app.params.status.get("HOVER_ALT"), None);
 }
 
 /// The daemon with the embedded twin, serving nothing, logging nothing.

@@ -305,7 +305,11 @@ fn link_lost() {
     // Nothing since 20 s: at 27 s (last heartbeat at 19 s) the link is lost, rates read 0 and the attitude is stale.
     let frame = render(&mut app, &rec, 27_000, (100, 32));
     assert!(frame.contains("LINK LOST 8 s"), "{frame}");
-    assert!(frame.contains("│ 0 Hz"), "{frame}");
+    // No live figures: no link rate, and the flight clock stopped at the last heartbeat (19 s).
+    let header = frame.lines().next().unwrap_or_default();
+    assert!(!header.contains("Hz"), "{frame}");
+    assert!(header.contains("flight 00:19"), "{frame}");
+    assert!(frame.contains("STALE: attitude"), "{frame}");
     insta::assert_snapshot!(frame);
     app.view = View::Links;
     insta::assert_snapshot!(
@@ -529,8 +533,62 @@ fn qloiter_shows_the_entry_point_as_its_target() {
     render(&mut app, &rec, 5_000, (80, 24));
     rec.fly(5_000, 8_000, |_| (19, true, 0.0, 0.0, 0.3, 1.2));
     let frame = render(&mut app, &rec, 8_000, (80, 24));
-    assert!(frame.contains("North   +0.05 m  setpoint   +0.05 m"), "{frame}");
-    assert!(frame.contains("East    -0.02 m  setpoint   -0.02 m"), "{frame}");
-    assert!(frame.contains("Alt     +1.20 m  setpoint   +1.20 m"), "{frame}");
+    assert!(
+        frame.contains("North   +0.05 m  setpoint   +0.05 m"),
+        "{frame}"
+    );
+    assert!(
+        frame.contains("East    -0.02 m  setpoint   -0.02 m"),
+        "{frame}"
+    );
+    assert!(
+        frame.contains("Alt     +1.20 m  setpoint   +1.20 m"),
+        "{frame}"
+    );
+    insta::assert_snapshot!(frame);
+}
+
+fn param_value(name: &str, value: f32) -> MavMessage {
+    let mut p = dialect::PARAM_VALUE_DATA {
+        param_value: value,
+        param_type: dialect::MavParamType::MAV_PARAM_TYPE_REAL32,
+        param_count: 11,
+        param_index: 10,
+        ..Default::default()
+    };
+    p.param_id = name.into();
+    MavMessage::PARAM_VALUE(p)
+}
+
+/// The table follows the vehicle's last word: a push confirmed at 0.1 that the vehicle resets
+/// to 0 shows 0 and no "confirmed"; a value typed wrong here is "not sent" (nothing went out)
+/// until the vehicle's next value for it.
+#[test]
+fn a_parameter_follows_the_vehicles_last_word() {
+    let mut rec = hover();
+    let mut app = app_with_params();
+    app.view = View::Params;
+    app.on_outcome(Outcome::ParamSet {
+        name: "SIM_PUSH_ROLL".into(),
+        result: Ok(0.1),
+    });
+    let state = rec.state.clone();
+    let now = rec.at(20_000);
+    // HOVER_ALT is the first row: type a word into it.
+    for k in [KeyCode::Enter, KeyCode::Char('x'), KeyCode::Enter] {
+        assert!(app.on_key(key(k), &state, now).is_empty());
+    }
+    let frame = render(&mut app, &rec, 20_000, (80, 24));
+    assert!(frame.contains("not sent"), "{frame}");
+    rec.feed(20_100, &param_value("SIM_PUSH_ROLL", 0.0));
+    render(&mut app, &rec, 20_200, (80, 24));
+    rec.feed(20_300, &param_value("HOVER_ALT", 1.0));
+    let frame = render(&mut app, &rec, 20_400, (80, 24));
+    assert_eq!(app.params.value("SIM_PUSH_ROLL"), Some(0.0));
+    assert!(app.params.status.is_empty(), "{:?}", app.params.status);
+    assert!(
+        !frame.contains("confirmed") && !frame.contains("not sent"),
+        "{frame}"
+    );
     insta::assert_snapshot!(frame);
 }

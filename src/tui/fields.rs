@@ -83,9 +83,24 @@ fn walk(path: &str, value: &str, out: &mut Vec<Field>) {
     }
     out.push(Field {
         path: path.to_owned(),
-        text: value.to_owned(),
+        text: flag_words(value).unwrap_or_else(|| value.to_owned()),
         value: number(value),
     });
+}
+
+/// A bitmask's `Debug` text (`MavModeFlag(A | B)`, `MavModeFlag(0x0)`) in words: `A | B`,
+/// `none`; `None` for anything else.
+fn flag_words(value: &str) -> Option<String> {
+    let open = value.find('(')?;
+    let name = &value[..open];
+    let inner = value[open + 1..].strip_suffix(')')?;
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric()) {
+        return None;
+    }
+    Some(match inner.trim() {
+        "0x0" | "" => "none".to_owned(),
+        words => words.to_owned(),
+    })
 }
 
 /// The fields of a message from its `Debug` text.
@@ -158,6 +173,31 @@ mod tests {
                 .and_then(|f| f.value),
             Some(0.0)
         );
+    }
+
+    #[test]
+    fn bitmasks_in_words() {
+        let mut hb = dialect::HEARTBEAT_DATA {
+            base_mode: dialect::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | dialect::MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+            ..Default::default()
+        };
+        let f = fields(&MavMessage::HEARTBEAT(hb.clone()));
+        let t = &f
+            .iter()
+            .find(|f| f.path == "base_mode")
+            .expect("base_mode")
+            .text;
+        assert!(!t.contains("MavModeFlag"), "{t}");
+        assert!(t.contains("MAV_MODE_FLAG_SAFETY_ARMED"), "{t}");
+        hb.base_mode = dialect::MavModeFlag::empty();
+        let f = fields(&MavMessage::HEARTBEAT(hb));
+        let t = &f
+            .iter()
+            .find(|f| f.path == "base_mode")
+            .expect("base_mode")
+            .text;
+        assert_eq!(t, "none");
     }
 
     #[test]

@@ -46,7 +46,7 @@ pub struct Vitals {
     pub gps: Option<(&'static str, u8, Severity)>,
     /// Horizontal distance (m) and bearing (degrees from North) from home to the vehicle.
     pub home: Option<(f32, f32)>,
-    /// In the air (EXTENDED_SYS_STATE; without it, armed and more than 0.5 m up).
+    /// In the air (EXTENDED_SYS_STATE says so, or more than 0.5 m above home).
     pub airborne: bool,
     /// Whether an RC receiver gives a throttle (None until RC_CHANNELS is heard).
     pub rc: Option<bool>,
@@ -172,13 +172,20 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
         let bearing = de.atan2(dn).to_degrees().rem_euclid(360.0);
         out.home = Some((dn.hypot(de), bearing));
     }
-    out.airborne = match last(245) {
-        Some(MavMessage::EXTENDED_SYS_STATE(e)) => !matches!(
+    // Either says so: EXTENDED_SYS_STATE and the armed flag (HEARTBEAT) come at 1 Hz, slower
+    // than the position, and a guard must not wait for them while the vehicle climbs.
+    let home_down = match last(242) {
+        Some(MavMessage::HOME_POSITION(h)) => h.z,
+        _ => 0.0,
+    };
+    let climbed = v
+        .position
+        .is_some_and(|p| p.pos_ned_m[2] - home_down < -0.5);
+    out.airborne = climbed
+        || matches!(last(245), Some(MavMessage::EXTENDED_SYS_STATE(e)) if !matches!(
             e.landed_state,
             MavLandedState::MAV_LANDED_STATE_ON_GROUND | MavLandedState::MAV_LANDED_STATE_UNDEFINED
-        ),
-        _ => v.armed && v.position.is_some_and(|p| p.pos_ned_m[2] < -0.5),
-    };
+        ));
     if let Some(MavMessage::RC_CHANNELS(r)) = last(65) {
         out.rc = Some(r.chancount >= 3 && r.chan3_raw != 0 && r.chan3_raw != u16::MAX);
     }

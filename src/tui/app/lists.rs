@@ -82,7 +82,7 @@ impl App {
                 self.note(Level::Error, format!("{name}: {reason}"));
                 self.params
                     .status
-                    .insert(name, ParamStatus::Refused(reason));
+                    .insert(name, ParamStatus::NotSent(reason));
                 Vec::new()
             }
         }

@@ -183,6 +183,8 @@ pub enum ParamStatus {
     Confirmed,
     /// The vehicle refused, with its reason.
     Refused(String),
+    /// Typed here and rejected before sending (not a number): the vehicle was not asked.
+    NotSent(String),
 }
 
 /// Severity of an event-log line (colours like STATUSTEXT).
@@ -215,6 +217,8 @@ pub struct ParamsState {
     pub diff: Option<Vec<(String, Option<f32>, f32)>>,
     /// Progress of a pull or push: (what, done, total).
     pub progress: Option<(String, usize, usize)>,
+    /// PARAM_VALUEs counted when the UI last looked (to follow the vehicle's word).
+    pub seen_values: Option<u64>,
 }
 
 impl ParamsState {
@@ -384,6 +388,43 @@ impl App {
             };
         }
         self.last_mode = Some(mode);
+        self.follow_param_values(state);
+    }
+
+    /// The vehicle's last word on a parameter wins: a PARAM_VALUE heard since the last frame
+    /// (an echo, a reset such as `SIM_PUSH_*` going back to 0, another client's write) sets the
+    /// table's value; a status it contradicts goes (a confirmation of another value, a local
+    /// error, a refusal once the value moved), a pending write it matches is left to its
+    /// outcome.
+    fn follow_param_values(&mut self, state: &VehicleState) {
+        let Some(v) = self.vehicle(state) else {
+            return;
+        };
+        let Some(s) = state.messages.get(&(v.system_id, v.component_id, 22)) else {
+            return;
+        };
+        if self.params.seen_values == Some(s.count) {
+            return;
+        }
+        self.params.seen_values = Some(s.count);
+        let Ok(vtol_link::dialect::MavMessage::PARAM_VALUE(pv)) = s.last.decode() else {
+            return;
+        };
+        let name = pv.param_id.to_str().unwrap_or("").to_owned();
+        let value = pv.param_value;
+        let Some(row) = self.params.table.iter_mut().find(|(n, _)| *n == name) else {
+            return;
+        };
+        let moved = row.1.to_bits() != value.to_bits();
+        row.1 = value;
+        let drop = match self.params.status.get(&name) {
+            Some(ParamStatus::Pending(_)) | None => false,
+            Some(ParamStatus::NotSent(_)) => true,
+            Some(ParamStatus::Confirmed | ParamStatus::Refused(_)) => moved,
+        };
+        if drop {
+            self.params.status.remove(&name);
+        }
     }
 
     /// Adds a line to the event log.
@@ -545,6 +586,10 @@ impl App {
             },
             Outcome::Params(table) => {
                 self.params.table = table;
+                // Fresh values from the vehicle: a local typing error is history.
+                self.params
+                    .status
+                    .retain(|_, s| !matches!(s, ParamStatus::NotSent(_)));
                 self.params.progress = None;
                 let n = self.params.table.len();
                 self.note(Level::Ok, format!("{n} parameters"));
@@ -585,6 +630,12 @@ impl App {
             Outcome::GainsLoaded(Err(e)) => self.note(Level::Error, e),
             Outcome::GainsPushed(result) => {
                 self.params.progress = None;
+                if result.is_ok() {
+                    // Every value of the upload was read back: confirmed, as a single write is.
+                    for (name, _, _) in self.params.diff.take().unwrap_or_default() {
+                        self.params.status.insert(name, ParamStatus::Confirmed);
+                    }
+                }
                 self.params.diff = None;
                 match result {
                     Ok(s) => self.note(Level::Ok, s),

@@ -107,11 +107,21 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
                     d(a.rates_rad_s[i])
                 )));
             }
-            if let Some(age) = stale_att {
-                lines.push(Line::styled(
-                    format!("attitude stale: last {age:.1} s ago"),
+            let stale_pos = age_s(snap, v, 32).filter(|a| *a > STALE_S);
+            match (stale_att, stale_pos) {
+                (Some(a), Some(p)) => lines.push(Line::styled(
+                    format!("STALE: attitude {a:.1} s, position {p:.1} s old"),
                     Style::new().fg(Color::Yellow),
-                ));
+                )),
+                (Some(a), None) => lines.push(Line::styled(
+                    format!("attitude stale: last {a:.1} s ago"),
+                    Style::new().fg(Color::Yellow),
+                )),
+                (None, Some(p)) => lines.push(Line::styled(
+                    format!("position stale: last {p:.1} s ago"),
+                    Style::new().fg(Color::Yellow),
+                )),
+                (None, None) => {}
             }
             let sp = setpoint_ned(app, v);
             match v.position {
@@ -177,12 +187,12 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     let h = texts.height.saturating_sub(2) as usize;
     let lines: Vec<Line> = vehicle
         .map(|v| {
-            v.status_texts
-                .iter()
+            informative_texts(&v.status_texts)
+                .into_iter()
                 .rev()
                 .take(h)
                 .rev()
-                .map(|(sev, t)| Line::styled(t.clone(), severity_style(*sev)))
+                .map(|(sev, t)| Line::styled(t.to_owned(), severity_style(sev)))
                 .collect()
         })
         .unwrap_or_default();
@@ -265,4 +275,21 @@ pub fn heading_tape(yaw_deg: f64, width: u16) -> Vec<Line<'static>> {
         Line::styled(labels, Style::new().fg(Color::Yellow)),
         Line::raw(ticks.into_iter().collect::<String>()),
     ]
+}
+
+/// The vehicle's texts without repeats of an informational one (a version banner sent again at
+/// every parameter download) since the last boot; warnings and refusals always show.
+fn informative_texts(texts: &std::collections::VecDeque<(u8, String)>) -> Vec<(u8, &str)> {
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    for (sev, t) in texts {
+        if t == "Rebooted" {
+            seen.clear();
+        }
+        if *sev >= 6 && !seen.insert(t.as_str()) {
+            continue;
+        }
+        out.push((*sev, t.as_str()));
+    }
+    out
 }

@@ -45,9 +45,11 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
                 status_name(v.system_status),
                 status_style(v.system_status),
             ));
+            // A lost vehicle's clock stops at its last heartbeat: nothing says it still flies.
+            let until = if lost { v.last_heartbeat } else { now };
             let flight = v
                 .armed_since
-                .map_or(0, |t| now.saturating_duration_since(t).as_secs());
+                .map_or(0, |t| until.saturating_duration_since(t).as_secs());
             spans.push(Span::raw(format!(
                 " │ flight {:02}:{:02}",
                 flight / 60,
@@ -75,7 +77,9 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         .vehicle(snap.state)
         .map(|v| v.link)
         .filter(|_| vehicle_links.clone().count() > 1);
-    for l in vehicle_links.filter(|l| shown_link.is_none_or(|s| s == l.id)) {
+    // A lost vehicle shows no live figures: its link's rate belongs to the others on it.
+    let shown_lost = app.vehicle(snap.state).is_some_and(|v| v.is_lost(now));
+    for l in vehicle_links.filter(|l| !shown_lost && shown_link.is_none_or(|s| s == l.id)) {
         if let Some(h) = snap.state.links.get(&l.id) {
             spans.push(Span::raw(format!(
                 " │ {:.0} Hz {:.1}% loss",

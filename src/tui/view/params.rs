@@ -10,8 +10,11 @@ use crate::tui::app::{App, ParamStatus};
 
 pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
     let p = &app.params;
-    let [list_area, side] =
-        Layout::horizontal([Constraint::Min(40), Constraint::Length(36)]).areas(area);
+    let [list_area, side] = Layout::horizontal([
+        Constraint::Min(40),
+        Constraint::Length(side_width(area.width)),
+    ])
+    .areas(area);
     let rows_data = p.filtered();
     let visible = list_area.height.saturating_sub(3) as usize;
     let first = p.selected.saturating_sub(visible.saturating_sub(1));
@@ -30,6 +33,9 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
                 }
                 Some(ParamStatus::Refused(r)) => {
                     (format!("REFUSED: {r}"), Style::new().fg(Color::Red))
+                }
+                Some(ParamStatus::NotSent(r)) => {
+                    (format!("not sent: {r}"), Style::new().fg(Color::Magenta))
                 }
                 None => (String::new(), Style::new()),
             };
@@ -111,6 +117,19 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
     } else {
         lines.push(Line::raw("Enter: edit   /: filter"));
         lines.push(Line::raw("f: gains file   r: download"));
+        // The selected row's whole status: the table's column may cut a refusal's reason.
+        if let Some((_, (name, _))) = rows_data.get(p.selected)
+            && let Some(s) = p.status.get(name)
+        {
+            lines.push(Line::raw(""));
+            lines.push(Line::raw(format!("{name}:")));
+            lines.push(Line::raw(match s {
+                ParamStatus::Pending(v) => format!("sent {v}, no echo yet"),
+                ParamStatus::Confirmed => "confirmed by the vehicle".to_owned(),
+                ParamStatus::Refused(r) => format!("refused: {r}"),
+                ParamStatus::NotSent(r) => format!("not sent: {r}"),
+            }));
+        }
     }
     f.render_widget(
         Paragraph::new(lines)
@@ -119,4 +138,9 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
             .block(Block::bordered().title(" Edit ").borders(Borders::ALL)),
         info,
     );
+}
+
+/// The side panel's width: narrow on a small terminal so the table keeps its status column.
+fn side_width(width: u16) -> u16 {
+    if width >= 120 { 36 } else { 26 }
 }
