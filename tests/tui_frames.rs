@@ -592,3 +592,26 @@ fn a_parameter_follows_the_vehicles_last_word() {
     );
     insta::assert_snapshot!(frame);
 }
+
+/// Every view at the smallest size the UI supports (80×24) keeps whole column titles.
+#[test]
+fn every_view_at_80_by_24() {
+    let rec = hover();
+    let mut app = app_with_params();
+    for (view, name, titles) in [
+        (View::Charts, "charts_80x24", &["Roll", "Position"][..]),
+        (
+            View::Links,
+            "links_80x24",
+            &["side", "peer", "Hz", "loss%", "heard", "drop", "crc"][..],
+        ),
+        (View::Messages, "messages_80x24", &["message", "Hz"][..]),
+    ] {
+        app.view = view;
+        let frame = render(&mut app, &rec, 20_000, (80, 24));
+        for t in titles {
+            assert!(frame.contains(t), "{name}: no {t:?}\n{frame}");
+        }
+        insta::assert_snapshot!(name, frame);
+    }
+}

@@ -15,10 +15,18 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
     let now = snap.now;
     let [table_area, rest] =
         Layout::vertical([Constraint::Min(6), Constraint::Length(9)]).areas(area);
-    let header = Row::new([
-        "id", "side", "peer", "rate Hz", "loss %", "heard", "rx", "tx", "dropped", "bad crc",
-    ])
-    .style(Style::new().add_modifier(Modifier::BOLD));
+    // Below 110 columns the titles shorten so every one stays whole.
+    let narrow = area.width < 110;
+    let titles = if narrow {
+        [
+            "id", "side", "peer", "Hz", "loss%", "heard", "rx", "tx", "drop", "crc",
+        ]
+    } else {
+        [
+            "id", "side", "peer", "rate Hz", "loss %", "heard", "rx", "tx", "dropped", "bad crc",
+        ]
+    };
+    let header = Row::new(titles).style(Style::new().add_modifier(Modifier::BOLD));
     let rows: Vec<Row> = snap
         .links
         .iter()
@@ -66,24 +74,37 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             .style(style)
         })
         .collect();
+    let widths = if narrow {
+        [
+            Constraint::Length(7),
+            Constraint::Length(7),
+            Constraint::Min(9),
+            Constraint::Length(6),
+            Constraint::Length(5),
+            Constraint::Length(11),
+            Constraint::Length(7),
+            Constraint::Length(7),
+            Constraint::Length(4),
+            Constraint::Length(3),
+        ]
+    } else {
+        [
+            Constraint::Length(8),
+            Constraint::Length(8),
+            Constraint::Min(14),
+            Constraint::Length(8),
+            Constraint::Length(7),
+            Constraint::Length(11),
+            Constraint::Length(8),
+            Constraint::Length(8),
+            Constraint::Length(8),
+            Constraint::Length(8),
+        ]
+    };
     f.render_widget(
-        Table::new(
-            rows,
-            [
-                Constraint::Length(8),
-                Constraint::Length(8),
-                Constraint::Min(14),
-                Constraint::Length(8),
-                Constraint::Length(7),
-                Constraint::Length(11),
-                Constraint::Length(8),
-                Constraint::Length(8),
-                Constraint::Length(8),
-                Constraint::Length(8),
-            ],
-        )
-        .header(header)
-        .block(Block::bordered().title(" Links ")),
+        Table::new(rows, widths)
+            .header(header)
+            .block(Block::bordered().title(" Links ")),
         table_area,
     );
     let [router, tlog] = Layout::horizontal([Constraint::Percentage(50); 2]).areas(rest);
