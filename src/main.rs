@@ -286,7 +286,8 @@ fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
     }
     refuse_unused_zenoh_flags(&config, zenoh_flags)?;
     init_ui_tracing(config.log_dir.as_deref())?;
-    until_shutdown(|cancel| async move {
+    let embedded = matches!(config.vehicle, VehicleSource::Embedded);
+    let result = until_shutdown(|cancel| async move {
         let mut tasks = tokio::task::JoinSet::new();
         let running = vtol_gcs::daemon::start(&config, &cancel, &mut tasks).await?;
         let result = vtol_gcs::tui::run(
@@ -298,7 +299,16 @@ fn ui(args: RunArgs, connect: Option<LinkUrl>) -> anyhow::Result<()> {
         cancel.cancel();
         while tasks.join_next().await.is_some() {}
         result.context("terminal")
-    })
+    });
+    if embedded {
+        // The twin lived in this process: say so once the screen is back, so nobody expects the
+        // parameters they set to be there next time.
+        eprintln!(
+            "the embedded twin's parameters were kept in memory only and are gone with it \
+             (keep them with `vtol-gcs params save FILE` before quitting; see docs/cli.md)"
+        );
+    }
+    result
 }
 
 fn run(args: RunArgs) -> anyhow::Result<()> {

@@ -167,6 +167,8 @@ def test_help_overlay_and_resize(screen_factory):
     s.wait(r"Horizon")
     s.keys("q")
     s.assert_exited_cleanly()
+    # The embedded twin's parameters go with the process: the user is told, once the screen is back.
+    s.wait(r"embedded twin's parameters were kept in memory only")
 
 
 def test_script_commands_the_vehicle_while_the_ui_is_open(screen_factory, tmp_path):
