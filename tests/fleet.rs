@@ -115,31 +115,33 @@ async fn read_until(
 
 #[tokio::test]
 async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
-    let (vtx, vrx) = mpsc::channel(1024);
-    let (ctx, crx) = mpsc::channel(1024);
     let cancel = CancellationToken::new();
     let (router, handle) = Router::new(None, None);
-    let task = tokio::spawn(router.run(vrx, crx, cancel.clone()));
+    let router = router.inline();
     let (mut a, far) = tokio::io::duplex(1 << 16);
-    let a_id = spawn_stream_link(
+    let (a_id, a_task) = spawn_stream_link(
         far,
         "vehicle a",
-        vtx.clone(),
+        router.events(Side::Vehicle),
         LinkOptions::default(),
         cancel.clone(),
-    )
-    .0;
+    );
     let (mut b, far) = tokio::io::duplex(1 << 16);
-    let b_id = spawn_stream_link(
+    let (b_id, b_task) = spawn_stream_link(
         far,
         "vehicle b",
-        vtx,
+        router.events(Side::Vehicle),
         LinkOptions::default(),
         cancel.clone(),
-    )
-    .0;
+    );
     let (mut client, far) = tokio::io::duplex(1 << 16);
-    spawn_stream_link(far, "client", ctx, LinkOptions::default(), cancel.clone());
+    let (_, client_task) = spawn_stream_link(
+        far,
+        "client",
+        router.events(Side::Client),
+        LinkOptions::default(),
+        cancel.clone(),
+    );
     let mut links = handle.links.clone();
     tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 3))
         .await
@@ -252,7 +254,10 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].system_id(), 1);
     cancel.cancel();
-    let _ = task.await;
+    for task in [a_task, b_task, client_task] {
+        let _ = task.await;
+    }
+    router.close();
 }
 
 fn render(app: &mut App, state: &VehicleState, history: &History, now: Instant) -> String {

@@ -1,4 +1,5 @@
-//! The router task over real in-memory byte links: bytes out equal bytes in (raw forwarding,
+//! The router, driven as the daemon drives it (inline, from the link tasks), over real
+//! in-memory byte links: bytes out equal bytes in (raw forwarding,
 //! sequence numbers intact), no echo to the ingress link, targeted frames only where the
 //! target was seen, and every frame logged to the tlog in both directions.
 
@@ -6,9 +7,9 @@ use std::time::Duration;
 
 use proptest::prelude::*;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
-use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::Router;
+use vtol_gcs::router::{InlineRouter, Router};
+use vtol_gcs::tap::Side;
 use vtol_gcs::tlog::{TlogHandle, TlogReader};
 use vtol_link::dialect::{self, MavMessage};
 use vtol_link::{Frame, FrameDecoder, LinkOptions, spawn_stream_link};
@@ -52,7 +53,8 @@ struct Harness {
     vehicle: DuplexStream,
     clients: Vec<DuplexStream>,
     cancel: CancellationToken,
-    router_task: tokio::task::JoinHandle<()>,
+    router: InlineRouter,
+    link_tasks: Vec<tokio::task::JoinHandle<()>>,
     tlog_path: std::path::PathBuf,
     handle: vtol_gcs::router::RouterHandle,
     _dir: tempfile::TempDir,
@@ -62,23 +64,29 @@ async fn harness(n_clients: usize) -> Harness {
     let dir = tempfile::tempdir().unwrap();
     let tlog = TlogHandle::start(dir.path(), 4096).unwrap();
     let tlog_path = tlog.path.clone();
-    let (vtx, vrx) = mpsc::channel(1024);
-    let (ctx, crx) = mpsc::channel(1024);
     let cancel = CancellationToken::new();
     let (router, handle) = Router::new(Some(tlog), None);
-    let router_task = tokio::spawn(router.run(vrx, crx, cancel.clone()));
+    let router = router.inline();
     let (vehicle, far) = tokio::io::duplex(1 << 16);
-    spawn_stream_link(far, "vehicle", vtx, LinkOptions::default(), cancel.clone());
+    let (_, task) = spawn_stream_link(
+        far,
+        "vehicle",
+        router.events(Side::Vehicle),
+        LinkOptions::default(),
+        cancel.clone(),
+    );
+    let mut link_tasks = vec![task];
     let mut clients = Vec::new();
     for i in 0..n_clients {
         let (c, far) = tokio::io::duplex(1 << 16);
-        spawn_stream_link(
+        let (_, task) = spawn_stream_link(
             far,
             format!("client {i}"),
-            ctx.clone(),
+            router.events(Side::Client),
             LinkOptions::default(),
             cancel.clone(),
         );
+        link_tasks.push(task);
         clients.push(c);
     }
     // Wait until the router has every link up (an event, with an upper bound).
@@ -94,7 +102,8 @@ async fn harness(n_clients: usize) -> Harness {
         vehicle,
         clients,
         cancel,
-        router_task,
+        router,
+        link_tasks,
         tlog_path,
         handle,
         _dir: dir,
@@ -103,7 +112,10 @@ async fn harness(n_clients: usize) -> Harness {
 
 async fn finish(h: Harness) -> Vec<(u64, Frame)> {
     h.cancel.cancel();
-    h.router_task.await.unwrap();
+    for task in h.link_tasks {
+        task.await.unwrap();
+    }
+    h.router.close();
     TlogReader::open(&h.tlog_path).unwrap().collect()
 }
 

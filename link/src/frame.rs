@@ -703,6 +703,25 @@ impl RawCommandAck {
         }
     }
 
+    /// Reads a COMMAND_ACK (77) without the typed decoder, so that acks of commands the
+    /// dialect's `MavCmd` does not know are read too; `None` for any other message.
+    #[must_use]
+    pub fn from_frame(frame: &Frame) -> Option<Self> {
+        if frame.message_id() != MSG_ID_COMMAND_ACK {
+            return None;
+        }
+        // Zero-fill the truncated v2 payload.
+        let p: [u8; 10] = frame.payload_padded();
+        Some(RawCommandAck {
+            command: u16::from_le_bytes([p[0], p[1]]),
+            result: p[2],
+            progress: p[3],
+            result_param2: i32::from_le_bytes([p[4], p[5], p[6], p[7]]),
+            target_system: p[8],
+            target_component: p[9],
+        })
+    }
+
     /// The ack as an unsigned MAVLink 2 frame (payload trailing zeros stripped).
     pub fn to_frame(&self, system_id: SystemId, component_id: ComponentId, seq: u8) -> Frame {
         let c = self.command.to_le_bytes();

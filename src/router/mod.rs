@@ -15,17 +15,15 @@
 //! nowhere: not to clients, not to the tlog, not to the tracker. SETUP_SIGNING (it carries a
 //! key) is never forwarded, logged or tapped, from any side.
 //!
-//! Two ways to drive it, with the same rules:
-//! - [`Router::inline`]: the daemon's hot path. The router state sits behind a lock and each
-//!   link task routes the frames it received itself, before it reads its socket again: no queue
-//!   and no task hop between a link and the router. A run of frames (one wake-up of a link
-//!   task) is routed under one lock, each egress link gets the run's frames for it in one go
-//!   (one `sendmmsg` for a UDP peer whose queue is empty); then the tlog gets the run's records
-//!   in one hand-off, and the tracker's tap gets the run's copies in one hand-off too, which
-//!   the tracker's state usually takes on the same thread once a run of them waits, without
-//!   waking the tracker ([`tap`]).
-//! - [`Router::run`]: a task fed by two event queues (one per side), for owners that prefer
-//!   queues.
+//! It is driven one way, [`Router::inline`]: the router state sits behind a lock and each link
+//! task routes the frames it received itself, before it reads its socket again: no queue and
+//! no task hop between a link and the router. A run of frames (one wake-up of a link task) is
+//! routed under one lock, each egress link gets the run's frames for it in one go (one
+//! `sendmmsg` for a UDP peer whose queue is empty); then the tlog gets the run's records in
+//! one hand-off, and the tracker's tap gets the run's copies in one hand-off too. The lock is
+//! then released, and only then does the link's thread apply the tapped frames to the
+//! tracker's state, once a run of them waits and the state is free ([`crate::tap::queue`]):
+//! the tracker's work never holds up another link's routing.
 
 pub mod table;
 
@@ -34,23 +32,20 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Instant;
 
-use tokio::sync::{mpsc, watch};
-use tokio_util::sync::CancellationToken;
+use tokio::sync::watch;
 use vtol_link::{
-    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, SendSummary, SystemId,
+    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, RawCommandAck, SendSummary,
+    SystemId,
 };
 
-use crate::tap::{LinkInfo, Side, SysidConflict, TapSender, Tapped, clock};
+use crate::tap::{Handed, LinkInfo, Side, SysidConflict, TapApplier, TapSender, Tapped, clock};
 use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
 use crate::trust::policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
 use crate::trust::signing::{DaemonSigning, SigningCounters};
 use table::{Addressing, Route, RoutingTable};
 
-const MSG_ID_COMMAND_ACK: u32 = 77;
-/// Events taken from a queue per wake-up ([`Router::run`]): under load a run of frames is
-/// routed together; at low rates a run is one frame and nothing waits.
-const BATCH: usize = 64;
-const MSG_ID_SETUP_SIGNING: u32 = 256;
+/// Records and tapped copies a run's buffers hold before they grow.
+const RUN_CAPACITY: usize = 64;
 
 /// Router-wide counters (per-link ones live in each link's [`LinkStats`]).
 #[derive(Debug, Default)]
@@ -101,7 +96,7 @@ struct Egress {
     counters: Arc<PolicyCounters>,
 }
 
-/// The router's state, driven by [`Router::run`] or, shared, by [`Router::inline`].
+/// The router's state, shared by the link tasks ([`Router::inline`]).
 pub struct Router {
     table: RoutingTable,
     egress: BTreeMap<LinkId, Egress>,
@@ -144,9 +139,9 @@ impl Router {
             stats: Arc::clone(&stats),
             links_tx,
             tlog,
-            pending_log: Vec::with_capacity(BATCH),
+            pending_log: Vec::with_capacity(RUN_CAPACITY),
             tap,
-            pending_tap: Vec::with_capacity(BATCH),
+            pending_tap: Vec::with_capacity(RUN_CAPACITY),
             signing: None,
             conflicts_tx,
         };
@@ -169,73 +164,37 @@ impl Router {
         counters
     }
 
-    /// Routes until `cancel` fires or both queues close; then closes the tlog (flushing it).
-    pub async fn run(
-        mut self,
-        mut vehicle: mpsc::Receiver<LinkEvent>,
-        mut clients: mpsc::Receiver<LinkEvent>,
-        cancel: CancellationToken,
-    ) {
-        let (mut vehicle_open, mut clients_open) = (true, true);
-        let (mut from_vehicle, mut from_clients) =
-            (Vec::with_capacity(BATCH), Vec::with_capacity(BATCH));
-        while vehicle_open || clients_open {
-            tokio::select! {
-                biased;
-                () = cancel.cancelled() => break,
-                n = vehicle.recv_many(&mut from_vehicle, BATCH), if vehicle_open => {
-                    vehicle_open = n > 0;
-                    self.apply_run(Side::Vehicle, &mut from_vehicle);
-                }
-                n = clients.recv_many(&mut from_clients, BATCH), if clients_open => {
-                    clients_open = n > 0;
-                    self.apply_run(Side::Client, &mut from_clients);
-                }
-            }
-        }
-        self.close();
-    }
-
     /// Shares the router between the link tasks: each routes what it receives itself. Hand
     /// [`InlineRouter::events`] to the links of each side; call [`InlineRouter::close`] at
     /// shutdown (it closes the tlog, flushing it).
     #[must_use]
     pub fn inline(self) -> InlineRouter {
-        InlineRouter(Arc::new(Mutex::new(Some(self))))
+        let tap = self.tap.as_ref().map(TapSender::applier);
+        InlineRouter {
+            router: Arc::new(Mutex::new(Some(self))),
+            tap,
+        }
     }
 
-    /// Applies one link event at once (its frame forwarded, its record handed to the tlog);
-    /// a new link gets the default policy.
-    pub fn handle(&mut self, side: Side, event: LinkEvent) {
-        self.handle_with(side, EndpointPolicy::default(), event);
-    }
-
-    /// [`Router::handle`], a new link getting `policy`.
-    pub fn handle_with(&mut self, side: Side, policy: EndpointPolicy, event: LinkEvent) {
+    /// Applies one link event at once (its frame forwarded, its record handed to the tlog), a
+    /// new link getting `policy`. Returns what became of the tapped copies
+    /// ([`Router::end_run`]).
+    fn handle(&mut self, side: Side, policy: EndpointPolicy, event: LinkEvent) -> Handed {
         let now = clock();
         self.apply(side, policy, event, unix_time_us(), now);
-        self.end_run();
+        self.end_run()
     }
 
-    /// Applies a run of events taken from a queue, in order, and empties `events`.
-    fn apply_run(&mut self, side: Side, events: &mut Vec<LinkEvent>) {
-        let t_us = unix_time_us();
-        let now = clock();
-        for ev in events.drain(..) {
-            self.apply(side, EndpointPolicy::default(), ev, t_us, now);
-        }
-        self.end_run();
-    }
-
-    /// Routes a run of frames (one wake-up of a link task) and empties `frames`.
-    fn route_run(&mut self, side: Side, frames: &mut Vec<(LinkId, Frame)>) {
+    /// Routes a run of frames (one wake-up of a link task) and empties `frames`. Returns what
+    /// became of the tapped copies ([`Router::end_run`]).
+    fn route_run(&mut self, side: Side, frames: &mut Vec<(LinkId, Frame)>) -> Handed {
         // One clock read per run: its frames arrived together.
         let t_us = unix_time_us();
         let now = clock();
         for (id, frame) in frames.drain(..) {
             self.route(id, side, frame, t_us, now);
         }
-        self.end_run();
+        self.end_run()
     }
 
     /// Saves the signing state (if signing); errors are logged, routing goes on.
@@ -248,24 +207,27 @@ impl Router {
     }
 
     /// Sends what the run routed to each egress link, then hands the run's records to the tlog
-    /// and its copies to the tracker's tap (which the tracker's state may take at once, on this
-    /// thread). The sends come first: nothing a frame's bookkeeping costs, or a thread it
-    /// wakes, comes between its arrival and its departure.
-    fn end_run(&mut self) {
+    /// and its copies to the tracker's tap. The sends come first: nothing a frame's bookkeeping
+    /// costs, or a thread it wakes, comes between its arrival and its departure. The caller
+    /// applies the tapped frames waiting for the tracker's state (if a run of them waits) once
+    /// the router's lock is released ([`TapApplier::apply_waiting`]).
+    fn end_run(&mut self) -> Handed {
         self.send_runs();
         if let Some(tlog) = &self.tlog
             && !self.pending_log.is_empty()
         {
             tlog.log_many(self.pending_log.drain(..));
         }
-        if let Some(tap) = &self.tap {
-            let dropped = tap.send_run(&mut self.pending_tap);
-            if dropped > 0 {
-                self.stats
-                    .dropped_tap
-                    .fetch_add(dropped as u64, Ordering::Relaxed);
-            }
+        let Some(tap) = &self.tap else {
+            return Handed::default();
+        };
+        let handed = tap.hand_over(&mut self.pending_tap);
+        if handed.dropped > 0 {
+            self.stats
+                .dropped_tap
+                .fetch_add(handed.dropped as u64, Ordering::Relaxed);
         }
+        handed
     }
 
     /// Hands each egress link the frames routed to it in this run.
@@ -377,7 +339,7 @@ impl Router {
     /// Applies the ingress side's rules before routing: the vehicle's signatures, a client
     /// link's trust. `None` when the frame goes nowhere (counted).
     fn admit(&mut self, ingress: LinkId, side: Side, frame: Frame) -> Option<Frame> {
-        if frame.message_id() == MSG_ID_SETUP_SIGNING {
+        if frame.message_id() == vtol_link::signing::MSG_ID_SETUP_SIGNING {
             // It carries a key: never forwarded, logged or shown, from any side.
             self.stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
             return None;
@@ -502,7 +464,11 @@ impl Router {
 
 /// The router shared by the link tasks ([`Router::inline`]).
 #[derive(Debug, Clone)]
-pub struct InlineRouter(Arc<Mutex<Option<Router>>>);
+pub struct InlineRouter {
+    router: Arc<Mutex<Option<Router>>>,
+    /// Applies the tracker's tapped frames once the router's lock is released.
+    tap: Option<TapApplier>,
+}
 
 impl InlineRouter {
     /// Where the links of `side` report: each calls the router from its own task.
@@ -548,7 +514,15 @@ impl InlineRouter {
 
     fn lock(&self) -> MutexGuard<'_, Option<Router>> {
         // A panic while routing leaves the table and queues usable: keep routing.
-        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+        self.router.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Applies the tracker's waiting frames after a run that left a run of them; called with
+    /// the router's lock released, so the tracker's work never holds up another link.
+    fn apply_tap(&self, handed: Handed) {
+        if let Some(tap) = &self.tap {
+            tap.apply_waiting(handed);
+        }
     }
 }
 
@@ -565,7 +539,9 @@ impl LinkEventHandler for SideHandler {
         let Some(router) = guard.as_mut() else {
             return false;
         };
-        router.handle_with(self.side, self.policy, event);
+        let handed = router.handle(self.side, self.policy, event);
+        drop(guard);
+        self.router.apply_tap(handed);
         true
     }
 
@@ -575,7 +551,9 @@ impl LinkEventHandler for SideHandler {
             frames.clear();
             return false;
         };
-        router.route_run(self.side, frames);
+        let handed = router.route_run(self.side, frames);
+        drop(guard);
+        self.router.apply_tap(handed);
         true
     }
 
@@ -593,12 +571,8 @@ pub fn addressing(frame: &Frame) -> Addressing {
     };
     if let Some(cmd) = frame.raw_command() {
         a.command = Some(cmd.command);
-    } else if frame.message_id() == MSG_ID_COMMAND_ACK {
-        let p = frame.payload();
-        a.ack_of_command = Some(u16::from_le_bytes([
-            p.first().copied().unwrap_or(0),
-            p.get(1).copied().unwrap_or(0),
-        ]));
+    } else if let Some(ack) = RawCommandAck::from_frame(frame) {
+        a.ack_of_command = Some(ack.command);
     }
     a
 }

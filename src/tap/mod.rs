@@ -14,7 +14,7 @@ use vtol_link::{Frame, LinkId, LinkStats, SystemId};
 
 use crate::trust::policy::{EndpointPolicy, PolicyCounters};
 
-pub use queue::{Drain, TapReceiver, TapSender, tap};
+pub use queue::{Drain, Handed, TapApplier, TapReceiver, TapSender, tap};
 
 /// Which side of the daemon a link is on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -95,8 +95,19 @@ impl TapSender {
     /// everything waiting if it is enough for the reader's [`Drain`] and the drain can take it
     /// without waiting: returns how many frames were dropped for want of room (the newest).
     pub fn send_run(&self, run: &mut Vec<Tapped>) -> usize {
+        let handed = self.hand_over(run);
+        self.applier().apply_waiting(handed);
+        handed.dropped
+    }
+
+    /// Hands over `run` (emptied) in order, as much as the tap has room for, and applies
+    /// nothing: the router calls it under its lock, so frames enter the tap in the order they
+    /// were routed, and applies them ([`TapApplier::apply_waiting`]) once its lock is released.
+    /// When a run waits for the drain, waking the reader is left to that call too: the frames
+    /// the sender applies itself wake nobody.
+    pub fn hand_over(&self, run: &mut Vec<Tapped>) -> Handed {
         if run.is_empty() {
-            return 0;
+            return Handed::default();
         }
         let mut q = self.shared.lock();
         let before = q.frames.len();
@@ -109,22 +120,76 @@ impl TapSender {
         } else {
             q.frames.append(run);
         }
-        // Under the tap's lock, so frames are applied in the order they were routed whoever
-        // applies them (the reader takes the tap only while it holds its own state).
-        if let Some((drain, at_least)) = self.shared.drain.get()
-            && q.frames.len() >= *at_least
-            && drain.try_apply(&mut q.frames)
-        {
-            q.frames.clear();
-        }
+        let apply = self
+            .shared
+            .drain
+            .get()
+            .is_some_and(|(_, at_least)| q.frames.len() >= *at_least);
         let at = self.shared.wake_at;
         let wake = before < at && q.frames.len() >= at;
         drop(q);
         run.clear();
+        if wake && !apply {
+            self.shared.filling.notify_one();
+        }
+        Handed {
+            dropped,
+            apply,
+            wake,
+        }
+    }
+
+    /// What applies the waiting frames on the sender's side, outside the sender's own locks.
+    #[must_use]
+    pub fn applier(&self) -> TapApplier {
+        TapApplier {
+            shared: Arc::clone(&self.shared),
+        }
+    }
+}
+
+/// What became of a run handed to the tap ([`TapSender::hand_over`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Handed {
+    /// Frames dropped for want of room (the newest of the run).
+    pub dropped: usize,
+    /// A run waits for the reader's [`Drain`]: the sender should apply it
+    /// ([`TapApplier::apply_waiting`]).
+    pub apply: bool,
+    /// The hand-over filled the tap to the reader's wake-up mark: the reader is woken unless
+    /// the sender applies what waits.
+    wake: bool,
+}
+
+/// Applies waiting frames through the reader's [`Drain`] from the sender's thread. Unlike the
+/// [`TapSender`], holding one does not keep the tap open.
+#[derive(Debug, Clone)]
+pub struct TapApplier {
+    shared: Arc<Shared>,
+}
+
+impl TapApplier {
+    /// After `handed` ([`TapSender::hand_over`]): applies everything waiting if it is enough
+    /// for the reader's [`Drain`] and the drain can take it without waiting; otherwise leaves
+    /// it for a later run or the reader, waking the reader if the hand-over filled the tap.
+    pub fn apply_waiting(&self, handed: Handed) {
+        if !handed.apply {
+            return;
+        }
+        let Some((drain, at_least)) = self.shared.drain.get() else {
+            return;
+        };
+        // Under the tap's lock, so frames are applied in the order they were handed over
+        // whoever applies them (the reader takes the tap only while it holds its own state).
+        let mut q = self.shared.lock();
+        if q.frames.len() >= *at_least && drain.try_apply(&mut q.frames) {
+            q.frames.clear();
+        }
+        let wake = handed.wake && q.frames.len() >= self.shared.wake_at;
+        drop(q);
         if wake {
             self.shared.filling.notify_one();
         }
-        dropped
     }
 }
 
