@@ -11,23 +11,22 @@
 //! the next datagram. The cost: a frame split across two datagrams (a raw serial-to-UDP
 //! bridge) is dropped, where pymavlink would reassemble it.
 //!
-//! Two ways to run a socket, by who takes the events:
-//! - **Inline owner** ([`Events::Inline`], the daemon's router): a forwarder's cost is its
-//!   system calls and wake-ups per datagram, so the socket is read by a thread of its own in
-//!   blocking mode, like a bare `recvfrom` loop: one `recvfrom` sleeps and takes a datagram,
-//!   or, while they come in bursts, one `recvmmsg` takes every datagram waiting; the owner
-//!   routes their frames before the next one. The socket is
-//!   never registered with the async reactor, so sending on it (which the kernel follows with
-//!   a "writable" event for every datagram) wakes nobody. Nor does the thread sleep with a
-//!   timeout (a kernel timer armed and cancelled per datagram): a task wakes it with an empty
-//!   datagram of its own when it is to stop, or when it has timers due and no traffic woke it
-//!   ([`Wakeup`]).
-//! - **Queue owner** ([`Events::Queue`]): a task on the runtime, for owners that read a queue
-//!   (the twin, tools).
+//! One way to run a socket, whoever takes the events: a forwarder's cost is its system calls
+//! and wake-ups per datagram, so the socket is read by a thread of its own in blocking mode,
+//! like a bare `recvfrom` loop: one `recvfrom` sleeps and takes a datagram, or, while they come
+//! in bursts, one `recvmmsg` takes every datagram waiting; the owner handles their frames
+//! before the next one. An inline owner ([`Events::Inline`], the daemon's router) routes them
+//! on that thread; a queue owner ([`Events::Queue`], the twin, the command-line client, tools)
+//! gets them in its queue, and a full queue makes the reader wait ([`QueueHandler`]). The
+//! socket is never registered with the async reactor, so sending on it (which the kernel
+//! follows with a "writable" event for every datagram) wakes nobody. Nor does the thread sleep
+//! with a timeout (a kernel timer armed and cancelled per datagram): a task wakes it with an
+//! empty datagram of its own when it is to stop, or when it has timers due and no traffic woke
+//! it ([`Wakeup`]).
 //!
-//! Either way a producer sends straight to a peer whose writer has nothing queued (one
-//! `sendto`, or one `sendmmsg` for a run of frames, never waiting), so the writer task only
-//! wakes when the socket buffer was full.
+//! A producer sends straight to a peer whose writer has nothing queued (one `sendto`, or one
+//! `sendmmsg` for a run of frames, never waiting), so the writer task only wakes when the
+//! socket buffer was full.
 //!
 //! An inline owner's **udpout socket is connected to its destination** ([`Connection`]): the
 //! kernel then keeps the route instead of looking it up for every datagram, ~0.7 µs of a
@@ -45,14 +44,13 @@
 
 use std::collections::hash_map::Entry;
 use std::io::{self, IoSlice, IoSliceMut};
-use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
-use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
+use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket};
+use std::os::fd::AsRawFd;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
-use tokio::io::Interest;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
@@ -60,7 +58,7 @@ use tokio_util::task::TaskTracker;
 
 use super::{
     Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkSender, LinkStats,
-    emit, emit_down, emit_frames, resolve, sleep_or_cancel,
+    resolve, sleep_or_cancel,
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
@@ -85,48 +83,46 @@ pub(crate) const BLOCKING_TICK: Duration = Duration::from_millis(100);
 /// blocking socket has no readiness events to wait on; a full UDP send buffer is rare).
 const FULL_RETRY: Duration = Duration::from_millis(1);
 
-/// The socket of a UDP endpoint, as its reader needs it.
-#[derive(Debug)]
-enum UdpSock {
-    /// Registered with the reactor, read by a task.
-    Async(tokio::net::UdpSocket),
-    /// Blocking, read by a thread of its own, unknown to the reactor.
-    Blocking(std::net::UdpSocket),
+/// A queue owner's events, from a reader's thread: a full queue makes the reader wait, as it
+/// makes any link of a queue owner wait, unless the endpoint is stopping.
+struct QueueHandler {
+    tx: mpsc::Sender<LinkEvent>,
+    cancel: CancellationToken,
+    runtime: tokio::runtime::Handle,
 }
 
-impl UdpSock {
-    fn local_addr(&self) -> io::Result<SocketAddr> {
-        match self {
-            UdpSock::Async(s) => s.local_addr(),
-            UdpSock::Blocking(s) => s.local_addr(),
-        }
-    }
-
-    fn fd(&self) -> BorrowedFd<'_> {
-        match self {
-            UdpSock::Async(s) => s.as_fd(),
-            UdpSock::Blocking(s) => s.as_fd(),
-        }
-    }
-
-    /// Runs a non-blocking send; on a registered socket a `WouldBlock` also clears the write
-    /// readiness, so that [`UdpSock::room`] waits for the next one.
-    fn send_io<R>(&self, f: impl FnOnce(BorrowedFd<'_>) -> io::Result<R>) -> io::Result<R> {
-        match self {
-            UdpSock::Async(s) => s.try_io(Interest::WRITABLE, || f(s.as_fd())),
-            UdpSock::Blocking(s) => f(s.as_fd()),
-        }
-    }
-
-    /// Waits until the socket may have room to send again.
-    async fn room(&self) -> io::Result<()> {
-        match self {
-            UdpSock::Async(s) => s.writable().await,
-            UdpSock::Blocking(_) => {
-                tokio::time::sleep(FULL_RETRY).await;
-                Ok(())
+impl LinkEventHandler for QueueHandler {
+    fn event(&self, event: LinkEvent) -> bool {
+        // The common case, room in the queue, needs no future.
+        let event = match self.tx.try_send(event) {
+            Ok(()) => return true,
+            Err(mpsc::error::TrySendError::Closed(_)) => return false,
+            Err(mpsc::error::TrySendError::Full(event)) => event,
+        };
+        // Called on a reader's own thread, never on the runtime's.
+        self.runtime.block_on(async {
+            tokio::select! {
+                biased;
+                () = self.cancel.cancelled() => false,
+                r = self.tx.send(event) => r.is_ok(),
             }
-        }
+        })
+    }
+
+    fn is_closed(&self) -> bool {
+        self.tx.is_closed()
+    }
+}
+
+/// The handler a reader's thread calls: the owner's, or one filling the owner's queue.
+fn handler(events: Events, cancel: &CancellationToken) -> Arc<dyn LinkEventHandler> {
+    match events {
+        Events::Inline(h) => h,
+        Events::Queue(tx) => Arc::new(QueueHandler {
+            tx,
+            cancel: cancel.clone(),
+            runtime: tokio::runtime::Handle::current(),
+        }),
     }
 }
 
@@ -136,7 +132,7 @@ impl UdpSock {
 /// goes direct once the writer has sent everything it was given.
 #[derive(Debug)]
 pub(crate) struct DirectUdp {
-    sock: Arc<UdpSock>,
+    sock: Arc<UdpSocket>,
     dest: SocketAddr,
     /// Frames handed to the writer's queue and not yet sent by it.
     pub(crate) queued: AtomicUsize,
@@ -163,12 +159,12 @@ impl Connection {
 
     /// Nobody listens at the destination (the kernel reported an ICMP error): send with the
     /// address from now on, which the kernel does not answer with errors.
-    fn dissolve(&self, sock: &UdpSock) {
+    fn dissolve(&self, sock: &UdpSocket) {
         let Ok(_guard) = self.change.lock() else {
             return;
         };
         if self.on.swap(false, Ordering::Relaxed) {
-            if let Err(e) = rustix::net::connect_unspec(sock.fd()) {
+            if let Err(e) = rustix::net::connect_unspec(sock) {
                 tracing::debug!(dest = %self.dest, "udp disconnect: {e}");
             }
             tracing::debug!(dest = %self.dest, "nobody listens: udpout socket unconnected");
@@ -176,12 +172,12 @@ impl Connection {
     }
 
     /// A datagram came from the destination: connect again.
-    fn reconnect(&self, sock: &UdpSock) {
+    fn reconnect(&self, sock: &UdpSocket) {
         let Ok(_guard) = self.change.lock() else {
             return;
         };
         if !self.is_on() {
-            match rustix::net::connect(sock.fd(), &self.dest) {
+            match rustix::net::connect(sock, &self.dest) {
                 Ok(()) => {
                     self.on.store(true, Ordering::Relaxed);
                     tracing::debug!(dest = %self.dest, "udpout socket connected again");
@@ -219,9 +215,7 @@ impl DirectUdp {
     fn send_one(&self, bytes: &[u8]) -> io::Result<usize> {
         let flags = rustix::net::SendFlags::DONTWAIT;
         if let Some(c) = self.connected() {
-            let sent = self
-                .sock
-                .send_io(|fd| rustix::net::send(fd, bytes, flags).map_err(io::Error::from));
+            let sent = rustix::net::send(&*self.sock, bytes, flags).map_err(io::Error::from);
             match sent {
                 Err(e) if is_icmp_error(&e) => {
                     // The error belongs to an earlier datagram; this one is still to send.
@@ -231,9 +225,7 @@ impl DirectUdp {
                 r => return r,
             }
         }
-        self.sock.send_io(|fd| {
-            rustix::net::sendto(fd, bytes, flags, &self.dest).map_err(io::Error::from)
-        })
+        rustix::net::sendto(&*self.sock, bytes, flags, &self.dest).map_err(io::Error::from)
     }
 
     /// Sends one datagram now if the socket has room: `None` when it would block.
@@ -278,10 +270,9 @@ impl DirectUdp {
                     }
                 })
                 .collect();
-            let sent = self.sock.send_io(|fd| {
-                rustix::net::sendmmsg(fd, &mut msgs, rustix::net::SendFlags::DONTWAIT)
-                    .map_err(io::Error::from)
-            });
+            let sent =
+                rustix::net::sendmmsg(&*self.sock, &mut msgs, rustix::net::SendFlags::DONTWAIT)
+                    .map_err(io::Error::from);
             match sent {
                 Ok(0) => break,
                 Ok(n) => {
@@ -349,7 +340,7 @@ impl Datagrams {
     /// Sleeps until a datagram arrives (or the socket's read timeout passes, `WouldBlock`),
     /// then takes it and, in batch mode, every other one waiting, up to the number of slots.
     /// `now` is read after the wake-up and returned for the caller's timers.
-    fn recv(&mut self, sock: &std::net::UdpSocket) -> io::Result<(usize, Instant)> {
+    fn recv(&mut self, sock: &UdpSocket) -> io::Result<(usize, Instant)> {
         let n = if self.batch || self.slots == 1 {
             self.recv_many(sock)?
         } else {
@@ -365,7 +356,7 @@ impl Datagrams {
     }
 
     /// One `recvfrom` into the first slot.
-    fn recv_one(&mut self, sock: &std::net::UdpSocket) -> io::Result<usize> {
+    fn recv_one(&mut self, sock: &UdpSocket) -> io::Result<usize> {
         self.got.clear();
         // Not `UdpSocket::recv_from`: a socket whose receiving side was shut down (how a
         // connected reader is told to stop) returns without a sender address, which the
@@ -381,7 +372,7 @@ impl Datagrams {
     }
 
     /// One `recvmmsg(MSG_WAITFORONE)`: the first datagram, then every other one waiting.
-    fn recv_many(&mut self, sock: &std::net::UdpSocket) -> io::Result<usize> {
+    fn recv_many(&mut self, sock: &UdpSocket) -> io::Result<usize> {
         self.got.clear();
         let mut chunks = self.buf.chunks_mut(MAX_DATAGRAM_BYTES);
         let mut iovs: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
@@ -415,28 +406,19 @@ fn to_std(a: SockaddrStorage) -> Option<SocketAddr> {
         .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(*v6)))
 }
 
-/// Binds `addrs` in turn; a socket for a blocking reader when the owner takes events inline.
-fn bind(url: &LinkUrl, addrs: &[SocketAddr], events: &Events) -> Result<Arc<UdpSock>, LinkError> {
+/// Binds `addrs` in turn: a socket for a blocking reader.
+fn bind(url: &LinkUrl, addrs: &[SocketAddr]) -> Result<Arc<UdpSocket>, LinkError> {
     let io_err = |source| LinkError::Io {
         url: url.to_string(),
         source,
     };
     let mut last = None;
     for &addr in addrs {
-        match std::net::UdpSocket::bind(addr) {
+        match UdpSocket::bind(addr) {
             Ok(s) => {
                 grow_recv_buffer(&s);
-                let sock = match events {
-                    Events::Inline(_) => {
-                        s.set_read_timeout(Some(BLOCKING_TICK)).map_err(io_err)?;
-                        UdpSock::Blocking(s)
-                    }
-                    Events::Queue(_) => {
-                        s.set_nonblocking(true).map_err(io_err)?;
-                        UdpSock::Async(tokio::net::UdpSocket::from_std(s).map_err(io_err)?)
-                    }
-                };
-                return Ok(Arc::new(sock));
+                s.set_read_timeout(Some(BLOCKING_TICK)).map_err(io_err)?;
+                return Ok(Arc::new(s));
             }
             Err(source) => last = Some((addr, source)),
         }
@@ -460,7 +442,7 @@ fn bind(url: &LinkUrl, addrs: &[SocketAddr], events: &Events) -> Result<Arc<UdpS
 pub(crate) const RECV_BUFFER_BYTES: usize = 1 << 20;
 
 /// Asks for [`RECV_BUFFER_BYTES`] of receive buffer; whatever is granted, the socket works.
-fn grow_recv_buffer(s: &std::net::UdpSocket) {
+fn grow_recv_buffer(s: &UdpSocket) {
     use rustix::net::sockopt;
     let granted = |s| sockopt::socket_recv_buffer_size(s).unwrap_or(0);
     let before = granted(s);
@@ -482,7 +464,7 @@ fn grow_recv_buffer(s: &std::net::UdpSocket) {
     tracing::debug!(bytes = granted(s), "udp receive buffer");
 }
 
-fn local_addr(url: &LinkUrl, sock: &UdpSock) -> Result<SocketAddr, LinkError> {
+fn local_addr(url: &LinkUrl, sock: &UdpSocket) -> Result<SocketAddr, LinkError> {
     sock.local_addr().map_err(|source| LinkError::Io {
         url: url.to_string(),
         source,
@@ -512,17 +494,9 @@ async fn udp_writer(
         while sent < batch.len() {
             sent += direct.try_send_now_many(&batch[sent..], &stats);
             if sent < batch.len() {
-                let room = tokio::select! {
-                    _ = cancel.cancelled() => return,
-                    r = direct.sock.room() => r,
-                };
-                if let Err(e) = room {
-                    tracing::debug!(dest = %direct.dest, "udp writer cannot wait for room: {e}");
-                    stats.add_tx_error();
-                    sent += 1;
-                    if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
-                        return;
-                    }
+                // A blocking socket has no readiness to wait on: try again shortly.
+                if !sleep_or_cancel(FULL_RETRY, &cancel).await {
+                    return;
                 }
             }
         }
@@ -534,7 +508,7 @@ async fn udp_writer(
 
 /// The writer of one UDP peer and the sender the owner uses for it.
 fn udp_link(
-    sock: &Arc<UdpSock>,
+    sock: &Arc<UdpSocket>,
     dest: SocketAddr,
     connection: Option<Arc<Connection>>,
     stats: &Arc<LinkStats>,
@@ -567,7 +541,7 @@ struct Peer {
 
 /// The peers of a udpin socket.
 struct Peers {
-    sock: Arc<UdpSock>,
+    sock: Arc<UdpSocket>,
     by_addr: foldhash::HashMap<SocketAddr, Peer>,
     writers: TaskTracker,
     runtime: tokio::runtime::Handle,
@@ -576,7 +550,7 @@ struct Peers {
 }
 
 impl Peers {
-    fn new(sock: Arc<UdpSock>, opts: LinkOptions, cancel: CancellationToken) -> Self {
+    fn new(sock: Arc<UdpSocket>, opts: LinkOptions, cancel: CancellationToken) -> Self {
         Peers {
             sock,
             by_addr: foldhash::HashMap::default(),
@@ -720,7 +694,7 @@ impl Wakeup {
 /// every address).
 #[derive(Debug)]
 struct Alarm {
-    sock: std::net::UdpSocket,
+    sock: UdpSocket,
     to: SocketAddr,
 }
 
@@ -731,7 +705,7 @@ impl Alarm {
             std::net::IpAddr::V6(ip) if ip.is_unspecified() => Ipv6Addr::LOCALHOST.into(),
             ip => ip,
         };
-        let sock = std::net::UdpSocket::bind(SocketAddr::new(ip, 0))?;
+        let sock = UdpSocket::bind(SocketAddr::new(ip, 0))?;
         sock.set_nonblocking(true)?;
         Ok(Alarm {
             sock,
@@ -752,7 +726,7 @@ struct Ring {
     alarm: Option<Alarm>,
     /// The reader's socket, when the alarm cannot reach it (connected to another address):
     /// shutting its receiving side down wakes the reader to stop.
-    shut: Option<std::net::UdpSocket>,
+    shut: Option<UdpSocket>,
 }
 
 impl Ring {
@@ -783,7 +757,7 @@ impl Drop for Ring {
 /// destination, so it is woken to stop by shutting its receiving side down.
 fn blocking_wakeup(
     cancel: &CancellationToken,
-    sock: &std::net::UdpSocket,
+    sock: &UdpSocket,
     idle: Option<Duration>,
     connected: bool,
 ) -> (CancellationToken, Arc<Wakeup>) {
@@ -871,28 +845,19 @@ pub(super) async fn spawn_udpin(
     cancel: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
     let addrs = resolve(host, port).await?;
-    let sock = bind(url, &addrs, &events)?;
+    let sock = bind(url, &addrs)?;
     let local = local_addr(url, &sock)?;
     tracing::info!(%url, %local, "udpin listening");
-    let task = match events {
-        Events::Inline(handler) => {
-            let UdpSock::Blocking(s) = &*sock else {
-                unreachable!("an inline owner's socket is blocking")
-            };
-            let (stop, wake) = blocking_wakeup(&cancel, s, Some(expiry_period(&opts)), false);
-            let peers = Peers::new(sock, opts, stop);
-            tokio::task::spawn_blocking(move || udpin_blocking(peers, &wake, &*handler))
-        }
-        events @ Events::Queue(_) => tokio::spawn(udpin_task(sock, events, opts, cancel)),
-    };
+    let handler = handler(events, &cancel);
+    let (stop, wake) = blocking_wakeup(&cancel, &sock, Some(expiry_period(&opts)), false);
+    let peers = Peers::new(sock, opts, stop);
+    let task = tokio::task::spawn_blocking(move || udpin_blocking(peers, &wake, &*handler));
     Ok((local, task))
 }
 
 /// The udpin reader on a thread of its own, routing inline.
 fn udpin_blocking(mut peers: Peers, wake: &Wakeup, handler: &dyn LinkEventHandler) {
-    let UdpSock::Blocking(sock) = &*Arc::clone(&peers.sock) else {
-        return;
-    };
+    let sock = &*Arc::clone(&peers.sock);
     let period = expiry_period(&peers.opts);
     let mut next_expiry = Instant::now() + period;
     let mut dgrams = Datagrams::new(RECV_BATCH);
@@ -953,67 +918,6 @@ fn udpin_blocking(mut peers: Peers, wake: &Wakeup, handler: &dyn LinkEventHandle
     runtime.block_on(writers.wait());
 }
 
-async fn udpin_task(
-    sock: Arc<UdpSock>,
-    events: Events,
-    opts: LinkOptions,
-    cancel: CancellationToken,
-) {
-    let UdpSock::Async(s) = &*Arc::clone(&sock) else {
-        return;
-    };
-    let period = expiry_period(&opts);
-    let mut peers = Peers::new(sock, opts, cancel.clone());
-    let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
-    let mut frames: Vec<(LinkId, Frame)> = Vec::with_capacity(RECV_BATCH);
-    let mut tick = tokio::time::interval(period);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    'run: loop {
-        tokio::select! {
-            _ = cancel.cancelled() => break,
-            _ = tick.tick() => {
-                for (id, reason) in peers.expire(Instant::now()) {
-                    emit_down(&events, id, reason, &cancel).await;
-                }
-            }
-            r = s.recv_from(&mut buf) => {
-                let (n, addr) = match r {
-                    Ok(x) => x,
-                    Err(e) => {
-                        // E.g. ECONNREFUSED from an ICMP error on some platforms: not fatal.
-                        tracing::debug!("udpin receive error: {e}");
-                        if !sleep_or_cancel(RECV_ERROR_PAUSE, &cancel).await {
-                            break;
-                        }
-                        continue;
-                    }
-                };
-                let mut next = Some((n, addr));
-                // Under load more datagrams are already waiting: take a run of them before
-                // going back to the select, which costs more than the receive itself.
-                for _ in 0..RECV_BATCH {
-                    let Some((n, addr)) = next.take() else { break };
-                    if let Some(up) = peers.on_datagram(addr, &buf[..n], Instant::now(), &mut frames)
-                        && !emit(&events, up, &cancel).await
-                    {
-                        peers.forget(addr);
-                        break 'run;
-                    }
-                    next = s.try_recv_from(&mut buf).ok();
-                }
-                if !emit_frames(&events, &mut frames, &cancel).await {
-                    break;
-                }
-            }
-        }
-    }
-    for id in peers.drain() {
-        emit_down(&events, id, "shutdown".to_string(), &cancel).await;
-    }
-    peers.writers.close();
-    peers.writers.wait().await;
-}
-
 /// Binds an ephemeral socket for udpout and starts its single link.
 pub(super) async fn spawn_udpout(
     url: &LinkUrl,
@@ -1031,13 +935,16 @@ pub(super) async fn spawn_udpout(
         (false, true) => (Ipv4Addr::UNSPECIFIED, 0).into(),
         (false, false) => (Ipv6Addr::UNSPECIFIED, 0).into(),
     };
-    // An inline owner's socket is connected, with a second one for the other senders.
+    // An inline owner's socket is connected, with a second one for the other senders (whose
+    // reader is a task: it calls the owner from the runtime, which a queue owner's handler
+    // must not be called from).
     let pair = match &events {
         Events::Inline(_) => connected_pair(any, dest)
             .inspect_err(|e| tracing::debug!(%url, "udpout unconnected: {e}"))
             .ok(),
         Events::Queue(_) => None,
     };
+    let handler = handler(events, &cancel);
     let (sock, local, strays) = match pair {
         Some((main, local, strays)) => {
             let strays =
@@ -1050,14 +957,10 @@ pub(super) async fn spawn_udpout(
                 on: AtomicBool::new(true),
                 change: std::sync::Mutex::new(()),
             });
-            (
-                Arc::new(UdpSock::Blocking(main)),
-                local,
-                Some((strays, connection)),
-            )
+            (Arc::new(main), local, Some((strays, connection)))
         }
         None => {
-            let sock = bind(url, &[any], &events)?;
+            let sock = bind(url, &[any])?;
             let local = local_addr(url, &sock)?;
             (sock, local, None)
         }
@@ -1066,13 +969,7 @@ pub(super) async fn spawn_udpout(
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, connected = connection.is_some(), "udpout sending to {dest}");
     let stats = Arc::new(LinkStats::default());
-    let (cancel, wake) = match (&events, &*sock) {
-        (Events::Inline(_), UdpSock::Blocking(s)) => {
-            let (stop, wake) = blocking_wakeup(&cancel, s, None, connection.is_some());
-            (stop, Some(wake))
-        }
-        _ => (cancel, None),
-    };
+    let (cancel, wake) = blocking_wakeup(&cancel, &sock, None, connection.is_some());
     let writer_cancel = cancel.child_token();
     let (tx, writer) = udp_link(
         &sock,
@@ -1098,62 +995,48 @@ pub(super) async fn spawn_udpout(
         writer_cancel,
         cancel,
     };
-    let task = match events {
-        Events::Inline(handler) => {
-            let runtime = tokio::runtime::Handle::current();
-            tokio::task::spawn_blocking(move || {
-                let reason = if handler.event(up) {
-                    let strays = strays.map(|(sock, connection)| {
-                        let stop = link.cancel.child_token();
-                        let task = runtime.spawn(udpout_strays(
-                            Strays {
-                                sock,
-                                connection,
-                                main: Arc::clone(&link.sock),
-                                alarm: link.wake.as_ref().and_then(|w| w.alarm),
-                                id,
-                                stats: Arc::clone(&link.stats),
-                                handler: Arc::clone(&handler),
-                            },
-                            stop.clone(),
-                        ));
-                        (stop, task)
-                    });
-                    let reason = udpout_blocking(&link, &*handler);
-                    // No frame after the link's end.
-                    if let Some((stop, task)) = strays {
-                        stop.cancel();
-                        let _ = runtime.block_on(task);
-                    }
-                    reason
-                } else {
-                    "shutdown".to_string()
-                };
-                link.writer_cancel.cancel();
-                let _ = runtime.block_on(link.writer);
-                handler.event(LinkEvent::Down { id, reason });
-            })
-        }
-        events @ Events::Queue(_) => tokio::spawn(async move {
-            let reason = if emit(&events, up, &link.cancel).await {
-                udpout_task(&link, &events).await
-            } else {
-                "shutdown".to_string()
-            };
-            link.writer_cancel.cancel();
-            let _ = link.writer.await;
-            emit_down(&events, id, reason, &link.cancel).await;
-        }),
-    };
+    let runtime = tokio::runtime::Handle::current();
+    let task = tokio::task::spawn_blocking(move || {
+        let reason = if handler.event(up) {
+            let strays = strays.map(|(sock, connection)| {
+                let stop = link.cancel.child_token();
+                let task = runtime.spawn(udpout_strays(
+                    Strays {
+                        sock,
+                        connection,
+                        main: Arc::clone(&link.sock),
+                        alarm: link.wake.alarm,
+                        id,
+                        stats: Arc::clone(&link.stats),
+                        handler: Arc::clone(&handler),
+                    },
+                    stop.clone(),
+                ));
+                (stop, task)
+            });
+            let reason = udpout_blocking(&link, &*handler);
+            // No frame after the link's end.
+            if let Some((stop, task)) = strays {
+                stop.cancel();
+                let _ = runtime.block_on(task);
+            }
+            reason
+        } else {
+            "shutdown".to_string()
+        };
+        link.writer_cancel.cancel();
+        let _ = runtime.block_on(link.writer);
+        handler.event(LinkEvent::Down { id, reason });
+    });
     Ok((local, id, task))
 }
 
 /// A udpout link: its socket, counters and writer.
 struct UdpOut {
     id: LinkId,
-    sock: Arc<UdpSock>,
-    /// A blocking reader's stop and wake-ups.
-    wake: Option<Arc<Wakeup>>,
+    sock: Arc<UdpSocket>,
+    /// The reader's stop and wake-ups.
+    wake: Arc<Wakeup>,
     /// The socket is connected to the destination ([`Connection`]).
     connection: Option<Arc<Connection>>,
     stats: Arc<LinkStats>,
@@ -1164,9 +1047,7 @@ struct UdpOut {
 
 /// Hears a udpout peer's replies on a thread of its own; returns why it stopped.
 fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
-    let (UdpSock::Blocking(sock), Some(wake)) = (&*link.sock, &link.wake) else {
-        return "not a blocking socket".to_string();
-    };
+    let (sock, wake) = (&*link.sock, &link.wake);
     // Replies may come from any address (the peer may answer from another port); one decoder
     // suffices since there is one logical peer.
     let mut decoder = FrameDecoder::new();
@@ -1227,8 +1108,8 @@ fn udpout_blocking(link: &UdpOut, handler: &dyn LinkEventHandler) -> String {
 fn connected_pair(
     any: SocketAddr,
     dest: SocketAddr,
-) -> io::Result<(std::net::UdpSocket, SocketAddr, std::net::UdpSocket)> {
-    let shared = |addr: SocketAddr| -> io::Result<std::net::UdpSocket> {
+) -> io::Result<(UdpSocket, SocketAddr, UdpSocket)> {
+    let shared = |addr: SocketAddr| -> io::Result<UdpSocket> {
         let family = if addr.is_ipv4() {
             rustix::net::AddressFamily::INET
         } else {
@@ -1242,7 +1123,7 @@ fn connected_pair(
         )?;
         rustix::net::sockopt::set_socket_reuseport(&fd, true)?;
         rustix::net::bind(&fd, &addr)?;
-        let sock = std::net::UdpSocket::from(fd);
+        let sock = UdpSocket::from(fd);
         grow_recv_buffer(&sock);
         Ok(sock)
     };
@@ -1262,7 +1143,7 @@ struct Strays {
     sock: tokio::net::UdpSocket,
     connection: Arc<Connection>,
     /// The connected socket, to connect again when the destination is heard here.
-    main: Arc<UdpSock>,
+    main: Arc<UdpSocket>,
     /// The reader's alarm: its datagrams land here, and are not traffic.
     alarm: Option<SocketAddr>,
     id: LinkId,
@@ -1307,38 +1188,6 @@ async fn udpout_strays(s: Strays, stop: CancellationToken) {
     }
 }
 
-/// Hears a udpout peer's replies in a task; returns why it stopped.
-async fn udpout_task(link: &UdpOut, events: &Events) -> String {
-    let UdpSock::Async(sock) = &*link.sock else {
-        return "not a registered socket".to_string();
-    };
-    let mut decoder = FrameDecoder::new();
-    let mut buf = vec![0u8; MAX_DATAGRAM_BYTES];
-    let mut frames: Vec<(LinkId, Frame)> = Vec::new();
-    loop {
-        let r = tokio::select! {
-            _ = link.cancel.cancelled() => return "shutdown".to_string(),
-            r = sock.recv_from(&mut buf) => r,
-        };
-        let n = match r {
-            Ok((n, _from)) => n,
-            Err(e) => {
-                tracing::debug!(id = %link.id, "udpout receive error: {e}");
-                if !sleep_or_cancel(RECV_ERROR_PAUSE, &link.cancel).await {
-                    return "shutdown".to_string();
-                }
-                continue;
-            }
-        };
-        link.stats.add_rx_bytes(n);
-        decoder.push_final_with(&buf[..n], |frame| frames.push((link.id, frame)));
-        link.stats.add_decode(&decoder.take_stats());
-        if !emit_frames(events, &mut frames, &link.cancel).await {
-            return "event receiver closed".to_string();
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1348,8 +1197,8 @@ mod tests {
     fn a_reader_shut_down_wakes_with_an_empty_receive_and_no_sender() {
         // How a connected udpout reader is stopped: its receive returns with nothing, and no
         // address (which `UdpSocket::recv_from` would panic on).
-        let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-        let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
         sock.connect(peer.local_addr().unwrap()).unwrap();
         rustix::net::shutdown(&sock, rustix::net::Shutdown::Read).unwrap();
         let mut d = Datagrams::new(4);
@@ -1378,30 +1227,12 @@ mod tests {
             .trim()
             .parse()
             .expect("a number");
-        let (tx, _rx) = mpsc::channel(1);
-        for (kind, events) in [
-            ("task-read", Events::Queue(tx)),
-            ("thread-read", Events::Inline(Arc::new(Ignore))),
-        ] {
-            let sock = bind(&url, &addrs, &events).unwrap();
-            let fd = match &*sock {
-                UdpSock::Async(s) => s.as_fd(),
-                UdpSock::Blocking(s) => s.as_fd(),
-            };
-            let got = socket_recv_buffer_size(fd).unwrap();
-            assert!(
-                got >= grantable().max(default),
-                "{kind} socket: {got} bytes, rmem_max allows {}",
-                grantable()
-            );
-        }
-    }
-
-    struct Ignore;
-
-    impl LinkEventHandler for Ignore {
-        fn event(&self, _: LinkEvent) -> bool {
-            true
-        }
+        let sock = bind(&url, &addrs).unwrap();
+        let got = socket_recv_buffer_size(&*sock).unwrap();
+        assert!(
+            got >= grantable().max(default),
+            "socket: {got} bytes, rmem_max allows {}",
+            grantable()
+        );
     }
 }
