@@ -309,6 +309,8 @@ pub async fn start(
             // A zenoh: vehicle URL is the ground end of a fleet: each vehicle its own link.
             let mut opts = config.link.clone();
             opts.zenoh.role = ZenohRole::Ground;
+            // A vehicle back from a new address is the same vehicle, not a second one.
+            opts.udp_follow_system = true;
             let h = spawn_endpoint(url, vehicle_tx, opts, cancel.clone())
                 .await
                 .map_err(|source| DaemonError::Link {

@@ -3,6 +3,7 @@
 //! the selected one; the tracker keeping them apart; a system id claimed by two vehicle links
 //! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
 
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use ratatui::Terminal;
@@ -15,13 +16,15 @@ use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
 use vtol_gcs::router::Router;
 use vtol_gcs::tap::{Side, SysidConflict};
+use vtol_gcs::tlog::{TlogHandle, TlogReader};
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{
-    ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, SystemId, spawn_stream_link,
+    ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint,
+    spawn_stream_link,
 };
 
 fn heartbeat(mode: u32, armed: bool) -> MavMessage {
@@ -258,6 +261,111 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
         let _ = task.await;
     }
     router.close();
+}
+
+/// A vehicle whose process restarts on a new source port of a `udpin` vehicle endpoint is the
+/// same vehicle: the endpoint follows its new address at once, and nothing it sends after its
+/// first frame is lost, to the clients or to the tlog. A vehicle on another endpoint claiming
+/// the same system id is still a conflict: its frames are logged and go nowhere else.
+#[tokio::test]
+async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_logged_not_merged() {
+    let dir = tempfile::tempdir().unwrap();
+    let tlog = TlogHandle::start(dir.path(), 4096).unwrap();
+    let tlog_path = tlog.path.clone();
+    let cancel = CancellationToken::new();
+    let (router, handle) = Router::new(Some(tlog), None);
+    let router = router.inline();
+    // As the daemon opens its vehicle endpoints.
+    let opts = LinkOptions {
+        udp_follow_system: true,
+        ..LinkOptions::default()
+    };
+    let url: LinkUrl = "udpin:127.0.0.1:0".parse().unwrap();
+    let vehicles = spawn_endpoint(
+        &url,
+        router.events(Side::Vehicle),
+        opts.clone(),
+        cancel.clone(),
+    )
+    .await
+    .unwrap();
+    let to = vehicles.local_addr().unwrap();
+    let elsewhere = spawn_endpoint(&url, router.events(Side::Vehicle), opts, cancel.clone())
+        .await
+        .unwrap();
+    let (mut client, far) = tokio::io::duplex(1 << 16);
+    let (_, client_task) = spawn_stream_link(
+        far,
+        "client",
+        router.events(Side::Client),
+        LinkOptions::default(),
+        cancel.clone(),
+    );
+    let mut links = handle.links.clone();
+    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 1))
+        .await
+        .expect("the client's link up")
+        .expect("router running");
+    let beat = |seq| Frame::encode_v2(SystemId(1), ComponentId(1), seq, &heartbeat(17, false));
+
+    // The vehicle's process sends ten frames, stops, and its next process sends ten more from
+    // another port at once.
+    let first = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    for seq in 0..10 {
+        first.send_to(beat(seq).as_bytes(), to).unwrap();
+    }
+    drop(first);
+    let second = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    for seq in 10..20 {
+        second.send_to(beat(seq).as_bytes(), to).unwrap();
+    }
+    let got = read_until(&mut client, Duration::from_secs(5), |f| f.len() >= 20).await;
+    let seqs: Vec<u8> = got.iter().map(Frame::seq).collect();
+    assert_eq!(
+        seqs,
+        (0..20).collect::<Vec<u8>>(),
+        "frames lost across the restart"
+    );
+    assert_eq!(handle.stats.sysid_conflicts.load(Ordering::Relaxed), 0);
+    // The old address's link went down: one vehicle link and the client's.
+    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 2))
+        .await
+        .expect("the old peer's link down")
+        .expect("router running");
+
+    // Another vehicle, on the other endpoint, sends as system 1: a conflict, not merged.
+    let claimant = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    claimant
+        .send_to(beat(100).as_bytes(), elsewhere.local_addr().unwrap())
+        .unwrap();
+    let mut conflicts = handle.conflicts.clone();
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        conflicts.wait_for(|c| !c.is_empty()),
+    )
+    .await
+    .expect("the conflict reported")
+    .expect("router running");
+    second.send_to(beat(20).as_bytes(), to).unwrap();
+    let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
+    let seqs: Vec<u8> = got.iter().map(Frame::seq).collect();
+    assert_eq!(seqs, [20], "the claimant's frame reached the client");
+
+    cancel.cancel();
+    client_task.await.unwrap();
+    vehicles.join().await;
+    elsewhere.join().await;
+    router.close();
+    let logged: Vec<u8> = TlogReader::open(&tlog_path)
+        .unwrap()
+        .map(|(_, f)| f.seq())
+        .collect();
+    let mut want: Vec<u8> = (0..=20).collect();
+    want.insert(20, 100);
+    assert_eq!(
+        logged, want,
+        "every frame received is logged, the disputed one too"
+    );
 }
 
 fn render(app: &mut App, state: &VehicleState, history: &History, now: Instant) -> String {

@@ -68,7 +68,7 @@ pub struct RouterStats {
     pub dropped_rate: AtomicU64,
     /// Frames from `sign` links that could not be signed (MAVLink 1), not routed.
     pub unsignable: AtomicU64,
-    /// Vehicle frames whose system id another vehicle link owns: not routed, logged or tracked.
+    /// Vehicle frames whose system id another vehicle link owns: logged, not routed or tracked.
     pub sysid_conflicts: AtomicU64,
 }
 
@@ -391,6 +391,18 @@ impl Router {
             return;
         };
         let (system, component) = frame.sender();
+        // Every frame received is logged, a disputed one too.
+        if self.tlog.is_some() {
+            let direction = match side {
+                Side::Vehicle => Direction::FromVehicle,
+                Side::Client => Direction::ToVehicle,
+            };
+            self.pending_log.push(Record {
+                t_us,
+                direction,
+                frame: frame.clone(),
+            });
+        }
         if side == Side::Vehicle {
             match self.table.claim(ingress, system, now) {
                 Ok(None) => {}
@@ -419,17 +431,6 @@ impl Router {
                 side,
                 frame: frame.clone(),
                 at: now,
-            });
-        }
-        if self.tlog.is_some() {
-            let direction = match side {
-                Side::Vehicle => Direction::FromVehicle,
-                Side::Client => Direction::ToVehicle,
-            };
-            self.pending_log.push(Record {
-                t_us,
-                direction,
-                frame: frame.clone(),
             });
         }
         let route = self

@@ -11,9 +11,11 @@
 //!
 //! Vehicles are kept apart by system id: the first vehicle-side link a system id is heard on
 //! owns it while that link lives and keeps sending as it ([`RoutingTable::claim`]); the same id
-//! from another vehicle link is a conflict, and the router never merges it (its frames go
-//! nowhere and are counted). An owner silent for [`CLAIM_TIMEOUT`] under that id hands it to
-//! the next link that sends as it: a vehicle restarted on a new UDP port comes back.
+//! from another vehicle link is a conflict, and the router never merges it (its frames are
+//! logged, go nowhere else and are counted). An owner silent for [`CLAIM_TIMEOUT`] under that
+//! id hands it to the next link that sends as it. (A vehicle restarted on a new UDP port of a
+//! `udpin` endpoint is followed by the endpoint itself, at once: the old peer's link goes
+//! down and the new one claims the id.)
 //!
 //! One refinement for shared ground stations: pymavlink scripts all speak as (255, 0), so a
 //! COMMAND_ACK for (255, 0) would reach every script. The table remembers which link last sent

@@ -392,6 +392,12 @@ pub struct LinkOptions {
     pub queue_len: usize,
     /// A UDP peer that sends nothing for this long goes down (default 10 s).
     pub udp_peer_timeout: Duration,
+    /// A `udpin` endpoint whose peers are vehicles (default false): a new peer address that
+    /// sends as a system id another peer of the endpoint sent as is that vehicle come back
+    /// (a restarted process, a radio bridge, a new NAT mapping): the old peer's link goes
+    /// down and the new address is followed at once, as mavlink-router's UDP server follows
+    /// its last sender. Off for clients, where scripts share system id 255.
+    pub udp_follow_system: bool,
     /// First reconnect delay for TCP clients and serial ports (default 100 ms).
     pub reconnect_min: Duration,
     /// Cap of the doubling reconnect delay (default 2 s).
@@ -473,6 +479,7 @@ impl Default for LinkOptions {
         LinkOptions {
             queue_len: 1024,
             udp_peer_timeout: Duration::from_secs(10),
+            udp_follow_system: false,
             reconnect_min: Duration::from_millis(100),
             reconnect_max: Duration::from_secs(2),
             wait_for_device: false,

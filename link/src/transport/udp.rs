@@ -62,6 +62,7 @@ use super::{
 };
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
+use crate::ids::SystemId;
 use crate::url::LinkUrl;
 
 /// Largest UDP payload: one receive slot, so no datagram is ever truncated.
@@ -537,6 +538,21 @@ struct Peer {
     decoder: FrameDecoder,
     stats: Arc<LinkStats>,
     writer_cancel: CancellationToken,
+    /// The system ids it sent as, when the endpoint follows its vehicles
+    /// ([`LinkOptions::udp_follow_system`]).
+    systems: Vec<SystemId>,
+}
+
+/// What a datagram changed in the peers of a udpin socket ([`Peers::on_datagram`]).
+#[derive(Default)]
+struct Arrival {
+    /// A peer that came back from the datagram's address: its old link is down, for the
+    /// caller to report after the frames before `start` and before the new link's `Up`.
+    replaced: Option<(LinkId, String)>,
+    /// A new link, for the caller to report before the datagram's frames.
+    up: Option<LinkEvent>,
+    /// Where the datagram's frames start in the caller's list.
+    start: usize,
 }
 
 /// The peers of a udpin socket.
@@ -563,8 +579,58 @@ impl Peers {
 
     /// Takes a datagram from `addr`: its frames are added to `frames`. A new peer becomes a
     /// link (its writer starts) and its `Up` event is returned, for the caller to report
-    /// before the frames.
+    /// before the frames; a peer it replaces ([`Peers::follow`]) is returned too.
     fn on_datagram(
+        &mut self,
+        addr: SocketAddr,
+        data: &[u8],
+        now: Instant,
+        frames: &mut Vec<(LinkId, Frame)>,
+    ) -> Arrival {
+        let start = frames.len();
+        let up = self.decode(addr, data, now, frames);
+        let replaced = if self.opts.udp_follow_system {
+            self.follow(addr, &frames[start..])
+        } else {
+            None
+        };
+        Arrival {
+            replaced,
+            up,
+            start,
+        }
+    }
+
+    /// A vehicle that comes back from a new address (a restarted process, a new NAT mapping)
+    /// is the same vehicle: when the peer at `addr` sends as a system id another peer of this
+    /// endpoint sent as, that peer is gone and `addr` takes over at once, as mavlink-router's
+    /// UDP server follows its last sender. Returns the replaced peer's link and why it ended.
+    fn follow(&mut self, addr: SocketAddr, frames: &[(LinkId, Frame)]) -> Option<(LinkId, String)> {
+        let peer = self.by_addr.get_mut(&addr)?;
+        let mut new = Vec::new();
+        for (_, f) in frames {
+            let system = f.sender().0;
+            if !peer.systems.contains(&system) {
+                peer.systems.push(system);
+                new.push(system);
+            }
+        }
+        if new.is_empty() {
+            return None;
+        }
+        let old = self
+            .by_addr
+            .iter()
+            .find(|(a, p)| **a != addr && p.systems.iter().any(|s| new.contains(s)))
+            .map(|(a, _)| *a)?;
+        let p = self.by_addr.remove(&old)?;
+        p.writer_cancel.cancel();
+        tracing::info!(id = %p.id, %old, new = %addr, "udp peer came back from a new address");
+        Some((p.id, format!("udp peer {old} came back from {addr}")))
+    }
+
+    /// Decodes a datagram from `addr` into `frames`; a new peer's `Up` is returned.
+    fn decode(
         &mut self,
         addr: SocketAddr,
         data: &[u8],
@@ -598,6 +664,7 @@ impl Peers {
                     decoder: FrameDecoder::new(),
                     stats,
                     writer_cancel,
+                    systems: Vec::new(),
                 });
                 (peer, Some(up))
             }
@@ -875,7 +942,17 @@ fn udpin_blocking(mut peers: Peers, wake: &Wakeup, handler: &dyn LinkEventHandle
                     if wake.is_alarm(Some(addr)) {
                         continue;
                     }
-                    if let Some(up) = peers.on_datagram(addr, data, t, &mut frames)
+                    let arrival = peers.on_datagram(addr, data, t, &mut frames);
+                    if let Some((old, reason)) = arrival.replaced {
+                        // The old peer's frames first, then its end, then the new link.
+                        let mut new = frames.split_off(arrival.start);
+                        if !handler.frames(&mut frames) {
+                            break 'run;
+                        }
+                        handler.event(LinkEvent::Down { id: old, reason });
+                        frames.append(&mut new);
+                    }
+                    if let Some(up) = arrival.up
                         && !handler.event(up)
                     {
                         peers.forget(addr);
