@@ -16,6 +16,7 @@ pub mod decoder;
 pub mod frame;
 pub mod ids;
 pub mod signing;
+pub mod tlog;
 pub mod transport;
 pub mod url;
 

@@ -13,9 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 
-/// Direction bits of a record's timestamp.
-const SENT: u64 = 0;
-const RECEIVED: u64 = 3;
+use vtol_link::tlog::{Direction, encode_record_bytes};
 
 /// A buffer handed to the writer thread once it holds this many bytes (or at a batch's end).
 const HAND_OVER_BYTES: usize = 64 * 1024;
@@ -82,10 +80,13 @@ impl TlogSink {
 
     /// Records a frame the vehicle sent (`sent`) or received, stamped `t_us`.
     pub fn record(&mut self, t_us: u64, sent: bool, frame: &[u8]) {
-        let bits = if sent { SENT } else { RECEIVED };
-        self.buf
-            .extend_from_slice(&((t_us & !3) | bits).to_be_bytes());
-        self.buf.extend_from_slice(frame);
+        // The vehicle's frames are the ones a ground station logs as from the vehicle.
+        let direction = if sent {
+            Direction::FromVehicle
+        } else {
+            Direction::ToVehicle
+        };
+        encode_record_bytes(&mut self.buf, t_us, direction, frame);
         if self.buf.len() >= HAND_OVER_BYTES {
             self.hand_over();
         }
