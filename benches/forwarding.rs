@@ -54,7 +54,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// MAVLink ATTITUDE: id 30, 28-byte payload, CRC_EXTRA 39.
-const ATTITUDE_ID: u32 = 30;
+const ATTITUDE_ID: u32 = vtol_link::protocol::id::ATTITUDE;
 const PAYLOAD_LEN: usize = 28;
 const FRAME_LEN: usize = 10 + PAYLOAD_LEN + 2;
 const SINK_RCVBUF: usize = 4 << 20;

@@ -9,7 +9,8 @@ use std::hint::black_box;
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use vtol_link::dialect::{self as apm, MavMessage};
-use vtol_link::frame::{Frame, MSG_ID_COMMAND_LONG};
+use vtol_link::frame::Frame;
+use vtol_link::protocol::id::COMMAND_LONG as MSG_ID_COMMAND_LONG;
 use vtol_link::signing::{Signing, SigningKey};
 
 fn command_long() -> Frame {

@@ -15,6 +15,7 @@
 pub mod decoder;
 pub mod frame;
 pub mod ids;
+pub mod protocol;
 pub mod signing;
 pub mod tlog;
 pub mod transport;

@@ -4,7 +4,7 @@
 //! write records with [`encode_record`].
 
 use crate::frame::{Frame, MAX_FRAME_LEN};
-use crate::signing::MSG_ID_SETUP_SIGNING;
+use crate::protocol::id;
 
 /// Bytes of a record's timestamp.
 pub const STAMP_LEN: usize = 8;
@@ -40,7 +40,7 @@ pub fn stamp(t_us: u64, direction: Direction) -> u64 {
 /// Appends a record as it goes into the file (timestamp, then the frame's bytes). SETUP_SIGNING
 /// carries a key and is never logged: false, and nothing appended, for it.
 pub fn encode_record(out: &mut Vec<u8>, t_us: u64, direction: Direction, frame: &Frame) -> bool {
-    if frame.message_id() == MSG_ID_SETUP_SIGNING {
+    if frame.message_id() == id::SETUP_SIGNING {
         return false;
     }
     encode_record_bytes(out, t_us, direction, frame.as_bytes());

@@ -17,11 +17,12 @@ use std::time::{Duration, Instant, SystemTime};
 
 use bytes::Bytes;
 use mavlink::types::CharArray;
+use vtol_link::Frame;
 use vtol_link::dialect::{self as apm, MavMessage};
+use vtol_link::protocol::id::COMMAND_LONG as MSG_ID_COMMAND_LONG;
 use vtol_link::signing::{
     Accepted, Refusal, SignatureFields, Signing, SigningKey, TIMESTAMP_UNITS_PER_S, timestamp_at,
 };
-use vtol_link::{Frame, frame::MSG_ID_COMMAND_LONG};
 
 const PASSPHRASE: &str = "vtol signing test passphrase";
 

@@ -15,12 +15,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use firmware_sim::endpoint::streams::CONTROLLER_OUTPUT_NAMES;
 use firmware_sim::model::frames::Euler;
 use firmware_sim::model::frames::{euler_to_ned_rpy, ned_to_paper};
 use nalgebra::Vector3;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
+use vtol_link::protocol::CONTROLLER_OUTPUT_NAMES;
 
 use super::{LogError, finish_read, open_tlog};
 

@@ -339,7 +339,7 @@ impl Router {
     /// Applies the ingress side's rules before routing: the vehicle's signatures, a client
     /// link's trust. `None` when the frame goes nowhere (counted).
     fn admit(&mut self, ingress: LinkId, side: Side, frame: Frame) -> Option<Frame> {
-        if frame.message_id() == vtol_link::signing::MSG_ID_SETUP_SIGNING {
+        if frame.message_id() == vtol_link::protocol::id::SETUP_SIGNING {
             // It carries a key: never forwarded, logged or shown, from any side.
             self.stats.withheld_signing.fetch_add(1, Ordering::Relaxed);
             return None;

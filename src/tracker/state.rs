@@ -11,7 +11,6 @@ use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 use super::window::{Stamp, Window};
 use crate::tap::Side;
 
-const MSG_HEARTBEAT: u32 = 0;
 /// ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT: the messages the view holds.
 const TRACKED: [u32; 4] = [30, 32, 36, 253];
 
@@ -323,7 +322,7 @@ impl VehicleState {
         // the tracker sees every routed frame, and a full decode of each would cost more than
         // routing it.
         let id = frame.message_id();
-        let wanted = if id == MSG_HEARTBEAT {
+        let wanted = if id == vtol_link::protocol::id::HEARTBEAT {
             true
         } else {
             TRACKED.contains(&id) && self.vehicles.contains_key(&key)

@@ -34,10 +34,10 @@ pub const RETRY_US: u64 = 1_000_000;
 /// Silence after which an upload is cancelled, µs of stream time (ArduPilot: 8 s).
 pub const TIMEOUT_US: u64 = 8_000_000;
 
-/// MISSION_ITEM id.
-pub const MISSION_ITEM_ID: u32 = 39;
-/// MISSION_ITEM_INT id.
-pub const MISSION_ITEM_INT_ID: u32 = 73;
+/// MISSION_ITEM (deprecated by MAVLink, still sent by older ground stations).
+pub const MISSION_ITEM_ID: u32 = vtol_link::protocol::id::MISSION_ITEM;
+/// MISSION_ITEM_INT.
+pub const MISSION_ITEM_INT_ID: u32 = vtol_link::protocol::id::MISSION_ITEM_INT;
 
 /// `MAV_MISSION_TYPE_MISSION`.
 const TYPE_MISSION: u8 = 0;

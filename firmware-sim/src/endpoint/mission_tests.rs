@@ -48,7 +48,7 @@ fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
 fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
     out.iter()
         .map(|o| &o.frame)
-        .filter(|f| f.message_id() == 77)
+        .filter(|f| f.message_id() == vtol_link::protocol::id::COMMAND_ACK)
         .map(|f| {
             let p: [u8; 10] = f.payload_padded();
             (u16::from_le_bytes([p[0], p[1]]), p[2])

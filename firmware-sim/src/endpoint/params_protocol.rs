@@ -15,8 +15,8 @@ use crate::nav::params::{Access, ParamError, ParamType, Params};
 /// 57600-baud radio for longer than ArduPilot would.
 pub const PARAMS_PER_TICK: usize = 10;
 
-/// PARAM_SET's message id.
-const PARAM_SET_ID: u32 = 23;
+/// PARAM_SET.
+const PARAM_SET_ID: u32 = vtol_link::protocol::id::PARAM_SET;
 
 /// PARAM_SET read from the raw payload: the typed decoder refuses `param_type` values outside
 /// the enum (pymavlink may send 0), and the contract says to ignore the type anyway. Returns

@@ -14,21 +14,10 @@ use crate::model::frames::{euler_to_ned_rpy, paper_to_ned};
 use crate::model::plant::battery::{BatteryState, CELLS};
 use crate::model::vehicle::{SystemState, Telemetry};
 use crate::nav::globe::{Origin, bearing_deg, horizontal_distance_m};
-
-/// GLOBAL_POSITION_INT.
-pub const GLOBAL_POSITION_INT: u32 = 33;
-/// GPS_RAW_INT.
-pub const GPS_RAW_INT: u32 = 24;
-/// HOME_POSITION.
-pub const HOME_POSITION: u32 = 242;
-/// VFR_HUD.
-pub const VFR_HUD: u32 = 74;
-/// BATTERY_STATUS.
-pub const BATTERY_STATUS: u32 = 147;
-/// NAV_CONTROLLER_OUTPUT.
-pub const NAV_CONTROLLER_OUTPUT: u32 = 62;
-/// MISSION_CURRENT.
-pub const MISSION_CURRENT: u32 = 42;
+pub use vtol_link::protocol::id::{
+    BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, HOME_POSITION, MISSION_CURRENT,
+    NAV_CONTROLLER_OUTPUT, VFR_HUD,
+};
 
 /// Satellites a good fix reports (the motion capture has none; scripts check for "enough").
 pub const GPS_SATELLITES: u8 = 16;

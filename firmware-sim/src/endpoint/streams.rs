@@ -15,45 +15,18 @@ use nalgebra::Vector3;
 use crate::model::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
 use crate::model::vehicle::Telemetry;
 
-/// Message ids the twin produces.
+/// Message ids the twin produces (the dialect's, from vtol-link's table).
 pub mod id {
-    /// HEARTBEAT.
-    pub const HEARTBEAT: u32 = 0;
-    /// SYS_STATUS.
-    pub const SYS_STATUS: u32 = 1;
-    /// SYSTEM_TIME.
-    pub const SYSTEM_TIME: u32 = 2;
-    /// SCALED_IMU.
-    pub const SCALED_IMU: u32 = 26;
-    /// RAW_IMU.
-    pub const RAW_IMU: u32 = 27;
-    /// ATTITUDE.
-    pub const ATTITUDE: u32 = 30;
-    /// ATTITUDE_QUATERNION.
-    pub const ATTITUDE_QUATERNION: u32 = 31;
-    /// LOCAL_POSITION_NED.
-    pub const LOCAL_POSITION_NED: u32 = 32;
-    /// SERVO_OUTPUT_RAW.
-    pub const SERVO_OUTPUT_RAW: u32 = 36;
-    /// RC_CHANNELS.
-    pub const RC_CHANNELS: u32 = 65;
-    /// AUTOPILOT_VERSION (on request only).
-    pub const AUTOPILOT_VERSION: u32 = 148;
-    /// EXTENDED_SYS_STATE.
-    pub const EXTENDED_SYS_STATE: u32 = 245;
-    /// NAMED_VALUE_FLOAT: the controller's outputs, one message per value
-    /// ([`super::CONTROLLER_OUTPUT_NAMES`]).
-    pub const NAMED_VALUE_FLOAT: u32 = 251;
-    pub use super::super::position::{
-        BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, HOME_POSITION, MISSION_CURRENT,
-        NAV_CONTROLLER_OUTPUT, VFR_HUD,
-    };
     pub use super::super::readiness::EKF_STATUS_REPORT;
+    pub use vtol_link::protocol::id::{
+        ATTITUDE, ATTITUDE_QUATERNION, AUTOPILOT_VERSION, BATTERY_STATUS, EXTENDED_SYS_STATE,
+        GLOBAL_POSITION_INT, GPS_RAW_INT, HEARTBEAT, HOME_POSITION, LOCAL_POSITION_NED,
+        MISSION_CURRENT, NAMED_VALUE_FLOAT, NAV_CONTROLLER_OUTPUT, RAW_IMU, RC_CHANNELS,
+        SCALED_IMU, SERVO_OUTPUT_RAW, SYS_STATUS, SYSTEM_TIME, VFR_HUD,
+    };
 }
 
-/// Names of the controller's outputs sent as NAMED_VALUE_FLOAT, in order: τ̃φ, τ̃θ, τ̃ψ (rad/s²,
-/// the paper's frame, Fig 5) and the thrust f_z (N).
-pub const CONTROLLER_OUTPUT_NAMES: [&str; 4] = ["TAU_PHI", "TAU_THETA", "TAU_PSI", "FZ"];
+pub use vtol_link::protocol::CONTROLLER_OUTPUT_NAMES;
 
 /// ArduPlane stream groups (`MAV_DATA_STREAM`), as the `SR0_*` parameters name them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

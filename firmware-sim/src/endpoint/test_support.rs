@@ -71,7 +71,7 @@ pub(super) fn command_long(command: apm::MavCmd, p: [f32; 7], confirmation: u8) 
 pub(super) fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
     out.iter()
         .map(|o| &o.frame)
-        .filter(|f| f.message_id() == 77)
+        .filter(|f| f.message_id() == vtol_link::protocol::id::COMMAND_ACK)
         .map(|f| {
             let p: [u8; 10] = f.payload_padded();
             assert_eq!(

@@ -40,7 +40,7 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
         vtol_link::SystemId(GCS_SYSID),
         vtol_link::ComponentId(GCS_COMPID),
         0,
-        vtol_link::frame::MSG_ID_COMMAND_LONG,
+        vtol_link::protocol::id::COMMAND_LONG,
         &payload,
     )
     .unwrap();
@@ -62,7 +62,7 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
         vtol_link::SystemId(GCS_SYSID),
         vtol_link::ComponentId(GCS_COMPID),
         0,
-        vtol_link::frame::MSG_ID_COMMAND_LONG,
+        vtol_link::protocol::id::COMMAND_LONG,
         &payload,
     )
     .unwrap();

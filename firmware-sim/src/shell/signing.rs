@@ -32,8 +32,7 @@ use std::time::SystemTime;
 use mavlink::dialects::ardupilotmega as apm;
 use tokio::time::Instant;
 use vtol_link::signing::{
-    KEY_LEN, MSG_ID_SETUP_SIGNING, Refusal, SignError, Signing, SigningFileError, SigningKey,
-    SigningState,
+    KEY_LEN, Refusal, SignError, Signing, SigningFileError, SigningKey, SigningState,
 };
 use vtol_link::{Accepted, Frame};
 
@@ -142,7 +141,7 @@ impl TwinSigning {
         now: SystemTime,
     ) -> Admit {
         let verdict = self.active.as_mut().map(|s| s.verify(frame, now));
-        if frame.message_id() == MSG_ID_SETUP_SIGNING && frame.is_verified() {
+        if frame.message_id() == vtol_link::protocol::id::SETUP_SIGNING && frame.is_verified() {
             let signed = matches!(verdict, Some(Ok(Accepted::Signed { .. })));
             let outcome = self.setup_signing(frame, signed || local, sysid, now);
             if outcome == SetupOutcome::Refused {

@@ -1,9 +1,10 @@
 //! Commands and their acknowledgements read and built from raw bytes, for command numbers the
 //! dialect's `MavCmd` does not know; a ground station's heartbeat.
 
-use super::{CRC_EXTRA_COMMAND_ACK, Frame, MSG_ID_COMMAND_ACK};
+use super::Frame;
 use crate::dialect::MavMessage;
 use crate::ids::{ComponentId, SystemId};
+use crate::protocol::{CRC_EXTRA_COMMAND_ACK, id};
 
 /// A COMMAND_LONG or COMMAND_INT read from raw bytes (see [`Frame::raw_command`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -106,7 +107,7 @@ impl RawCommandAck {
     /// dialect's `MavCmd` does not know are read too; `None` for any other message.
     #[must_use]
     pub fn from_frame(frame: &Frame) -> Option<Self> {
-        if frame.message_id() != MSG_ID_COMMAND_ACK {
+        if frame.message_id() != id::COMMAND_ACK {
             return None;
         }
         // Zero-fill the truncated v2 payload.
@@ -142,7 +143,7 @@ impl RawCommandAck {
             system_id,
             component_id,
             seq,
-            MSG_ID_COMMAND_ACK,
+            id::COMMAND_ACK,
             &payload[..len],
             CRC_EXTRA_COMMAND_ACK,
         )

@@ -18,6 +18,7 @@ use mavlink::{MavlinkVersion, Message};
 
 use crate::dialect::MavMessage;
 use crate::ids::{ComponentId, SystemId};
+use crate::protocol::id;
 
 pub use command::{RawCommand, RawCommandAck, RawCommandKind, gcs_heartbeat};
 use dialect::dialect_table;
@@ -39,15 +40,6 @@ pub const SIGNATURE_LEN: usize = 13;
 pub const INCOMPAT_SIGNED: u8 = 0x01;
 /// Largest possible frame: v2 header, 255-byte payload, CRC and signature.
 pub const MAX_FRAME_LEN: usize = HEADER_LEN_V2 + 255 + CRC_LEN + SIGNATURE_LEN;
-
-/// Message id of COMMAND_INT.
-pub const MSG_ID_COMMAND_INT: u32 = 75;
-/// Message id of COMMAND_LONG.
-pub const MSG_ID_COMMAND_LONG: u32 = 76;
-/// Message id of COMMAND_ACK.
-pub const MSG_ID_COMMAND_ACK: u32 = 77;
-/// CRC_EXTRA of COMMAND_ACK (PROTOCOL.md D.1).
-pub const CRC_EXTRA_COMMAND_ACK: u8 = 143;
 
 /// Why bytes are not a valid frame, or a frame does not decode.
 #[derive(Debug, thiserror::Error)]
@@ -476,7 +468,7 @@ impl Frame {
     /// commands the dialect's `MavCmd` does not know can still be acknowledged.
     pub fn raw_command(&self) -> Option<RawCommand> {
         let id = self.message_id();
-        if id != MSG_ID_COMMAND_LONG && id != MSG_ID_COMMAND_INT {
+        if id != id::COMMAND_LONG && id != id::COMMAND_INT {
             return None;
         }
         // Zero-fill the truncated v2 payload; both layouts put command at 28..30 and the
@@ -486,7 +478,7 @@ impl Frame {
         p[..n].copy_from_slice(&self.payload()[..n]);
         let f = |i: usize| f32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
         let i = |i: usize| i32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
-        let kind = if id == MSG_ID_COMMAND_LONG {
+        let kind = if id == id::COMMAND_LONG {
             RawCommandKind::Long {
                 params: [f(0), f(4), f(8), f(12), f(16), f(20), f(24)],
                 confirmation: p[32],

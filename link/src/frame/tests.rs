@@ -163,8 +163,14 @@ fn payload_built_by_hand_is_trimmed_and_read_back_zero_filled() {
     let mut p = [0u8; 10];
     p[..2].copy_from_slice(&400u16.to_le_bytes());
     p[3] = 0xFF;
-    let f =
-        Frame::encode_payload_v2(SystemId(1), ComponentId(1), 4, MSG_ID_COMMAND_ACK, &p).unwrap();
+    let f = Frame::encode_payload_v2(
+        SystemId(1),
+        ComponentId(1),
+        4,
+        crate::protocol::id::COMMAND_ACK,
+        &p,
+    )
+    .unwrap();
     assert!(f.is_verified());
     assert_eq!(f.payload(), &p[..4], "trailing zeros stripped");
     assert_eq!(f.payload_padded::<10>(), p);
@@ -193,7 +199,7 @@ fn unsupported_ack_for_unknown_command_decodes_in_raw_form() {
         SystemId(255),
         ComponentId(190),
         3,
-        MSG_ID_COMMAND_LONG,
+        crate::protocol::id::COMMAND_LONG,
         &p[..32],
         152,
     )

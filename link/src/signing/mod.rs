@@ -54,10 +54,6 @@ pub const MAX_TIMESTAMP: u64 = (1 << 48) - 1;
 /// How far (in timestamp units: 60 s) the first frame of a new stream may be behind our own
 /// timestamp (devguide; pymavlink and the C library use the same 6 000 000).
 pub const NEW_STREAM_WINDOW: u64 = 60 * TIMESTAMP_UNITS_PER_S;
-/// Message id of RADIO_STATUS, which radios inject unsigned: allowed unsigned by default.
-pub const MSG_ID_RADIO_STATUS: u32 = 109;
-/// Message id of SETUP_SIGNING.
-pub const MSG_ID_SETUP_SIGNING: u32 = 256;
 /// At most this many streams are remembered; a further new stream is refused (the C library
 /// keeps 16). Only frames with a right signature create streams.
 pub const MAX_STREAMS: usize = 1024;

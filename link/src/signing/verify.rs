@@ -4,8 +4,8 @@ use std::collections::HashMap;
 use std::time::SystemTime;
 
 use super::{
-    MAX_STREAMS, MSG_ID_RADIO_STATUS, NEW_STREAM_WINDOW, SignError, SignatureFields, SigningKey,
-    SigningState, TimestampSource, sign_frame, signature_matches,
+    MAX_STREAMS, NEW_STREAM_WINDOW, SignError, SignatureFields, SigningKey, SigningState,
+    TimestampSource, sign_frame, signature_matches,
 };
 use crate::frame::Frame;
 
@@ -86,7 +86,7 @@ impl Signing {
             link_id,
             clock: TimestampSource::new(initial_timestamp),
             streams: HashMap::new(),
-            allow_unsigned: vec![MSG_ID_RADIO_STATUS],
+            allow_unsigned: vec![crate::protocol::id::RADIO_STATUS],
         }
     }
 
