@@ -14,7 +14,7 @@ use vtol_link::{LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_li
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
-use crate::router::{Router, RouterHandle};
+use crate::router::{InlineRouter, Router, RouterHandle};
 use crate::tap::Side;
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
@@ -127,6 +127,63 @@ pub async fn start(
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> Result<Running, DaemonError> {
+    let signing = open_signing(config)?;
+    let signing_state = signing
+        .as_ref()
+        .and_then(|s| s.file().map(std::path::Path::to_owned));
+    let tlog = match &config.log_dir {
+        Some(dir) => Some(TlogHandle::start(dir, TLOG_QUEUE)?),
+        None => None,
+    };
+    let tlog_path = tlog.as_ref().map(|t| t.path.clone());
+    let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
+
+    let (tap_tx, tap_rx) = crate::tap::tap(TAP_QUEUE, tracker::TAP_RUN);
+    let (state_tx, state_rx) = watch::channel(VehicleState::default());
+    let (router, router_handle) = start_router(tlog, tap_tx, signing, cancel, tasks);
+    let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
+        crate::tracker::History::new(crate::tracker::now()),
+    ));
+    tasks.spawn(tracker::run(
+        config.tracker_period,
+        tap_rx,
+        router_handle.links.clone(),
+        state_tx,
+        std::sync::Arc::clone(&history),
+        cancel.clone(),
+    ));
+
+    // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
+    let serving = serve(config, &router, cancel, tasks).await?;
+    let client = attach_own_client(config, &router, cancel, tasks);
+    let vehicle_addr = open_vehicle(config, &router, &client, &state_rx, cancel, tasks).await?;
+
+    let param_fetches = std::sync::Arc::new(crate::reboot::ParamFetches::default());
+    tasks.spawn(crate::reboot::watch(
+        state_rx.clone(),
+        client.clone(),
+        config.fetch_params,
+        std::sync::Arc::clone(&param_fetches),
+        cancel.clone(),
+    ));
+
+    Ok(Running {
+        client,
+        param_fetches,
+        tlog_stats,
+        vehicle_addr,
+        serving,
+        signing_state,
+        tlog_path,
+        state: state_rx,
+        router: router_handle,
+        history,
+    })
+}
+
+/// The daemon's signing, when it has a key: its state file (the default one, its directory
+/// created, unless one is given) and whether the vehicle's signatures are checked.
+fn open_signing(config: &Config) -> Result<Option<DaemonSigning>, DaemonError> {
     for spec in &config.serve {
         if spec.policy.trust == Trust::Sign && config.signing.is_none() {
             return Err(DaemonError::SignWithoutKey {
@@ -160,27 +217,25 @@ pub async fn start(
         }
         None => None,
     };
-    let signing_state = signing
-        .as_ref()
-        .and_then(|s| s.file().map(std::path::Path::to_owned));
-    let tlog = match &config.log_dir {
-        Some(dir) => Some(TlogHandle::start(dir, TLOG_QUEUE)?),
-        None => None,
-    };
-    let tlog_path = tlog.as_ref().map(|t| t.path.clone());
-    let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
+    Ok(signing)
+}
 
-    let (tap_tx, tap_rx) = crate::tap::tap(TAP_QUEUE, tracker::TAP_RUN);
-    let (state_tx, state_rx) = watch::channel(VehicleState::default());
-
+/// The router, shared by the link tasks, with its tasks: closing it at shutdown (the tlog
+/// flushed), and saving the signing state every [`SAVE_EVERY`].
+fn start_router(
+    tlog: Option<TlogHandle>,
+    tap: crate::tap::TapSender,
+    signing: Option<DaemonSigning>,
+    cancel: &CancellationToken,
+    tasks: &mut JoinSet<()>,
+) -> (InlineRouter, RouterHandle) {
     // The hot path: each link task routes what it receives itself (no router task, no queue
     // between a link and the router).
-    let (mut router, mut router_handle) = Router::new(tlog, Some(tap_tx));
+    let (mut router, mut router_handle) = Router::new(tlog, Some(tap));
     if let Some(s) = signing {
         router_handle.signing = Some(router.set_signing(s));
     }
     let router = router.inline();
-    let vehicle_tx = router.events(Side::Vehicle);
     {
         let (router, cancel) = (router.clone(), cancel.clone());
         tasks.spawn(async move {
@@ -202,19 +257,16 @@ pub async fn start(
             }
         });
     }
-    let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
-        crate::tracker::History::new(crate::tracker::now()),
-    ));
-    tasks.spawn(tracker::run(
-        config.tracker_period,
-        tap_rx,
-        router_handle.links.clone(),
-        state_tx,
-        std::sync::Arc::clone(&history),
-        cancel.clone(),
-    ));
+    (router, router_handle)
+}
 
-    // Clients first, so nothing the vehicle says at start-up is missed by a waiting client.
+/// Opens the serve endpoints: where each ended up, with its policy.
+async fn serve(
+    config: &Config,
+    router: &InlineRouter,
+    cancel: &CancellationToken,
+    tasks: &mut JoinSet<()>,
+) -> Result<Vec<(LinkUrl, Option<SocketAddr>, EndpointPolicy)>, DaemonError> {
     let mut serving = Vec::new();
     for spec in &config.serve {
         let events = router.events_with(Side::Client, spec.policy);
@@ -230,7 +282,16 @@ pub async fn start(
         serving.push((spec.url.clone(), h.local_addr(), spec.policy));
         tasks.spawn(h.join());
     }
+    Ok(serving)
+}
 
+/// The daemon's own client (heartbeat, commands, parameters) on an in-memory link.
+fn attach_own_client(
+    config: &Config,
+    router: &InlineRouter,
+    cancel: &CancellationToken,
+    tasks: &mut JoinSet<()>,
+) -> ClientHandle {
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
     let client = gcs::attach(
         gcs_end,
@@ -263,7 +324,20 @@ pub async fn start(
     tasks.spawn(async move {
         let _ = link_task.await;
     });
+    client
+}
 
+/// Opens the vehicle side: the embedded twin, a replayed log or a URL. Returns where a vehicle
+/// URL that listens ended up.
+async fn open_vehicle(
+    config: &Config,
+    router: &InlineRouter,
+    client: &ClientHandle,
+    state: &watch::Receiver<VehicleState>,
+    cancel: &CancellationToken,
+    tasks: &mut JoinSet<()>,
+) -> Result<Option<SocketAddr>, DaemonError> {
+    let vehicle_tx = router.events(Side::Vehicle);
     let mut vehicle_addr = None;
     match &config.vehicle {
         VehicleSource::Embedded => {
@@ -320,36 +394,11 @@ pub async fn start(
             vehicle_addr = h.local_addr();
             tasks.spawn(h.join());
             if matches!(url, LinkUrl::UdpOut { .. }) {
-                tasks.spawn(udpout_hello(
-                    client.clone(),
-                    state_rx.clone(),
-                    cancel.clone(),
-                ));
+                tasks.spawn(udpout_hello(client.clone(), state.clone(), cancel.clone()));
             }
         }
     }
-
-    let param_fetches = std::sync::Arc::new(crate::reboot::ParamFetches::default());
-    tasks.spawn(crate::reboot::watch(
-        state_rx.clone(),
-        client.clone(),
-        config.fetch_params,
-        std::sync::Arc::clone(&param_fetches),
-        cancel.clone(),
-    ));
-
-    Ok(Running {
-        client,
-        param_fetches,
-        tlog_stats,
-        vehicle_addr,
-        serving,
-        signing_state,
-        tlog_path,
-        state: state_rx,
-        router: router_handle,
-        history,
-    })
+    Ok(vehicle_addr)
 }
 
 /// How often the daemon speaks first on a `udpout` vehicle link while no vehicle is heard.

@@ -291,7 +291,7 @@ impl VehicleState {
         if !self.down.is_empty() && self.down.contains(&link) {
             return None;
         }
-        let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
+        let (now, stamp) = (stamp.at(), *stamp);
         let lost = self.account(link, side, frame, &stamp);
         let key = frame.sender();
         if let Some(v) = self.vehicles.get_mut(&key) {
@@ -300,6 +300,35 @@ impl VehicleState {
             v.lost += u64::from(lost);
             v.window.add_stamped(&stamp, 1, lost);
         }
+        self.count_message(key, frame, &stamp);
+        // Decode only what the view uses, and only from known vehicles (or their heartbeat):
+        // the tracker sees every routed frame, and a full decode of each would cost more than
+        // routing it.
+        let id = frame.message_id();
+        let wanted = if id == vtol_link::protocol::id::HEARTBEAT {
+            true
+        } else {
+            TRACKED.contains(&id) && self.vehicles.contains_key(&key)
+        };
+        if !wanted {
+            return None;
+        }
+        let Ok(msg) = frame.decode() else { return None };
+        if let MavMessage::HEARTBEAT(hb) = &msg {
+            if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
+                return None;
+            }
+            self.apply_heartbeat(key, link, hb, &stamp);
+            return Some(msg);
+        }
+        let v = self.vehicles.get_mut(&key)?;
+        apply_telemetry(v, &mut self.text_chunks, key, &msg, now);
+        Some(msg)
+    }
+
+    /// Counts a frame in its message's statistics.
+    fn count_message(&mut self, key: (SystemId, ComponentId), frame: &Frame, stamp: &Stamp) {
+        let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
         self.messages
             .entry((key.0, key.1, frame.message_id()))
             .and_modify(|m| {
@@ -318,125 +347,127 @@ impl VehicleState {
                     window,
                 }
             });
-        // Decode only what the view uses, and only from known vehicles (or their heartbeat):
-        // the tracker sees every routed frame, and a full decode of each would cost more than
-        // routing it.
-        let id = frame.message_id();
-        let wanted = if id == vtol_link::protocol::id::HEARTBEAT {
-            true
-        } else {
-            TRACKED.contains(&id) && self.vehicles.contains_key(&key)
-        };
-        if !wanted {
-            return None;
-        }
-        let Ok(msg) = frame.decode() else { return None };
-        if let MavMessage::HEARTBEAT(hb) = &msg {
-            if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
-                return None;
-            }
-            let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
-                system_id: key.0,
-                component_id: key.1,
-                link,
-                frames: 1,
-                lost: 0,
-                window: {
-                    let mut w = Window::new(epoch);
-                    w.add_stamped(&stamp, 1, 0);
-                    w
-                },
-                mav_type: hb.mavtype,
-                autopilot: hb.autopilot,
-                custom_mode: hb.custom_mode,
-                armed: false,
-                system_status: hb.system_status,
-                attitude: None,
-                position: None,
-                servo_us: [0; 16],
-                status_texts: VecDeque::new(),
-                last_heartbeat: now,
-                link_down: false,
-                armed_since: None,
-                reboots: 0,
-                last_reboot: None,
-            });
-            v.mav_type = hb.mavtype;
-            v.autopilot = hb.autopilot;
-            v.custom_mode = hb.custom_mode;
-            v.armed = hb
-                .base_mode
-                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-            v.armed_since = match (v.armed, v.armed_since) {
-                (true, None) => Some(now),
-                (true, since) => since,
-                (false, _) => None,
-            };
-            v.system_status = hb.system_status;
-            v.last_heartbeat = now;
-            v.link_down = false;
-            return Some(msg);
-        }
-        let v = self.vehicles.get_mut(&key)?;
-        match &msg {
-            MavMessage::ATTITUDE(a) => {
-                // The boot clock only moves forward while the vehicle runs; going back means
-                // it restarted (a reboot command, a power cycle, a new process on the port).
-                if let Some(prev) = v.attitude
-                    && a.time_boot_ms < prev.time_boot_ms
-                {
-                    v.reboots += 1;
-                    v.last_reboot = Some(Reboot {
-                        before_ms: prev.time_boot_ms,
-                        after_ms: a.time_boot_ms,
-                        at: now,
-                    });
-                }
-                v.attitude = Some(Attitude {
-                    rpy_rad: [a.roll, a.pitch, a.yaw],
-                    rates_rad_s: [a.rollspeed, a.pitchspeed, a.yawspeed],
-                    time_boot_ms: a.time_boot_ms,
-                });
-            }
-            MavMessage::LOCAL_POSITION_NED(p) => {
-                v.position = Some(LocalPosition {
-                    pos_ned_m: [p.x, p.y, p.z],
-                    vel_ned_m_s: [p.vx, p.vy, p.vz],
-                });
-            }
-            MavMessage::SERVO_OUTPUT_RAW(s) => {
-                v.servo_us = [
-                    s.servo1_raw,
-                    s.servo2_raw,
-                    s.servo3_raw,
-                    s.servo4_raw,
-                    s.servo5_raw,
-                    s.servo6_raw,
-                    s.servo7_raw,
-                    s.servo8_raw,
-                    s.servo9_raw,
-                    s.servo10_raw,
-                    s.servo11_raw,
-                    s.servo12_raw,
-                    s.servo13_raw,
-                    s.servo14_raw,
-                    s.servo15_raw,
-                    s.servo16_raw,
-                ];
-            }
-            MavMessage::STATUSTEXT(t) => {
-                if let Some(text) = self.text_chunks.entry(key).or_default().push(t) {
-                    if v.status_texts.len() == STATUS_TEXTS_KEPT {
-                        v.status_texts.pop_front();
-                    }
-                    v.status_texts.push_back((t.severity as u8, text));
-                }
-            }
-            _ => {}
-        }
-        Some(msg)
     }
 
+    /// A vehicle's heartbeat: the vehicle is added if new, its mode, arming and state read.
+    fn apply_heartbeat(
+        &mut self,
+        key: (SystemId, ComponentId),
+        link: LinkId,
+        hb: &vtol_link::dialect::HEARTBEAT_DATA,
+        stamp: &Stamp,
+    ) {
+        let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
+        let v = self.vehicles.entry(key).or_insert_with(|| VehicleView {
+            system_id: key.0,
+            component_id: key.1,
+            link,
+            frames: 1,
+            lost: 0,
+            window: {
+                let mut w = Window::new(epoch);
+                w.add_stamped(&stamp, 1, 0);
+                w
+            },
+            mav_type: hb.mavtype,
+            autopilot: hb.autopilot,
+            custom_mode: hb.custom_mode,
+            armed: false,
+            system_status: hb.system_status,
+            attitude: None,
+            position: None,
+            servo_us: [0; 16],
+            status_texts: VecDeque::new(),
+            last_heartbeat: now,
+            link_down: false,
+            armed_since: None,
+            reboots: 0,
+            last_reboot: None,
+        });
+        v.mav_type = hb.mavtype;
+        v.autopilot = hb.autopilot;
+        v.custom_mode = hb.custom_mode;
+        v.armed = hb
+            .base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+        v.armed_since = match (v.armed, v.armed_since) {
+            (true, None) => Some(now),
+            (true, since) => since,
+            (false, _) => None,
+        };
+        v.system_status = hb.system_status;
+        v.last_heartbeat = now;
+        v.link_down = false;
+    }
+}
+
+/// A known vehicle's telemetry (attitude, position, servo outputs, text) applied to its view.
+fn apply_telemetry(
+    v: &mut VehicleView,
+    text_chunks: &mut HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
+    key: (SystemId, ComponentId),
+    msg: &MavMessage,
+    now: Instant,
+) {
+    match msg {
+        MavMessage::ATTITUDE(a) => {
+            // The boot clock only moves forward while the vehicle runs; going back means
+            // it restarted (a reboot command, a power cycle, a new process on the port).
+            if let Some(prev) = v.attitude
+                && a.time_boot_ms < prev.time_boot_ms
+            {
+                v.reboots += 1;
+                v.last_reboot = Some(Reboot {
+                    before_ms: prev.time_boot_ms,
+                    after_ms: a.time_boot_ms,
+                    at: now,
+                });
+            }
+            v.attitude = Some(Attitude {
+                rpy_rad: [a.roll, a.pitch, a.yaw],
+                rates_rad_s: [a.rollspeed, a.pitchspeed, a.yawspeed],
+                time_boot_ms: a.time_boot_ms,
+            });
+        }
+        MavMessage::LOCAL_POSITION_NED(p) => {
+            v.position = Some(LocalPosition {
+                pos_ned_m: [p.x, p.y, p.z],
+                vel_ned_m_s: [p.vx, p.vy, p.vz],
+            });
+        }
+        MavMessage::SERVO_OUTPUT_RAW(s) => {
+            v.servo_us = [
+                s.servo1_raw,
+                s.servo2_raw,
+                s.servo3_raw,
+                s.servo4_raw,
+                s.servo5_raw,
+                s.servo6_raw,
+                s.servo7_raw,
+                s.servo8_raw,
+                s.servo9_raw,
+                s.servo10_raw,
+                s.servo11_raw,
+                s.servo12_raw,
+                s.servo13_raw,
+                s.servo14_raw,
+                s.servo15_raw,
+                s.servo16_raw,
+            ];
+        }
+        MavMessage::STATUSTEXT(t) => {
+            if let Some(text) = text_chunks.entry(key).or_default().push(t) {
+                if v.status_texts.len() == STATUS_TEXTS_KEPT {
+                    v.status_texts.pop_front();
+                }
+                v.status_texts.push_back((t.severity as u8, text));
+            }
+        }
+        _ => {}
+    }
+}
+
+impl VehicleState {
     /// Counts a frame in its link's health; returns the frames its sender's sequence says
     /// were lost just before it.
     fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> u32 {
