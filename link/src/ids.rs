@@ -12,9 +12,6 @@ pub struct SystemId(pub u8);
 pub struct ComponentId(pub u8);
 
 impl SystemId {
-    /// Target system 0: every system.
-    pub const BROADCAST: SystemId = SystemId(0);
-
     /// Whether this is the broadcast id 0.
     #[must_use]
     pub fn is_broadcast(self) -> bool {

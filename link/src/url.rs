@@ -302,11 +302,6 @@ impl LinkUrl {
             LinkUrl::Serial { .. } | LinkUrl::Zenoh { .. } => None,
         }
     }
-
-    /// True for the variants that listen (udpin, tcpin).
-    pub fn is_listener(&self) -> bool {
-        matches!(self, LinkUrl::UdpIn { .. } | LinkUrl::TcpIn { .. })
-    }
 }
 
 #[cfg(test)]

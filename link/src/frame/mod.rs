@@ -337,11 +337,6 @@ impl Frame {
         if self.is_v2() { self.bytes[2] } else { 0 }
     }
 
-    /// Compat flags (0 for v1).
-    pub fn compat_flags(&self) -> u8 {
-        if self.is_v2() { self.bytes[3] } else { 0 }
-    }
-
     /// True if the frame carries a MAVLink 2 signature.
     pub fn is_signed(&self) -> bool {
         self.incompat_flags() & INCOMPAT_SIGNED != 0
@@ -396,11 +391,6 @@ impl Frame {
     /// The underlying shared buffer (cloning it does not copy).
     pub fn bytes(&self) -> &Bytes {
         &self.bytes
-    }
-
-    /// Consumes the frame and returns its buffer.
-    pub fn into_bytes(self) -> Bytes {
-        self.bytes
     }
 
     /// Total length in bytes, signature included.

@@ -90,12 +90,6 @@ impl Signing {
         }
     }
 
-    /// Signing from a persisted state.
-    #[must_use]
-    pub fn from_state(state: &SigningState, link_id: u8) -> Signing {
-        Signing::new(state.key.clone(), link_id, state.timestamp)
-    }
-
     /// Replaces the list of message ids accepted unsigned.
     #[must_use]
     pub fn with_allow_unsigned(mut self, message_ids: &[u32]) -> Signing {

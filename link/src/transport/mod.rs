@@ -75,11 +75,6 @@ impl EndpointHandle {
             tracing::error!(url = %self.url, "endpoint task failed: {e}");
         }
     }
-
-    /// The task handle, for `select!` or abort.
-    pub fn into_join_handle(self) -> JoinHandle<()> {
-        self.task
-    }
 }
 
 /// Opens the endpoint a URL describes and runs it until `cancel` fires.
