@@ -3,9 +3,12 @@
 //! the selected one; the tracker keeping them apart; a system id claimed by two vehicle links
 //! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
 
+mod common;
+
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use common::stream_link;
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
@@ -24,7 +27,6 @@ use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{
     ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint,
-    spawn_stream_link,
 };
 
 fn heartbeat(mode: u32, armed: bool) -> MavMessage {
@@ -121,30 +123,9 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
     let cancel = CancellationToken::new();
     let (router, handle) = Router::new(None, None);
     let router = router.inline();
-    let (mut a, far) = tokio::io::duplex(1 << 16);
-    let (a_id, a_task) = spawn_stream_link(
-        far,
-        "vehicle a",
-        router.events(Side::Vehicle),
-        LinkOptions::default(),
-        cancel.clone(),
-    );
-    let (mut b, far) = tokio::io::duplex(1 << 16);
-    let (b_id, b_task) = spawn_stream_link(
-        far,
-        "vehicle b",
-        router.events(Side::Vehicle),
-        LinkOptions::default(),
-        cancel.clone(),
-    );
-    let (mut client, far) = tokio::io::duplex(1 << 16);
-    let (_, client_task) = spawn_stream_link(
-        far,
-        "client",
-        router.events(Side::Client),
-        LinkOptions::default(),
-        cancel.clone(),
-    );
+    let (mut a, a_id, a_task) = stream_link(&router, Side::Vehicle, "vehicle a", &cancel);
+    let (mut b, b_id, b_task) = stream_link(&router, Side::Vehicle, "vehicle b", &cancel);
+    let (mut client, _, client_task) = stream_link(&router, Side::Client, "client", &cancel);
     let mut links = handle.links.clone();
     tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 3))
         .await
@@ -293,14 +274,7 @@ async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_log
     let elsewhere = spawn_endpoint(&url, router.events(Side::Vehicle), opts, cancel.clone())
         .await
         .unwrap();
-    let (mut client, far) = tokio::io::duplex(1 << 16);
-    let (_, client_task) = spawn_stream_link(
-        far,
-        "client",
-        router.events(Side::Client),
-        LinkOptions::default(),
-        cancel.clone(),
-    );
+    let (mut client, _, client_task) = stream_link(&router, Side::Client, "client", &cancel);
     let mut links = handle.links.clone();
     tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 1))
         .await

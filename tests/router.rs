@@ -3,8 +3,11 @@
 //! sequence numbers intact), no echo to the ingress link, targeted frames only where the
 //! target was seen, and every frame logged to the tlog in both directions.
 
+mod common;
+
 use std::time::Duration;
 
+use common::stream_link;
 use proptest::prelude::*;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
@@ -12,7 +15,7 @@ use vtol_gcs::router::{InlineRouter, Router};
 use vtol_gcs::tap::Side;
 use vtol_gcs::tlog::{TlogHandle, TlogReader};
 use vtol_link::dialect::{self, MavMessage};
-use vtol_link::{Frame, FrameDecoder, LinkOptions, spawn_stream_link};
+use vtol_link::{Frame, FrameDecoder};
 
 fn param_request_read(target_system: u8, index: i16) -> MavMessage {
     MavMessage::PARAM_REQUEST_READ(dialect::PARAM_REQUEST_READ_DATA {
@@ -67,25 +70,11 @@ async fn harness(n_clients: usize) -> Harness {
     let cancel = CancellationToken::new();
     let (router, handle) = Router::new(Some(tlog), None);
     let router = router.inline();
-    let (vehicle, far) = tokio::io::duplex(1 << 16);
-    let (_, task) = spawn_stream_link(
-        far,
-        "vehicle",
-        router.events(Side::Vehicle),
-        LinkOptions::default(),
-        cancel.clone(),
-    );
+    let (vehicle, _, task) = stream_link(&router, Side::Vehicle, "vehicle", &cancel);
     let mut link_tasks = vec![task];
     let mut clients = Vec::new();
     for i in 0..n_clients {
-        let (c, far) = tokio::io::duplex(1 << 16);
-        let (_, task) = spawn_stream_link(
-            far,
-            format!("client {i}"),
-            router.events(Side::Client),
-            LinkOptions::default(),
-            cancel.clone(),
-        );
+        let (c, _, task) = stream_link(&router, Side::Client, &format!("client {i}"), &cancel);
         link_tasks.push(task);
         clients.push(c);
     }
