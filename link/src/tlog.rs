@@ -23,6 +23,7 @@ pub enum Direction {
 impl Direction {
     /// The direction's bits in a record's timestamp.
     #[must_use]
+    #[inline]
     pub fn link_bits(self) -> u64 {
         match self {
             Self::FromVehicle => 0,
@@ -33,12 +34,14 @@ impl Direction {
 
 /// A record's 8-byte timestamp: `t_us` with the direction in the low 2 bits.
 #[must_use]
+#[inline]
 pub fn stamp(t_us: u64, direction: Direction) -> u64 {
     (t_us & !3) | direction.link_bits()
 }
 
 /// Appends a record as it goes into the file (timestamp, then the frame's bytes). SETUP_SIGNING
 /// carries a key and is never logged: false, and nothing appended, for it.
+#[inline]
 pub fn encode_record(out: &mut Vec<u8>, t_us: u64, direction: Direction, frame: &Frame) -> bool {
     if frame.message_id() == id::SETUP_SIGNING {
         return false;
@@ -49,6 +52,7 @@ pub fn encode_record(out: &mut Vec<u8>, t_us: u64, direction: Direction, frame: 
 
 /// Appends a record of a frame's raw bytes, for a writer that has already kept SETUP_SIGNING
 /// out (the twin's, whose signing layer takes it before anything is logged).
+#[inline]
 pub fn encode_record_bytes(out: &mut Vec<u8>, t_us: u64, direction: Direction, frame: &[u8]) {
     out.extend_from_slice(&stamp(t_us, direction).to_be_bytes());
     out.extend_from_slice(frame);

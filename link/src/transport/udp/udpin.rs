@@ -80,12 +80,8 @@ impl Peers {
         frames: &mut Vec<(LinkId, Frame)>,
     ) -> Arrival {
         let start = frames.len();
-        let up = self.decode(addr, data, now, frames);
-        let replaced = if self.opts.udp_follow_system {
-            self.follow(addr, &frames[start..])
-        } else {
-            None
-        };
+        let (up, new_systems) = self.decode(addr, data, now, frames);
+        let replaced = new_systems.and_then(|new| self.follow(addr, &new));
         Arrival {
             replaced,
             up,
@@ -96,24 +92,14 @@ impl Peers {
     /// A vehicle that comes back from a new address (a restarted process, a new NAT mapping)
     /// is the same vehicle: when the peer at `addr` sends as a system id another peer of this
     /// endpoint sent as, that peer is gone and `addr` takes over at once, as mavlink-router's
-    /// UDP server follows its last sender. Returns the replaced peer's link and why it ended.
+    /// UDP server follows its last sender. `new`: the system ids the peer at `addr` just sent
+    /// as for the first time ([`Peers::decode`]). Returns the replaced peer's link and why it
+    /// ended.
     pub(crate) fn follow(
         &mut self,
         addr: SocketAddr,
-        frames: &[(LinkId, Frame)],
+        new: &[SystemId],
     ) -> Option<(LinkId, String)> {
-        let peer = self.by_addr.get_mut(&addr)?;
-        let mut new = Vec::new();
-        for (_, f) in frames {
-            let system = f.sender().0;
-            if !peer.systems.contains(&system) {
-                peer.systems.push(system);
-                new.push(system);
-            }
-        }
-        if new.is_empty() {
-            return None;
-        }
         let old = self
             .by_addr
             .iter()
@@ -125,14 +111,15 @@ impl Peers {
         Some((p.id, format!("udp peer {old} came back from {addr}")))
     }
 
-    /// Decodes a datagram from `addr` into `frames`; a new peer's `Up` is returned.
+    /// Decodes a datagram from `addr` into `frames`; a new peer's `Up` is returned, and, when
+    /// the endpoint follows its vehicles, the system ids the peer sent as for the first time.
     pub(crate) fn decode(
         &mut self,
         addr: SocketAddr,
         data: &[u8],
         now: Instant,
         frames: &mut Vec<(LinkId, Frame)>,
-    ) -> Option<LinkEvent> {
+    ) -> (Option<LinkEvent>, Option<Vec<SystemId>>) {
         let (peer, up) = match self.by_addr.entry(addr) {
             Entry::Occupied(o) => (o.into_mut(), None),
             Entry::Vacant(v) => {
@@ -168,10 +155,23 @@ impl Peers {
         peer.last_heard = now;
         peer.stats.add_rx_bytes(data.len());
         let id = peer.id;
+        let start = frames.len();
         peer.decoder
             .push_final_with(data, |frame| frames.push((id, frame)));
         peer.stats.add_decode(&peer.decoder.take_stats());
-        up
+        if !self.opts.udp_follow_system {
+            return (up, None);
+        }
+        // Almost always the one system id the peer has sent as all along: nothing new.
+        let mut new = Vec::new();
+        for (_, f) in &frames[start..] {
+            let system = f.sender().0;
+            if !peer.systems.contains(&system) {
+                peer.systems.push(system);
+                new.push(system);
+            }
+        }
+        (up, Some(new).filter(|n| !n.is_empty()))
     }
 
     /// Drops a peer that was not reported up (its owner is gone).
