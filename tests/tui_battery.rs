@@ -8,41 +8,18 @@ use std::time::{Duration, Instant};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::style::Color;
-use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::Config;
-use vtol_gcs::daemon::{self, Running};
-use vtol_gcs::tracker::VehicleState;
+use vtol_gcs::daemon::{self};
 use vtol_gcs::tui::app::{App, Outcome, Request};
+use vtol_gcs::tui::draw_running;
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::SeriesCache;
 use vtol_gcs::tui::vitals::{Severity, vitals};
-use vtol_gcs::tui::{Control, draw_running};
 use vtol_link::dialect::MavState;
 
-async fn run(app: &mut App, control: &ClientControl, reqs: Vec<Request>) -> Vec<Outcome> {
-    let mut all = Vec::new();
-    for r in reqs {
-        let (tx, mut rx) = mpsc::channel(64);
-        control.execute(r, tx).await;
-        while let Some(o) = rx.recv().await {
-            app.on_outcome(o.clone());
-            all.push(o);
-        }
-    }
-    all
-}
-
-async fn wait_state(running: &Running, what: &str, ok: impl Fn(&VehicleState) -> bool) {
-    let mut rx = running.state.clone();
-    tokio::time::timeout(Duration::from_secs(60), async {
-        while !ok(&rx.borrow_and_update()) {
-            rx.changed().await.expect("tracker running");
-        }
-    })
-    .await
-    .unwrap_or_else(|_| panic!("timed out waiting for {what}"));
-}
+mod ui_support;
+use ui_support::{run, wait_state};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_low_battery_shows_its_warning_and_the_vehicle_lands() {

@@ -5,24 +5,16 @@
 use std::time::{Duration, Instant};
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use tokio::sync::mpsc;
-use tokio_util::sync::CancellationToken;
-use vtol_gcs::config::Config;
-use vtol_gcs::daemon::{self, Running};
 use vtol_gcs::tracker::VehicleState;
-use vtol_gcs::tui::Control;
 use vtol_gcs::tui::app::{App, Confirm, Outcome, ParamStatus, Request, View};
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_link::dialect::MavState;
 
+mod ui_support;
+use ui_support::{chars, run, start, wait_state};
+
 fn key(c: KeyCode) -> KeyEvent {
     KeyEvent::new(c, KeyModifiers::NONE)
-}
-
-fn chars(app: &mut App, state: &VehicleState, s: &str) -> Vec<Request> {
-    s.chars()
-        .flat_map(|c| app.on_key(key(KeyCode::Char(c)), state, Instant::now()))
-        .collect()
 }
 
 #[test]
@@ -102,46 +94,6 @@ fn a_typed_value_that_is_not_a_number_is_refused_without_sending() {
     // A later value from the vehicle clears the local error.
     app.on_outcome(Outcome::Params(vec![("HOVER_ALT".into(), 1.5)]));
     assert_eq!(app.params.status.get("HOVER_ALT"), None);
-}
-
-/// The daemon with the embedded twin, serving nothing, logging nothing.
-async fn start() -> (Running, CancellationToken, tokio::task::JoinSet<()>) {
-    let config = Config {
-        serve: Vec::new(),
-        log_dir: None,
-        ..Config::default()
-    };
-    let cancel = CancellationToken::new();
-    let mut tasks = tokio::task::JoinSet::new();
-    let running = daemon::start(&config, &cancel, &mut tasks)
-        .await
-        .expect("daemon starts");
-    (running, cancel, tasks)
-}
-
-/// Carries out `reqs` and feeds every outcome back into `app`, returning them.
-async fn run(app: &mut App, control: &ClientControl, reqs: Vec<Request>) -> Vec<Outcome> {
-    let mut all = Vec::new();
-    for r in reqs {
-        let (tx, mut rx) = mpsc::channel(64);
-        control.execute(r, tx).await;
-        while let Some(o) = rx.recv().await {
-            app.on_outcome(o.clone());
-            all.push(o);
-        }
-    }
-    all
-}
-
-async fn wait_state(running: &Running, what: &str, ok: impl Fn(&VehicleState) -> bool) {
-    let mut rx = running.state.clone();
-    tokio::time::timeout(Duration::from_secs(30), async {
-        while !ok(&rx.borrow_and_update()) {
-            rx.changed().await.expect("tracker running");
-        }
-    })
-    .await
-    .unwrap_or_else(|_| panic!("timed out waiting for {what}"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -3,77 +3,16 @@
 //! the vehicle refuses it; force disarm has its own prompt; a crash's refusal says how to
 //! recover and the reboot key clears it.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use tokio::sync::mpsc;
-use tokio_util::sync::CancellationToken;
-use vtol_gcs::config::Config;
-use vtol_gcs::daemon::{self, Running};
 use vtol_gcs::tracker::VehicleState;
-use vtol_gcs::tui::Control;
 use vtol_gcs::tui::app::{App, Confirm, Level, Outcome, Request};
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::vitals::vitals;
 use vtol_link::dialect::MavState;
 
-fn chars(app: &mut App, state: &VehicleState, s: &str) -> Vec<Request> {
-    s.chars()
-        .flat_map(|c| {
-            let k = KeyEvent::new(KeyCode::Char(c), KeyModifiers::NONE);
-            app.on_key(k, state, Instant::now())
-        })
-        .collect()
-}
-
-async fn start() -> (Running, CancellationToken, tokio::task::JoinSet<()>) {
-    let config = Config {
-        serve: Vec::new(),
-        log_dir: None,
-        ..Config::default()
-    };
-    let cancel = CancellationToken::new();
-    let mut tasks = tokio::task::JoinSet::new();
-    let running = daemon::start(&config, &cancel, &mut tasks)
-        .await
-        .expect("daemon starts");
-    (running, cancel, tasks)
-}
-
-async fn run(app: &mut App, control: &ClientControl, reqs: Vec<Request>) -> Vec<Outcome> {
-    let mut all = Vec::new();
-    for r in reqs {
-        let (tx, mut rx) = mpsc::channel(64);
-        control.execute(r, tx).await;
-        while let Some(o) = rx.recv().await {
-            app.on_outcome(o.clone());
-            all.push(o);
-        }
-    }
-    all
-}
-
-/// Waits until `ok` holds for the tracker's state and returns that state.
-async fn wait_state(
-    running: &Running,
-    what: &str,
-    ok: impl Fn(&VehicleState) -> bool,
-) -> VehicleState {
-    let mut rx = running.state.clone();
-    tokio::time::timeout(Duration::from_secs(40), async {
-        loop {
-            {
-                let s = rx.borrow_and_update();
-                if ok(&s) {
-                    return s.clone();
-                }
-            }
-            rx.changed().await.expect("tracker running");
-        }
-    })
-    .await
-    .unwrap_or_else(|_| panic!("timed out waiting for {what}"))
-}
+mod ui_support;
+use ui_support::{chars, run, start, wait_state};
 
 fn airborne_above(s: &VehicleState, alt_m: f32) -> bool {
     s.vehicles
