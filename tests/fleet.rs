@@ -282,13 +282,15 @@ async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_log
         .expect("router running");
     let beat = |seq| Frame::encode_v2(SystemId(1), ComponentId(1), seq, &heartbeat(17, false));
 
-    // The vehicle's process sends ten frames, stops, and its next process sends ten more from
-    // another port at once.
+    // The vehicle's process sends ten frames, stops, and its next process, up a moment later
+    // (a restart is never instant: the model of it here is a pause of 0.6 s, past
+    // FOLLOW_AFTER_SILENCE), sends ten more from another port.
     let first = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     for seq in 0..10 {
         first.send_to(beat(seq).as_bytes(), to).unwrap();
     }
     drop(first);
+    tokio::time::sleep(Duration::from_millis(600)).await;
     let second = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     for seq in 10..20 {
         second.send_to(beat(seq).as_bytes(), to).unwrap();

@@ -14,8 +14,8 @@
 //! from another vehicle link is a conflict, and the router never merges it (its frames are
 //! logged, go nowhere else and are counted). An owner silent for [`CLAIM_TIMEOUT`] under that
 //! id hands it to the next link that sends as it. (A vehicle restarted on a new UDP port of a
-//! `udpin` endpoint is followed by the endpoint itself, at once: the old peer's link goes
-//! down and the new one claims the id.)
+//! `udpin` endpoint is followed by the endpoint itself, at once once the old address has been
+//! silent half a second: the old peer's link goes down and the new one claims the id.)
 //!
 //! One refinement for shared ground stations: pymavlink scripts all speak as (255, 0), so a
 //! COMMAND_ACK for (255, 0) would reach every script. The table remembers which link last sent

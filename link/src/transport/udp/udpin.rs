@@ -33,7 +33,17 @@ pub(crate) struct Peer {
     /// The system ids it sent as, when the endpoint follows its vehicles
     /// ([`LinkOptions::udp_follow_system`]).
     pub(crate) systems: Vec<SystemId>,
+    /// System ids it sent as that another peer, still sending, sent as first: it is followed
+    /// for them once that peer falls silent ([`FOLLOW_AFTER_SILENCE`]).
+    pub(crate) contested: Vec<SystemId>,
 }
+
+/// How long the old address of a system id must have been silent for a new address sending as
+/// that system to be the same vehicle come back (a restarted process, a new NAT mapping). A
+/// vehicle's telemetry never pauses this long while it is up: a new address heard while the old
+/// one still sends is a second vehicle (a conflict for the router), until the old one falls
+/// silent.
+pub(crate) const FOLLOW_AFTER_SILENCE: Duration = Duration::from_millis(500);
 
 /// What a datagram changed in the peers of a udpin socket ([`Peers::on_datagram`]).
 #[derive(Default)]
@@ -81,7 +91,7 @@ impl Peers {
     ) -> Arrival {
         let start = frames.len();
         let (up, new_systems) = self.decode(addr, data, now, frames);
-        let replaced = new_systems.and_then(|new| self.follow(addr, &new));
+        let replaced = new_systems.and_then(|new| self.follow(addr, &new, now));
         Arrival {
             replaced,
             up,
@@ -91,22 +101,41 @@ impl Peers {
 
     /// A vehicle that comes back from a new address (a restarted process, a new NAT mapping)
     /// is the same vehicle: when the peer at `addr` sends as a system id another peer of this
-    /// endpoint sent as, that peer is gone and `addr` takes over at once, as mavlink-router's
-    /// UDP server follows its last sender. `new`: the system ids the peer at `addr` just sent
-    /// as for the first time ([`Peers::decode`]). Returns the replaced peer's link and why it
-    /// ended.
+    /// endpoint sent as, and that peer has been silent [`FOLLOW_AFTER_SILENCE`], that peer is
+    /// gone and `addr` takes over at once, as mavlink-router's UDP server follows its last
+    /// sender. While the other peer still sends, `addr` is a second vehicle (the router's
+    /// conflict) and asks again with each datagram. `new`: the system ids the peer at `addr`
+    /// just sent as for the first time, or still contests ([`Peers::decode`]). Returns the
+    /// replaced peer's link and why it ended.
     pub(crate) fn follow(
         &mut self,
         addr: SocketAddr,
         new: &[SystemId],
+        now: Instant,
     ) -> Option<(LinkId, String)> {
-        let old = self
+        let Some((old, heard)) = self
             .by_addr
             .iter()
             .find(|(a, p)| **a != addr && p.systems.iter().any(|s| new.contains(s)))
-            .map(|(a, _)| *a)?;
+            .map(|(a, p)| (*a, p.last_heard))
+        else {
+            if let Some(p) = self.by_addr.get_mut(&addr) {
+                p.contested.clear();
+            }
+            return None;
+        };
+        if now.saturating_duration_since(heard) < FOLLOW_AFTER_SILENCE {
+            // The old address still sends: a second vehicle, not this one come back.
+            if let Some(p) = self.by_addr.get_mut(&addr) {
+                p.contested = new.to_vec();
+            }
+            return None;
+        }
         let p = self.by_addr.remove(&old)?;
         p.writer_cancel.cancel();
+        if let Some(p) = self.by_addr.get_mut(&addr) {
+            p.contested.clear();
+        }
         tracing::info!(id = %p.id, %old, new = %addr, "udp peer came back from a new address");
         Some((p.id, format!("udp peer {old} came back from {addr}")))
     }
@@ -148,6 +177,7 @@ impl Peers {
                     stats,
                     writer_cancel,
                     systems: Vec::new(),
+                    contested: Vec::new(),
                 });
                 (peer, Some(up))
             }
@@ -169,6 +199,12 @@ impl Peers {
             if !peer.systems.contains(&system) {
                 peer.systems.push(system);
                 new.push(system);
+            }
+        }
+        // A contested peer asks again with every datagram, until the other address is silent.
+        for s in &peer.contested {
+            if !new.contains(s) {
+                new.push(*s);
             }
         }
         (up, Some(new).filter(|n| !n.is_empty()))
