@@ -4,6 +4,7 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
+use super::test_support::raw_command;
 use super::*;
 use crate::model::mode::FlightMode;
 use crate::nav::globe::GeoPoint;
@@ -108,20 +109,7 @@ fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
 }
 
 fn command(command: u16, p: [f32; 7]) -> Frame {
-    let mut payload = [0u8; 33];
-    for (k, v) in p.iter().enumerate() {
-        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
-    }
-    payload[28..30].copy_from_slice(&command.to_le_bytes());
-    payload[30] = 1;
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        5,
-        76,
-        &payload,
-    )
-    .unwrap()
+    raw_command(76, 33, command, &p)
 }
 
 fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) -> Frame {

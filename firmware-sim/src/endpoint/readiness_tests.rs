@@ -36,38 +36,12 @@ fn prearm_health(msgs: &[apm::MavMessage]) -> Vec<bool> {
 
 /// A COMMAND_INT with `command` and params 1–4 (frame 0, x = y = z = 0).
 fn command_int(command: u16, p: [f32; 4]) -> Frame {
-    let mut payload = [0u8; 35];
-    for (k, v) in p.iter().enumerate() {
-        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
-    }
-    payload[28..30].copy_from_slice(&command.to_le_bytes());
-    payload[30] = 1;
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        5,
-        75,
-        &payload,
-    )
-    .unwrap()
+    raw_command(75, 35, command, &p)
 }
 
 /// A COMMAND_LONG with any command number (the dialect's enum lacks some).
 fn command_raw(command: u16, p: [f32; 7]) -> Frame {
-    let mut payload = [0u8; 33];
-    for (k, v) in p.iter().enumerate() {
-        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
-    }
-    payload[28..30].copy_from_slice(&command.to_le_bytes());
-    payload[30] = 1;
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        5,
-        76,
-        &payload,
-    )
-    .unwrap()
+    raw_command(76, 33, command, &p)
 }
 
 #[test]

@@ -141,3 +141,23 @@ pub(super) fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
     }
     out
 }
+
+/// A COMMAND_LONG (`message_id` 76, 33 bytes) or COMMAND_INT (75, 35 bytes) from the test's
+/// ground station to system 1, with any command number (the dialect's enum lacks some): `p` are
+/// its leading float params (x, y, z of a COMMAND_INT stay 0).
+pub(super) fn raw_command(message_id: u32, len: usize, command: u16, p: &[f32]) -> Frame {
+    let mut payload = vec![0u8; len];
+    for (k, v) in p.iter().enumerate() {
+        payload[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    payload[28..30].copy_from_slice(&command.to_le_bytes());
+    payload[30] = 1;
+    Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        5,
+        message_id,
+        &payload,
+    )
+    .unwrap()
+}
