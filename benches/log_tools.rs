@@ -281,12 +281,15 @@ fn main() {
         &out,
         &PlotOptions {
             kind: Kind::All,
+            frame: plot::Frame::Ned,
             size: None,
-            setpoint: [0.0, 0.0, 1.0],
+            setpoint: None,
             title: None,
         },
     )
-    .expect("draw");
+    .expect("draw")
+    .panels
+    .len();
     let wall = t.elapsed().as_secs_f64();
     let cpu = cpu_s().0 - cpu0;
     println!(

@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use vtol_gcs::log::export::{self, ExportReport, Selection};
-use vtol_gcs::log::plot::{self, Kind, PlotOptions};
+use vtol_gcs::log::plot::{self, Frame, Kind, PlotOptions};
 use vtol_gcs::log::{open_tlog, stats};
 
 /// `log` subcommands.
@@ -63,9 +63,14 @@ pub struct PlotArgs {
     /// Picture size WIDTHxHEIGHT in pixels (default: by figure).
     #[arg(long, value_parser = parse_size)]
     size: Option<(u32, u32)>,
-    /// Position setpoint x,y,z in m, z up (drawn on the position panels).
-    #[arg(long, value_parser = parse_setpoint, default_value = "0,0,1")]
-    setpoint: [f64; 3],
+    /// Axes: ned (North, East, Down; roll, pitch, yaw in degrees, as the UI shows them) or
+    /// paper (x = −North, y = East, z up; φ = −roll, θ = pitch, ψ = −yaw in rad).
+    #[arg(long, value_enum, default_value_t = Frame::Ned)]
+    frame: Frame,
+    /// A constant position setpoint to draw, three numbers in m in the --frame's axes (e.g.
+    /// 0,0,1 for z = 1 m up with --frame paper). A tlog's own position target is drawn anyway.
+    #[arg(long, value_parser = parse_setpoint)]
+    setpoint: Option<[f64; 3]>,
     /// Figure title (default: the figure and the file names).
     #[arg(long)]
     title: Option<String>,
@@ -194,14 +199,19 @@ pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
             let compare = a.compare.as_deref().map(plot::load).transpose()?;
             let opts = PlotOptions {
                 kind: a.kind,
+                frame: a.frame,
                 size: a.size,
                 setpoint: a.setpoint,
                 title: a.title,
             };
-            let panels = plot::draw(&main, compare.as_ref(), &a.output, &opts)
+            let figure = plot::draw(&main, compare.as_ref(), &a.output, &opts)
                 .map_err(anyhow::Error::from)
                 .with_context(|| format!("plotting {}", a.file.display()))?;
-            println!("wrote {} ({panels} panels)", a.output.display());
+            println!(
+                "wrote {} ({} panels)",
+                a.output.display(),
+                figure.panels.len()
+            );
         }
     }
     Ok(())
