@@ -86,9 +86,15 @@ fn load_csv(path: &Path) -> Result<FlightData, LogError> {
         idx.as_ref()
             .map(|v| v.iter().map(|&i| std::mem::take(&mut cols[i])).collect())
     };
+    let position: Option<[Points; 3]> = take(&pos).and_then(|v| v.try_into().ok());
+    let altitude = position.as_ref().map(|p| Altitude {
+        reference: AltitudeRef::Origin,
+        points: p[2].iter().map(|&(t, d)| (t, -d)).collect(),
+    });
     Ok(FlightData {
         attitude: take(&att).and_then(|v| v.try_into().ok()),
-        position: take(&pos).and_then(|v| v.try_into().ok()),
+        position,
+        altitude,
         pwm: take(&pwm).and_then(|v| v.try_into().ok()),
         inputs: take(&inp).and_then(|v| v.try_into().ok()),
         ..FlightData::default()

@@ -24,6 +24,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use plotters::coord::ranged1d::Ranged;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -220,7 +222,14 @@ fn t_end_of(sources: &[&FlightData]) -> f64 {
                 .and_then(|a| a.points.last().map(|p| p.0)),
         );
     }
-    ends.into_iter().fold(0.0_f64, f64::max).max(1e-3)
+    let end = ends.into_iter().fold(0.0_f64, f64::max).max(1e-3);
+    // a log that stops just short of a tick (7.98 s) ends its axis on that tick (8 s)
+    let step = match RangedCoordf64::from(0.0..end).key_points(10).as_slice() {
+        [a, b, ..] => b - a,
+        _ => return end,
+    };
+    let nice = (end / step - 1e-9).ceil() * step;
+    if nice - end <= 0.05 * end { nice } else { end }
 }
 
 /// Draws the figure of `opts.kind` for `main` (and `compare`, on the same axes) into a PNG.

@@ -18,8 +18,12 @@ use super::{FONT, PanelGeometry, Points};
 pub const GAP_FACTOR: f64 = 5.0;
 
 const LINE_WIDTH: u32 = 2;
+/// At most this many tick labels on a y axis, and one per this many pixels of height.
 const Y_LABELS: usize = 6;
+const Y_LABEL_PX: u32 = 26;
+/// At most this many on the time axis, one per this many pixels of width.
 const X_LABELS: usize = 10;
+const X_LABEL_PX: u32 = 50;
 
 /// Splits a series into runs at outages (a step over [`GAP_FACTOR`] × the median step) and,
 /// for angles, where the value wraps (a jump larger than `wrap`).
@@ -281,7 +285,14 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     panel: &Panel,
     t_end: f64,
 ) -> Result<PanelGeometry, DrawingAreaErrorKind<DB::ErrorType>> {
-    let (pw, _) = area.dim_in_pixel();
+    let (pw, ph) = area.dim_in_pixel();
+    // the plotting area is the panel less its caption, margins and label areas
+    let y_labels = usize::try_from(ph.saturating_sub(80) / Y_LABEL_PX)
+        .unwrap_or(Y_LABELS)
+        .clamp(2, Y_LABELS);
+    let x_labels = usize::try_from(pw.saturating_sub(112) / X_LABEL_PX)
+        .unwrap_or(X_LABELS)
+        .clamp(2, X_LABELS);
     let columns = usize::try_from(pw).unwrap_or(800).max(1);
     let lines: Vec<(Vec<Points>, &Line)> = panel
         .lines
@@ -311,8 +322,8 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     let y = (lo - pad, hi + pad);
     let x = (0.0, t_end);
     let (xd, yd) = (
-        tick_decimals(x.0..x.1, X_LABELS),
-        tick_decimals(y.0..y.1, Y_LABELS),
+        tick_decimals(x.0..x.1, x_labels),
+        tick_decimals(y.0..y.1, y_labels),
     );
     let x_fmt = move |v: &f64| tick_label(*v, xd);
     let y_fmt = move |v: &f64| tick_label(*v, yd);
@@ -328,8 +339,8 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         .build_cartesian_2d(x.0..x.1, y.0..y.1)?;
     chart
         .configure_mesh()
-        .x_labels(X_LABELS)
-        .y_labels(Y_LABELS)
+        .x_labels(x_labels)
+        .y_labels(y_labels)
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .x_desc("t (s)")
@@ -364,6 +375,9 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         )?;
         // labels alternate between two rows so that close changes stay readable
         let row = 4 + 16 * (i32::try_from(i % 2).unwrap_or(0));
+        // the label's box, so that the legend avoids it
+        let (lx, ly) = (px + 4.0, f64::from(row));
+        sample_ink(&[[(lx, ly), (lx + 40.0, ly + 14.0)]], &mut ink);
         plot.draw(&Text::new(
             label.clone(),
             (px.round() as i32 + 4, row),
