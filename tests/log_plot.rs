@@ -231,6 +231,49 @@ fn no_line_leaves_its_panel() {
 }
 
 #[test]
+fn lines_drawn_over_each_other_stay_visible() {
+    let dir = tempfile::tempdir().unwrap();
+    let tlog = dir.path().join("same.tlog");
+    // both ESCs command exactly the same PWM: ESC 2 lies on ESC 1 all along
+    write_tlog(
+        &tlog,
+        5,
+        |_| false,
+        |i, t| {
+            let mut m = hover(i, t);
+            let esc = 1600 + (50.0 * (t * 2.0).sin()) as u16;
+            m[2] = apm::MavMessage::SERVO_OUTPUT_RAW(apm::SERVO_OUTPUT_RAW_DATA {
+                servo1_raw: esc,
+                servo2_raw: esc,
+                ..Default::default()
+            });
+            m
+        },
+    );
+    let data = plot::load(&tlog).unwrap();
+    let out = dir.path().join("pwm.png");
+    let (fig, img) = draw(&data, &out, &opts(Kind::Pwm, Frame::Ned, Some((800, 700))));
+    let rotors = &fig.panels[0];
+    assert_eq!(rotors.lines, ["ESC 1", "ESC 2"]);
+    let count = |rgb: [u8; 3]| {
+        let mut n = 0;
+        for y in rotors.y_px.clone() {
+            for x in rotors.x_px.clone() {
+                let i = ((y as u32 * img.w + x as u32) * 3) as usize;
+                n += usize::from(img.rgb[i..i + 3] == rgb);
+            }
+        }
+        n
+    };
+    // ESC 1 solid blue shows between ESC 2's orange dashes
+    let (esc1, esc2) = (count([0x1f, 0x5f, 0xbf]), count([0xe3, 0x6c, 0x0a]));
+    assert!(
+        esc1 > 300 && esc2 > 300,
+        "ESC 1: {esc1} px, ESC 2: {esc2} px"
+    );
+}
+
+#[test]
 fn an_outage_is_drawn_as_a_gap() {
     let dir = tempfile::tempdir().unwrap();
     let tlog = dir.path().join("outage.tlog");
