@@ -170,8 +170,10 @@ impl Scan {
             }
             M::GLOBAL_POSITION_INT(g) => self.rel_alt.push((t, f64::from(g.relative_alt) * 1e-3)),
             M::EXTENDED_SYS_STATE(e) => {
-                let name = vtol_state_name(e.vtol_state as u32);
-                if self.vtol.last().is_none_or(|(_, last)| *last != name) {
+                // a vehicle that is no VTOL says UNDEFINED: nothing to mark
+                if let Some(name) = vtol_state_name(e.vtol_state as u32)
+                    && self.vtol.last().is_none_or(|(_, last)| last != name)
+                {
                     self.vtol.push((t, name.to_owned()));
                 }
             }
@@ -215,13 +217,13 @@ impl Scan {
 }
 
 /// EXTENDED_SYS_STATE's `vtol_state` as a short label for the figures.
-fn vtol_state_name(v: u32) -> &'static str {
+fn vtol_state_name(v: u32) -> Option<&'static str> {
     match v {
-        1 => "to FW",
-        2 => "to MC",
-        3 => "MC",
-        4 => "FW",
-        _ => "undefined",
+        1 => Some("to FW"),
+        2 => Some("to MC"),
+        3 => Some("MC"),
+        4 => Some("FW"),
+        _ => None,
     }
 }
 
