@@ -3,49 +3,24 @@
 //! seconds into a hover; the vehicle says so in ArduPilot's words, switches to QLAND and lands,
 //! and the UI's header shows the failsafe banner and the battery in its warning colour.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::style::Color;
-use tokio_util::sync::CancellationToken;
-use vtol_gcs::config::Config;
-use vtol_gcs::daemon::{self};
 use vtol_gcs::tui::app::{App, Outcome, Request};
 use vtol_gcs::tui::draw_running;
-use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::SeriesCache;
 use vtol_gcs::tui::vitals::{Severity, vitals};
-use vtol_link::dialect::MavState;
 
 mod ui_support;
-use ui_support::{run, wait_state};
+use ui_support::{run, start, wait_standby, wait_state};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_low_battery_shows_its_warning_and_the_vehicle_lands() {
-    let config = Config {
-        serve: Vec::new(),
-        log_dir: None,
-        ..Config::default()
-    };
-    let cancel = CancellationToken::new();
-    let mut tasks = tokio::task::JoinSet::new();
-    let running = daemon::start(&config, &cancel, &mut tasks)
-        .await
-        .expect("daemon starts");
-    let control = ClientControl::new(running.client.clone());
-    running
-        .client
-        .wait_target(Duration::from_secs(15))
-        .await
-        .expect("vehicle found");
+    let (running, cancel, mut tasks, control) = start().await;
     let mut app = App::default();
-    wait_state(&running, "STANDBY", |s| {
-        s.vehicles
-            .values()
-            .any(|v| v.system_status == MavState::MAV_STATE_STANDBY)
-    })
-    .await;
+    wait_standby(&running).await;
     // 1300 mAh pack: low once 4 mAh are drawn (about 3 s of hover); then land.
     let reqs = vec![
         Request::ParamSet {

@@ -2,16 +2,14 @@
 //! carried out by the real client against the embedded twin (the daemon in this process), with
 //! the outcomes fed back into the UI state as the event loop does.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::app::{App, Confirm, Outcome, ParamStatus, Request, View};
-use vtol_gcs::tui::exec::ClientControl;
-use vtol_link::dialect::MavState;
 
 mod ui_support;
-use ui_support::{chars, run, start, wait_state};
+use ui_support::{chars, run, start, wait_standby, wait_state};
 
 fn key(c: KeyCode) -> KeyEvent {
     KeyEvent::new(c, KeyModifiers::NONE)
@@ -98,13 +96,7 @@ fn a_typed_value_that_is_not_a_number_is_refused_without_sending() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn parameter_edit_round_trip_and_arm_against_the_twin() {
-    let (running, cancel, mut tasks) = start().await;
-    let control = ClientControl::new(running.client.clone());
-    running
-        .client
-        .wait_target(Duration::from_secs(15))
-        .await
-        .expect("vehicle found");
+    let (running, cancel, mut tasks, control) = start().await;
     let mut app = App::default();
 
     // Download: progress, then the table with the vehicle's values.
@@ -177,12 +169,7 @@ async fn parameter_edit_round_trip_and_arm_against_the_twin() {
     );
 
     // Arm through the confirmation once the vehicle is ready; the tracker sees it armed.
-    wait_state(&running, "STANDBY", |s| {
-        s.vehicles
-            .values()
-            .any(|v| v.system_status == MavState::MAV_STATE_STANDBY)
-    })
-    .await;
+    wait_standby(&running).await;
     app.view = View::Flight;
     let reqs = chars(&mut app, &state, "ay");
     let outcomes = run(&mut app, &control, reqs).await;
@@ -211,13 +198,7 @@ async fn parameter_edit_round_trip_and_arm_against_the_twin() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn gains_file_diff_then_transactional_upload() {
-    let (running, cancel, mut tasks) = start().await;
-    let control = ClientControl::new(running.client.clone());
-    running
-        .client
-        .wait_target(Duration::from_secs(15))
-        .await
-        .expect("vehicle found");
+    let (running, cancel, mut tasks, control) = start().await;
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("gains.param");
     // Applicable in one order only: every level shrinks, so d, c, b, a (each write keeps

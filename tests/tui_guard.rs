@@ -3,16 +3,13 @@
 //! the vehicle refuses it; force disarm has its own prompt; a crash's refusal says how to
 //! recover and the reboot key clears it.
 
-use std::time::Duration;
-
 use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::app::{App, Confirm, Level, Outcome, Request};
-use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::vitals::vitals;
 use vtol_link::dialect::MavState;
 
 mod ui_support;
-use ui_support::{chars, run, start, wait_state};
+use ui_support::{chars, run, start, wait_standby, wait_state};
 
 fn airborne_above(s: &VehicleState, alt_m: f32) -> bool {
     s.vehicles
@@ -30,20 +27,9 @@ fn mode(s: &VehicleState) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn qstabilize_in_the_air_asks_first_and_a_crash_is_cleared_by_the_reboot_key() {
-    let (running, cancel, mut tasks) = start().await;
-    let control = ClientControl::new(running.client.clone());
-    running
-        .client
-        .wait_target(Duration::from_secs(15))
-        .await
-        .expect("vehicle found");
+    let (running, cancel, mut tasks, control) = start().await;
     let mut app = App::default();
-    let state = wait_state(&running, "STANDBY", |s| {
-        s.vehicles
-            .values()
-            .any(|v| v.system_status == MavState::MAV_STATE_STANDBY)
-    })
-    .await;
+    let state = wait_standby(&running).await;
     // On the ground, QSTABILIZE is sent at once (no altitude to lose).
     assert_eq!(
         chars(&mut app, &state, "s"),

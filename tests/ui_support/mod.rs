@@ -14,6 +14,7 @@ use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::Control;
 use vtol_gcs::tui::app::{App, Outcome, Request};
 use vtol_gcs::tui::exec::ClientControl;
+use vtol_link::dialect::MavState;
 
 /// Types `s` into `app`, one key a character, and returns the requests the keys make.
 pub fn chars(app: &mut App, state: &VehicleState, s: &str) -> Vec<Request> {
@@ -25,8 +26,14 @@ pub fn chars(app: &mut App, state: &VehicleState, s: &str) -> Vec<Request> {
         .collect()
 }
 
-/// The daemon with the embedded twin, serving nothing, logging nothing.
-pub async fn start() -> (Running, CancellationToken, tokio::task::JoinSet<()>) {
+/// The daemon with the embedded twin (serving nothing, logging nothing) once its client has
+/// found the vehicle (15 s at most), and the UI's control over that client.
+pub async fn start() -> (
+    Running,
+    CancellationToken,
+    tokio::task::JoinSet<()>,
+    ClientControl,
+) {
     let config = Config {
         serve: Vec::new(),
         log_dir: None,
@@ -37,7 +44,23 @@ pub async fn start() -> (Running, CancellationToken, tokio::task::JoinSet<()>) {
     let running = daemon::start(&config, &cancel, &mut tasks)
         .await
         .expect("daemon starts");
-    (running, cancel, tasks)
+    let control = ClientControl::new(running.client.clone());
+    running
+        .client
+        .wait_target(Duration::from_secs(15))
+        .await
+        .expect("vehicle found");
+    (running, cancel, tasks, control)
+}
+
+/// Waits until a vehicle reports STANDBY (ready to arm) and returns the tracker's state.
+pub async fn wait_standby(running: &Running) -> VehicleState {
+    wait_state(running, "STANDBY", |s| {
+        s.vehicles
+            .values()
+            .any(|v| v.system_status == MavState::MAV_STATE_STANDBY)
+    })
+    .await
 }
 
 /// Carries out `reqs` and feeds every outcome back into `app`, returning them.
