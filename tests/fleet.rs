@@ -8,26 +8,24 @@ mod common;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use common::stream_link;
+use common::{logged_router, read_until, stream_link, wait_links};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
-use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
 use vtol_gcs::router::Router;
 use vtol_gcs::tap::{Side, SysidConflict};
-use vtol_gcs::tlog::{TlogHandle, TlogReader};
+use vtol_gcs::tlog::TlogReader;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
-use vtol_link::{
-    ComponentId, Frame, FrameDecoder, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint,
-};
+use vtol_link::{ComponentId, Frame, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint};
 
 fn heartbeat(mode: u32, armed: bool) -> MavMessage {
     let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
@@ -42,6 +40,11 @@ fn heartbeat(mode: u32, armed: bool) -> MavMessage {
         system_status: MavState::MAV_STATE_STANDBY,
         mavlink_version: 3,
     })
+}
+
+/// A heartbeat of system `sys` (component 1), framed with sequence number `seq`.
+fn beat(sys: u8, seq: u8, mode: u32, armed: bool) -> Frame {
+    Frame::encode_v2(SystemId(sys), ComponentId(1), seq, &heartbeat(mode, armed))
 }
 
 fn key(c: char) -> Event {
@@ -63,12 +66,7 @@ fn the_tracker_keeps_vehicles_on_one_link_apart() {
             if sys == 3 && n % 4 == 3 {
                 continue;
             }
-            let f = Frame::encode_v2(
-                vtol_link::SystemId(sys),
-                vtol_link::ComponentId(1),
-                n,
-                &heartbeat(17 + u32::from(sys), sys == 2),
-            );
+            let f = beat(sys, n, 17 + u32::from(sys), sys == 2);
             s.apply(
                 link,
                 Side::Vehicle,
@@ -96,26 +94,11 @@ fn the_tracker_keeps_vehicles_on_one_link_apart() {
     assert!(s.vehicles.values().all(|v| v.link == link));
 }
 
-/// Reads frames from `end` until `stop(frames)` holds or `limit` passes.
-async fn read_until(
-    end: &mut DuplexStream,
-    limit: Duration,
-    stop: impl Fn(&[Frame]) -> bool,
-) -> Vec<Frame> {
-    let mut dec = FrameDecoder::new();
-    let mut got = Vec::new();
-    let mut buf = [0u8; 4096];
-    let deadline = tokio::time::Instant::now() + limit;
-    while !stop(&got) {
-        match tokio::time::timeout_at(deadline, end.read(&mut buf)).await {
-            Ok(Ok(k)) if k > 0 => {
-                dec.push(&buf[..k]);
-                got.extend(dec.frames());
-            }
-            _ => break,
-        }
-    }
-    got
+/// Writes a heartbeat of system `sys` (custom mode `mode`, `armed` or not) into `end`.
+async fn send_heartbeat(end: &mut DuplexStream, sys: u8, seq: u8, mode: u32, armed: bool) {
+    end.write_all(beat(sys, seq, mode, armed).as_bytes())
+        .await
+        .unwrap();
 }
 
 #[tokio::test]
@@ -127,48 +110,15 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
     let (mut b, b_id, b_task) = stream_link(&router, Side::Vehicle, "vehicle b", &cancel);
     let (mut client, _, client_task) = stream_link(&router, Side::Client, "client", &cancel);
     let mut links = handle.links.clone();
-    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 3))
-        .await
-        .expect("three links up")
-        .expect("router running");
+    wait_links(&mut links, 3, "three links up").await;
 
     // A is system 1 (QHOVER); B claims system 1 too (QLAND), and is also system 2.
-    a.write_all(
-        Frame::encode_v2(
-            vtol_link::SystemId(1),
-            vtol_link::ComponentId(1),
-            0,
-            &heartbeat(18, false),
-        )
-        .as_bytes(),
-    )
-    .await
-    .unwrap();
+    send_heartbeat(&mut a, 1, 0, 18, false).await;
     let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
     assert_eq!(got.len(), 1, "A's heartbeat reaches the client");
     let mut conflicts = handle.conflicts.clone();
-    b.write_all(
-        Frame::encode_v2(
-            vtol_link::SystemId(1),
-            vtol_link::ComponentId(1),
-            0,
-            &heartbeat(20, true),
-        )
-        .as_bytes(),
-    )
-    .await
-    .unwrap();
-    b.write_all(
-        Frame::encode_v2(
-            vtol_link::SystemId(2),
-            vtol_link::ComponentId(1),
-            0,
-            &heartbeat(17, false),
-        )
-        .as_bytes(),
-    )
-    .await
-    .unwrap();
+    send_heartbeat(&mut b, 1, 0, 20, true).await;
+    send_heartbeat(&mut b, 2, 0, 17, false).await;
     let seen = tokio::time::timeout(
         Duration::from_secs(5),
         conflicts.wait_for(|c| !c.is_empty()),
@@ -223,17 +173,7 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
         .await
         .expect("conflict cleared")
         .expect("router running");
-    b.write_all(
-        Frame::encode_v2(
-            vtol_link::SystemId(1),
-            vtol_link::ComponentId(1),
-            1,
-            &heartbeat(20, true),
-        )
-        .as_bytes(),
-    )
-    .await
-    .unwrap();
+    send_heartbeat(&mut b, 1, 1, 20, true).await;
     let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].system_id(), 1);
@@ -250,12 +190,8 @@ async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
 /// the same system id is still a conflict: its frames are logged and go nowhere else.
 #[tokio::test]
 async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_logged_not_merged() {
-    let dir = tempfile::tempdir().unwrap();
-    let tlog = TlogHandle::start(dir.path(), 4096).unwrap();
-    let tlog_path = tlog.path.clone();
+    let (_dir, tlog_path, router, handle) = logged_router();
     let cancel = CancellationToken::new();
-    let (router, handle) = Router::new(Some(tlog), None);
-    let router = router.inline();
     // As the daemon opens its vehicle endpoints.
     let opts = LinkOptions {
         udp_follow_system: true,
@@ -276,24 +212,24 @@ async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_log
         .unwrap();
     let (mut client, _, client_task) = stream_link(&router, Side::Client, "client", &cancel);
     let mut links = handle.links.clone();
-    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 1))
-        .await
-        .expect("the client's link up")
-        .expect("router running");
-    let beat = |seq| Frame::encode_v2(SystemId(1), ComponentId(1), seq, &heartbeat(17, false));
+    wait_links(&mut links, 1, "the client's link up").await;
 
     // The vehicle's process sends ten frames, stops, and its next process, up a moment later
     // (a restart is never instant: the model of it here is a pause of 0.6 s, past
     // FOLLOW_AFTER_SILENCE), sends ten more from another port.
     let first = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     for seq in 0..10 {
-        first.send_to(beat(seq).as_bytes(), to).unwrap();
+        first
+            .send_to(beat(1, seq, 17, false).as_bytes(), to)
+            .unwrap();
     }
     drop(first);
     tokio::time::sleep(Duration::from_millis(600)).await;
     let second = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     for seq in 10..20 {
-        second.send_to(beat(seq).as_bytes(), to).unwrap();
+        second
+            .send_to(beat(1, seq, 17, false).as_bytes(), to)
+            .unwrap();
     }
     let got = read_until(&mut client, Duration::from_secs(5), |f| f.len() >= 20).await;
     let seqs: Vec<u8> = got.iter().map(Frame::seq).collect();
@@ -304,15 +240,15 @@ async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_log
     );
     assert_eq!(handle.stats.sysid_conflicts.load(Ordering::Relaxed), 0);
     // The old address's link went down: one vehicle link and the client's.
-    tokio::time::timeout(Duration::from_secs(5), links.wait_for(|l| l.len() == 2))
-        .await
-        .expect("the old peer's link down")
-        .expect("router running");
+    wait_links(&mut links, 2, "the old peer's link down").await;
 
     // Another vehicle, on the other endpoint, sends as system 1: a conflict, not merged.
     let claimant = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     claimant
-        .send_to(beat(100).as_bytes(), elsewhere.local_addr().unwrap())
+        .send_to(
+            beat(1, 100, 17, false).as_bytes(),
+            elsewhere.local_addr().unwrap(),
+        )
         .unwrap();
     let mut conflicts = handle.conflicts.clone();
     tokio::time::timeout(
@@ -322,7 +258,9 @@ async fn a_vehicle_back_from_a_new_port_is_followed_and_a_second_claimant_is_log
     .await
     .expect("the conflict reported")
     .expect("router running");
-    second.send_to(beat(20).as_bytes(), to).unwrap();
+    second
+        .send_to(beat(1, 20, 17, false).as_bytes(), to)
+        .unwrap();
     let got = read_until(&mut client, Duration::from_secs(5), |f| !f.is_empty()).await;
     let seqs: Vec<u8> = got.iter().map(Frame::seq).collect();
     assert_eq!(seqs, [20], "the claimant's frame reached the client");
@@ -380,40 +318,10 @@ fn ui_lists_three_vehicles_and_switches() {
     // 1 hovers, 2 is armed in QLOITER, 3 fell silent 6 s ago.
     for n in 0u8..10 {
         let t = t0 + Duration::from_secs(u64::from(n));
-        state.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(
-                vtol_link::SystemId(1),
-                vtol_link::ComponentId(1),
-                n,
-                &heartbeat(18, true),
-            ),
-            t,
-        );
-        state.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(
-                vtol_link::SystemId(2),
-                vtol_link::ComponentId(1),
-                n,
-                &heartbeat(19, true),
-            ),
-            t,
-        );
+        state.apply(LinkId(1), Side::Vehicle, &beat(1, n, 18, true), t);
+        state.apply(LinkId(1), Side::Vehicle, &beat(2, n, 19, true), t);
         if n < 4 {
-            state.apply(
-                LinkId(1),
-                Side::Vehicle,
-                &Frame::encode_v2(
-                    vtol_link::SystemId(3),
-                    vtol_link::ComponentId(1),
-                    n,
-                    &heartbeat(17, false),
-                ),
-                t,
-            );
+            state.apply(LinkId(1), Side::Vehicle, &beat(3, n, 17, false), t);
         }
     }
     let now = t0 + Duration::from_millis(9_500);
@@ -456,12 +364,7 @@ fn a_fleet_wider_than_the_screen_wraps_and_scrolls_to_the_selected_vehicle() {
         state.apply(
             LinkId(u32::from(sys)),
             Side::Vehicle,
-            &Frame::encode_v2(
-                vtol_link::SystemId(sys),
-                vtol_link::ComponentId(1),
-                0,
-                &heartbeat(17, false),
-            ),
+            &beat(sys, 0, 17, false),
             t0,
         );
     }

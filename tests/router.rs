@@ -7,15 +7,15 @@ mod common;
 
 use std::time::Duration;
 
-use common::stream_link;
+use common::{logged_router, read_until, stream_link, wait_links};
 use proptest::prelude::*;
-use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::{InlineRouter, Router};
+use vtol_gcs::router::InlineRouter;
 use vtol_gcs::tap::Side;
-use vtol_gcs::tlog::{TlogHandle, TlogReader};
+use vtol_gcs::tlog::TlogReader;
+use vtol_link::Frame;
 use vtol_link::dialect::{self, MavMessage};
-use vtol_link::{Frame, FrameDecoder};
 
 fn param_request_read(target_system: u8, index: i16) -> MavMessage {
     MavMessage::PARAM_REQUEST_READ(dialect::PARAM_REQUEST_READ_DATA {
@@ -36,20 +36,7 @@ fn statustext(n: u8) -> MavMessage {
 
 /// Reads frames from `end` until `n` arrived or `limit` passed.
 async fn read_frames(end: &mut DuplexStream, n: usize, limit: Duration) -> Vec<Frame> {
-    let mut dec = FrameDecoder::new();
-    let mut got = Vec::new();
-    let mut buf = [0u8; 4096];
-    let deadline = tokio::time::Instant::now() + limit;
-    while got.len() < n {
-        match tokio::time::timeout_at(deadline, end.read(&mut buf)).await {
-            Ok(Ok(k)) if k > 0 => {
-                dec.push(&buf[..k]);
-                got.extend(dec.frames());
-            }
-            _ => break,
-        }
-    }
-    got
+    read_until(end, limit, |f| f.len() >= n).await
 }
 
 struct Harness {
@@ -64,12 +51,8 @@ struct Harness {
 }
 
 async fn harness(n_clients: usize) -> Harness {
-    let dir = tempfile::tempdir().unwrap();
-    let tlog = TlogHandle::start(dir.path(), 4096).unwrap();
-    let tlog_path = tlog.path.clone();
+    let (dir, tlog_path, router, handle) = logged_router();
     let cancel = CancellationToken::new();
-    let (router, handle) = Router::new(Some(tlog), None);
-    let router = router.inline();
     let (vehicle, _, task) = stream_link(&router, Side::Vehicle, "vehicle", &cancel);
     let mut link_tasks = vec![task];
     let mut clients = Vec::new();
@@ -80,13 +63,7 @@ async fn harness(n_clients: usize) -> Harness {
     }
     // Wait until the router has every link up (an event, with an upper bound).
     let mut links = handle.links.clone();
-    tokio::time::timeout(
-        Duration::from_secs(5),
-        links.wait_for(|l| l.len() == n_clients + 1),
-    )
-    .await
-    .expect("links up in time")
-    .unwrap();
+    wait_links(&mut links, n_clients + 1, "links up").await;
     Harness {
         vehicle,
         clients,
