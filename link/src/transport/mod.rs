@@ -93,16 +93,18 @@ pub async fn spawn_endpoint(
     let events = events.into();
     let (local_addr, link_id, task) = match url {
         LinkUrl::UdpIn { host, port } => {
-            let (addr, task) = udp::spawn_udpin(url, host, *port, events, opts, cancel).await?;
+            let at = SocketEndpoint::resolve(url, host, *port, events, opts, cancel).await?;
+            let (addr, task) = udp::spawn_udpin(at)?;
             (Some(addr), None, task)
         }
         LinkUrl::UdpOut { host, port } => {
-            let (addr, id, task) =
-                udp::spawn_udpout(url, host, *port, events, opts, cancel).await?;
+            let at = SocketEndpoint::resolve(url, host, *port, events, opts, cancel).await?;
+            let (addr, id, task) = udp::spawn_udpout(at)?;
             (Some(addr), Some(id), task)
         }
         LinkUrl::TcpIn { host, port } => {
-            let (addr, task) = tcp::spawn_tcpin(url, host, *port, events, opts, cancel).await?;
+            let at = SocketEndpoint::resolve(url, host, *port, events, opts, cancel).await?;
+            let (addr, task) = tcp::spawn_tcpin(at).await?;
             (Some(addr), None, task)
         }
         LinkUrl::Tcp { host, port } => {
@@ -137,6 +139,39 @@ pub async fn spawn_endpoint(
         link_id,
         task,
     })
+}
+
+/// What a socket endpoint (udpin, udpout, tcpin) starts from: the URL it was opened from, its
+/// host and the addresses `host:port` resolved to, where its events go, its options and its
+/// cancellation.
+pub(crate) struct SocketEndpoint<'a> {
+    pub(crate) url: &'a LinkUrl,
+    pub(crate) host: &'a str,
+    pub(crate) addrs: Vec<SocketAddr>,
+    pub(crate) events: Events,
+    pub(crate) opts: LinkOptions,
+    pub(crate) cancel: CancellationToken,
+}
+
+impl<'a> SocketEndpoint<'a> {
+    /// Resolves `host:port` (see [`resolve`]) for the endpoint `url` names.
+    async fn resolve(
+        url: &'a LinkUrl,
+        host: &'a str,
+        port: u16,
+        events: Events,
+        opts: LinkOptions,
+        cancel: CancellationToken,
+    ) -> Result<Self, LinkError> {
+        Ok(Self {
+            url,
+            host,
+            addrs: resolve(host, port).await?,
+            events,
+            opts,
+            cancel,
+        })
+    }
 }
 
 /// Resolves `host:port`, IPv4 addresses first (so `localhost` binds and connects like

@@ -16,26 +16,21 @@ use tokio_util::task::TaskTracker;
 
 use super::stream::run_reconnecting;
 use super::{
-    Events, LinkError, LinkId, LinkOptions, LinkStats, resolve, run_stream_link, sleep_or_cancel,
+    Events, LinkError, LinkId, LinkOptions, LinkStats, SocketEndpoint, resolve, run_stream_link,
+    sleep_or_cancel,
 };
-use crate::url::LinkUrl;
 
 /// Pause after a failed accept (e.g. EMFILE) so it cannot become a busy loop.
 const ACCEPT_ERROR_PAUSE: Duration = Duration::from_millis(100);
 
 /// Binds a tcpin listener and spawns its accept loop.
 pub(super) async fn spawn_tcpin(
-    url: &LinkUrl,
-    host: &str,
-    port: u16,
-    events: Events,
-    opts: LinkOptions,
-    cancel: CancellationToken,
+    at: SocketEndpoint<'_>,
 ) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
-    let addrs = resolve(host, port).await?;
+    let url = at.url;
     let mut last = None;
     let mut listener = None;
-    for &addr in &addrs {
+    for &addr in &at.addrs {
         match TcpListener::bind(addr).await {
             Ok(l) => {
                 listener = Some(l);
@@ -55,7 +50,7 @@ pub(super) async fn spawn_tcpin(
         }
         (None, None) => {
             return Err(LinkError::NoAddress {
-                host: host.to_string(),
+                host: at.host.to_string(),
             });
         }
     };
@@ -64,7 +59,7 @@ pub(super) async fn spawn_tcpin(
         source,
     })?;
     tracing::info!(%url, %local, "tcpin listening");
-    let task = tokio::spawn(tcpin_task(listener, events, opts, cancel));
+    let task = tokio::spawn(tcpin_task(listener, at.events, at.opts, at.cancel));
     Ok((local, task))
 }
 

@@ -57,7 +57,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::{
     Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkSender, LinkStats,
-    resolve, sleep_or_cancel,
+    sleep_or_cancel,
 };
 use crate::url::LinkUrl;
 

@@ -15,13 +15,11 @@ use super::{
     Datagrams, RECV_BATCH, RECV_ERROR_PAUSE, Wakeup, bind, blocking_wakeup, handler, local_addr,
     udp_link,
 };
-use super::{
-    Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkStats, resolve,
-};
+use super::{LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkStats};
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
 use crate::ids::SystemId;
-use crate::url::LinkUrl;
+use crate::transport::SocketEndpoint;
 
 /// State of one UDP peer (one link) of a udpin socket.
 pub(crate) struct Peer {
@@ -255,21 +253,17 @@ pub(crate) fn expiry_period(opts: &LinkOptions) -> Duration {
 }
 
 /// Binds a udpin socket and starts its reader.
-pub(crate) async fn spawn_udpin(
-    url: &LinkUrl,
-    host: &str,
-    port: u16,
-    events: Events,
-    opts: LinkOptions,
-    cancel: CancellationToken,
+pub(crate) fn spawn_udpin(
+    at: SocketEndpoint<'_>,
 ) -> Result<(SocketAddr, JoinHandle<()>), LinkError> {
-    let addrs = resolve(host, port).await?;
-    let sock = bind(url, &addrs)?;
+    let url = at.url;
+    let sock = bind(url, &at.addrs)?;
     let local = local_addr(url, &sock)?;
     tracing::info!(%url, %local, "udpin listening");
-    let handler = handler(events, &cancel);
-    let (stop, wake) = blocking_wakeup(&cancel, &sock, Some(expiry_period(&opts)), false);
-    let peers = Peers::new(sock, opts, stop);
+    let handler = handler(at.events, &at.cancel);
+    let expiry = Some(expiry_period(&at.opts));
+    let (stop, wake) = blocking_wakeup(&at.cancel, &sock, expiry, false);
+    let peers = Peers::new(sock, at.opts, stop);
     let task = tokio::task::spawn_blocking(move || udpin_blocking(peers, &wake, &*handler));
     Ok((local, task))
 }

@@ -12,24 +12,17 @@ use super::{
     BLOCKING_TICK, Connection, Datagrams, MAX_DATAGRAM_BYTES, RECV_ERROR_PAUSE, REPLY_BATCH,
     Wakeup, bind, blocking_wakeup, grow_recv_buffer, handler, is_icmp_error, local_addr, udp_link,
 };
-use super::{
-    Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkOptions, LinkStats, resolve,
-    sleep_or_cancel,
-};
+use super::{Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkStats, sleep_or_cancel};
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
-use crate::url::LinkUrl;
+use crate::transport::SocketEndpoint;
 
 /// Binds an ephemeral socket for udpout and starts its single link.
-pub(crate) async fn spawn_udpout(
-    url: &LinkUrl,
-    host: &str,
-    port: u16,
-    events: Events,
-    opts: LinkOptions,
-    cancel: CancellationToken,
+pub(crate) fn spawn_udpout(
+    at: SocketEndpoint<'_>,
 ) -> Result<(SocketAddr, LinkId, JoinHandle<()>), LinkError> {
-    let dest = resolve(host, port).await?[0];
+    let url = at.url;
+    let dest = at.addrs[0];
     // A loopback destination is answered from loopback: the socket binds there, as listeners
     // bind 127.0.0.1, instead of on every interface.
     let any: SocketAddr = match (dest.ip().is_loopback(), dest.is_ipv4()) {
@@ -40,13 +33,13 @@ pub(crate) async fn spawn_udpout(
     // An inline owner's socket is connected, with a second one for the other senders (whose
     // reader is a task: it calls the owner from the runtime, which a queue owner's handler
     // must not be called from).
-    let pair = match &events {
+    let pair = match &at.events {
         Events::Inline(_) => connected_pair(any, dest)
             .inspect_err(|e| tracing::debug!(%url, "udpout unconnected: {e}"))
             .ok(),
         Events::Queue(_) => None,
     };
-    let handler = handler(events, &cancel);
+    let handler = handler(at.events, &at.cancel);
     let (sock, local, strays) = match pair {
         Some((main, local, strays)) => {
             let strays =
@@ -71,14 +64,14 @@ pub(crate) async fn spawn_udpout(
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, connected = connection.is_some(), "udpout sending to {dest}");
     let stats = Arc::new(LinkStats::default());
-    let (cancel, wake) = blocking_wakeup(&cancel, &sock, None, connection.is_some());
+    let (cancel, wake) = blocking_wakeup(&at.cancel, &sock, None, connection.is_some());
     let writer_cancel = cancel.child_token();
     let (tx, writer) = udp_link(
         &sock,
         dest,
         connection.clone(),
         &stats,
-        &opts,
+        &at.opts,
         writer_cancel.clone(),
     );
     let writer = tokio::spawn(writer);
