@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import pytest
+
 # (route, transport) of every target, and their test ids.
 TARGETS = [("direct", "tcp"), ("direct", "udp"), ("daemon", "tcp"), ("daemon", "udp")]
 TARGET_IDS = [f"{r}-{t}" for r, t in TARGETS]
@@ -48,6 +50,14 @@ def start_target(route: str, transport: str, twins, daemons, speed: float | None
         front = daemons(vehicle="tcp:" + twin.addr("tcpin"), log=False)
     host, port = front.host_port("tcpin" if transport == "tcp" else "udpin")
     return Target(route, transport, host, port)
+
+
+@pytest.fixture(params=TARGETS, ids=TARGET_IDS)
+def target(request, twin_factory, daemon_factory):
+    """Every target in turn, for a test that takes `target` (and imports `twin_factory` and
+    `daemon_factory`, the fixtures it starts them with)."""
+    route, transport = request.param
+    return start_target(route, transport, twin_factory, daemon_factory)
 
 
 # The origin's metres per degree, for offsets of a few metres (flat Earth is exact enough here).

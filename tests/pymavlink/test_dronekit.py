@@ -17,17 +17,11 @@ from pymavlink import mavutil
 
 from conftest import f32, twin_factory  # noqa: F401 (fixture)
 from daemon_support import daemon_factory  # noqa: F401 (fixture)
-from sdk_targets import TARGET_IDS, TARGETS, distance_m, offset, start_target
+from sdk_targets import distance_m, offset, target  # noqa: F401 (fixture)
 
 TAKEOFF_ALT = 2.0
 # Upper bounds, wall seconds (the twin flies at sdk_targets.FLIGHT_SPEED x real time).
 STEP_TIMEOUT = 30.0
-
-
-@pytest.fixture(params=TARGETS, ids=TARGET_IDS)
-def target(request, twin_factory, daemon_factory):  # noqa: F811
-    route, transport = request.param
-    return start_target(route, transport, twin_factory, daemon_factory)
 
 
 def arm_and_takeoff(vehicle, a_target_altitude):

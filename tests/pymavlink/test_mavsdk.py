@@ -20,7 +20,7 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
 from conftest import twin_factory  # noqa: F401 (fixture)
 from daemon_support import daemon_factory  # noqa: F401 (fixture)
-from sdk_targets import TARGET_IDS, TARGETS, distance_m, offset, start_target
+from sdk_targets import distance_m, offset, target  # noqa: F401 (fixture)
 
 TAKEOFF_ALT = 2.0
 STEP_TIMEOUT = 30.0  # wall seconds; the twin flies at sdk_targets.FLIGHT_SPEED x real time
@@ -29,12 +29,6 @@ MAV_FRAME_GLOBAL = 0
 MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_CMD_NAV_VTOL_TAKEOFF = 84
-
-
-@pytest.fixture(params=TARGETS, ids=TARGET_IDS)
-def target(request, twin_factory, daemon_factory):  # noqa: F811
-    route, transport = request.param
-    return start_target(route, transport, twin_factory, daemon_factory)
 
 
 async def first(gen, pred, what: str, timeout: float = STEP_TIMEOUT):
