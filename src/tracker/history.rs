@@ -13,6 +13,7 @@ use foldhash::HashMap;
 use vtol_link::Frame;
 use vtol_link::dialect::MavMessage;
 
+use super::state::servo_outputs;
 use super::window::Stamp;
 
 /// How far back the history reaches (the charts' window can be set up to this).
@@ -230,16 +231,8 @@ impl History {
                 push(&mut self.vehicles.entry(key).or_default().attitude, t_s, v);
             }
             MavMessage::SERVO_OUTPUT_RAW(s) => {
-                let v = [
-                    s.servo1_raw,
-                    s.servo2_raw,
-                    s.servo3_raw,
-                    s.servo4_raw,
-                    s.servo5_raw,
-                    s.servo6_raw,
-                    s.servo7_raw,
-                    s.servo8_raw,
-                ];
+                let all = servo_outputs(s);
+                let v: [u16; 8] = std::array::from_fn(|i| all[i]);
                 push(&mut self.vehicles.entry(key).or_default().servo, t_s, v);
             }
             MavMessage::LOCAL_POSITION_NED(p) => {

@@ -5,7 +5,9 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use foldhash::{HashMap, HashSet};
-use vtol_link::dialect::{MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::dialect::{
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, SERVO_OUTPUT_RAW_DATA,
+};
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
 use super::window::{Stamp, Window};
@@ -122,6 +124,29 @@ impl VehicleView {
         plane_mode_name(self.custom_mode)
             .map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
     }
+}
+
+/// A SERVO_OUTPUT_RAW's 16 outputs, µs, in channel order.
+#[must_use]
+pub fn servo_outputs(s: &SERVO_OUTPUT_RAW_DATA) -> [u16; 16] {
+    [
+        s.servo1_raw,
+        s.servo2_raw,
+        s.servo3_raw,
+        s.servo4_raw,
+        s.servo5_raw,
+        s.servo6_raw,
+        s.servo7_raw,
+        s.servo8_raw,
+        s.servo9_raw,
+        s.servo10_raw,
+        s.servo11_raw,
+        s.servo12_raw,
+        s.servo13_raw,
+        s.servo14_raw,
+        s.servo15_raw,
+        s.servo16_raw,
+    ]
 }
 
 /// Names of ArduPlane's mode numbers (what pymavlink's `mode_mapping_apm` holds).
@@ -436,24 +461,7 @@ fn apply_telemetry(
             });
         }
         MavMessage::SERVO_OUTPUT_RAW(s) => {
-            v.servo_us = [
-                s.servo1_raw,
-                s.servo2_raw,
-                s.servo3_raw,
-                s.servo4_raw,
-                s.servo5_raw,
-                s.servo6_raw,
-                s.servo7_raw,
-                s.servo8_raw,
-                s.servo9_raw,
-                s.servo10_raw,
-                s.servo11_raw,
-                s.servo12_raw,
-                s.servo13_raw,
-                s.servo14_raw,
-                s.servo15_raw,
-                s.servo16_raw,
-            ];
+            v.servo_us = servo_outputs(s);
         }
         MavMessage::STATUSTEXT(t) => {
             if let Some(text) = text_chunks.entry(key).or_default().push(t) {
