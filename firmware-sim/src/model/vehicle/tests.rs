@@ -18,6 +18,34 @@ fn on_ground() -> VehicleConfig {
     }
 }
 
+/// The default vehicle, `alt_m` above the ground.
+fn at_altitude(alt_m: f64) -> VehicleConfig {
+    VehicleConfig {
+        initial: InitialState {
+            pos_m: Vector3::new(0.0, 0.0, alt_m),
+            ..Default::default()
+        },
+        ..VehicleConfig::default()
+    }
+}
+
+/// Armed and flying `mode`, `alt_m` above the ground.
+fn flying(alt_m: f64, mode: FlightMode) -> VehicleConfig {
+    VehicleConfig {
+        armed: true,
+        mode,
+        ..at_altitude(alt_m)
+    }
+}
+
+/// [`flying`] with the paper's model.
+fn paper_flying(alt_m: f64, mode: FlightMode) -> VehicleConfig {
+    VehicleConfig {
+        model: ModelMode::Paper,
+        ..flying(alt_m, mode)
+    }
+}
+
 #[test]
 fn calibrates_then_arms_only_when_checks_pass() {
     let mut v = Vehicle::new(on_ground());
@@ -60,12 +88,8 @@ fn a_vehicle_calibrated_before_start_arms_at_once_in_qhover() {
 #[test]
 fn refuses_to_arm_in_the_air() {
     let cfg = VehicleConfig {
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 5.0),
-            ..Default::default()
-        },
         ideal_sensors: true,
-        ..VehicleConfig::default()
+        ..at_altitude(5.0)
     };
     let mut v = Vehicle::new(cfg);
     assert_eq!(v.arm(false), Err(ArmError::PreArm("not landed")));
@@ -74,13 +98,7 @@ fn refuses_to_arm_in_the_air() {
 
 #[test]
 fn disarmed_drop_is_a_crash_and_does_not_fall_through() {
-    let cfg = VehicleConfig {
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 2.0),
-            ..Default::default()
-        },
-        ..VehicleConfig::default()
-    };
+    let cfg = at_altitude(2.0);
     let mut v = Vehicle::new(cfg);
     run(&mut v, 1.0);
     // 2 m free fall: contact at 6.3 m/s, beyond the crash threshold.
@@ -92,17 +110,7 @@ fn disarmed_drop_is_a_crash_and_does_not_fall_through() {
 
 #[test]
 fn tipping_over_is_a_crash() {
-    let cfg = VehicleConfig {
-        model: ModelMode::Paper,
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 10.0),
-            ..Default::default()
-        },
-        armed: true,
-        mode: FlightMode::QLoiter,
-        ..VehicleConfig::default()
-    };
-    let mut v = Vehicle::new(cfg);
+    let mut v = Vehicle::new(paper_flying(10.0, FlightMode::QLoiter));
     v.push(Vector3::new(3.0, 0.0, 0.0), 0.5);
     run(&mut v, 1.0);
     assert_eq!(v.telemetry().state, SystemState::Emergency);
@@ -111,17 +119,7 @@ fn tipping_over_is_a_crash() {
 
 #[test]
 fn a_push_rolls_the_vehicle_and_it_recovers() {
-    let cfg = VehicleConfig {
-        model: ModelMode::Paper,
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 1.0),
-            ..Default::default()
-        },
-        armed: true,
-        mode: FlightMode::QLoiter,
-        ..VehicleConfig::default()
-    };
-    let mut v = Vehicle::new(cfg);
+    let mut v = Vehicle::new(paper_flying(1.0, FlightMode::QLoiter));
     v.push(Vector3::new(0.05, 0.0, 0.0), 0.2);
     run(&mut v, 0.2);
     assert!(
@@ -136,17 +134,7 @@ fn a_push_rolls_the_vehicle_and_it_recovers() {
 #[test]
 fn steady_wind_drifts_a_vehicle_downwind() {
     // QSTABILIZE at hover throttle with no position hold: the wind's drag carries it along +y.
-    let cfg = VehicleConfig {
-        model: ModelMode::Paper,
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 5.0),
-            ..Default::default()
-        },
-        armed: true,
-        mode: FlightMode::QStabilize,
-        ..VehicleConfig::default()
-    };
-    let mut v = Vehicle::new(cfg);
+    let mut v = Vehicle::new(paper_flying(5.0, FlightMode::QStabilize));
     v.set_rc_input([1500, 1500, 1462, 1500, 0, 0, 0, 0]);
     v.set_wind(Vector3::new(0.0, 3.0, 0.0), 0.5);
     run(&mut v, 2.0);
@@ -179,13 +167,9 @@ fn same_seed_same_flight() {
 #[test]
 fn rc_loss_in_qstabilize_is_critical() {
     let cfg = VehicleConfig {
-        initial: InitialState {
-            pos_m: Vector3::new(0.0, 0.0, 1.0),
-            ..Default::default()
-        },
         armed: true,
         ideal_sensors: true,
-        ..VehicleConfig::default()
+        ..at_altitude(1.0)
     };
     let mut v = Vehicle::new(cfg);
     v.set_rc_input([1500, 1500, 1500, 1500, 0, 0, 0, 0]);
@@ -206,15 +190,7 @@ fn qloiter_in_steady_wind_settles_downwind() {
         (Vector3::new(0.5, 0.0, 0.0), "broadside"),
         (Vector3::new(0.0, 0.5, 0.0), "edgewise"),
     ] {
-        let cfg = VehicleConfig {
-            initial: InitialState {
-                pos_m: Vector3::new(0.0, 0.0, 1.0),
-                ..Default::default()
-            },
-            armed: true,
-            mode: FlightMode::QLoiter,
-            ..VehicleConfig::default()
-        };
+        let cfg = flying(1.0, FlightMode::QLoiter);
         let mut v = Vehicle::new(cfg);
         v.set_wind(wind, 0.0);
         run(&mut v, 90.0);
