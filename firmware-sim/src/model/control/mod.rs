@@ -439,35 +439,22 @@ impl Controller {
                 };
                 let mut err = pos.xy() - target;
                 let mut v = vel.xy();
-                if model == ModelMode::Paper {
-                    (
-                        chains::longitudinal_tau(
-                            &gains.longitudinal,
-                            model,
-                            g,
-                            err.x,
-                            v.x,
-                            euler.theta,
-                            theta_dot,
-                        ),
-                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                    )
-                } else {
+                if model != ModelMode::Paper {
                     err = chains::to_heading_frame(euler.psi, err);
                     v = chains::to_heading_frame(euler.psi, v);
-                    (
-                        chains::longitudinal_tau(
-                            &gains.longitudinal,
-                            model,
-                            g,
-                            err.x,
-                            v.x,
-                            euler.theta,
-                            theta_dot,
-                        ),
-                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                    )
                 }
+                (
+                    chains::longitudinal_tau(
+                        &gains.longitudinal,
+                        model,
+                        g,
+                        err.x,
+                        v.x,
+                        euler.theta,
+                        theta_dot,
+                    ),
+                    chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
+                )
             }
             FlightMode::QStabilize | FlightMode::QHover => (
                 chains::attitude_hold_tau(
