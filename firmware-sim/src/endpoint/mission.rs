@@ -528,7 +528,7 @@ impl Endpoint {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use vtol_link::Frame;
+    use crate::endpoint::test_support::from_gcs;
 
     #[test]
     fn item_payload_round_trips_raw() {
@@ -543,27 +543,13 @@ mod tests {
             autocontinue: 1,
         };
         let p = item_payload(4, &item, (1, 1), true);
-        let f = Frame::encode_payload_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            0,
-            MISSION_ITEM_INT_ID,
-            &p,
-        )
-        .unwrap();
+        let f = from_gcs(0, MISSION_ITEM_INT_ID, &p);
         let r = raw_item(&f).unwrap();
         assert_eq!((r.seq, r.target_system, r.target_component), (4, 1, 1));
         assert_eq!(r.item, item);
         // MISSION_ITEM: degrees as floats, back to 1e-7 degree within float32 precision.
         let p = item_payload(4, &item, (1, 1), false);
-        let f = Frame::encode_payload_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            0,
-            MISSION_ITEM_ID,
-            &p,
-        )
-        .unwrap();
+        let f = from_gcs(0, MISSION_ITEM_ID, &p);
         let r = raw_item(&f).unwrap();
         assert!((r.item.x - item.x).abs() < 40, "{} vs {}", r.item.x, item.x);
         assert_eq!(r.item.command, 65000);

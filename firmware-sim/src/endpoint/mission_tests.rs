@@ -4,7 +4,7 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
-use super::test_support::raw_command;
+use super::test_support::{each, from_gcs, raw_command, run_until};
 use super::*;
 use crate::model::mode::FlightMode;
 use crate::nav::globe::GeoPoint;
@@ -58,54 +58,20 @@ fn acks(out: &[Outbound]) -> Vec<(u16, u8)> {
 }
 
 fn texts(out: &[Outbound]) -> Vec<apm::STATUSTEXT_DATA> {
-    decode(out)
-        .into_iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::STATUSTEXT(t) => Some(t),
-            _ => None,
-        })
-        .collect()
+    each!(decode(out), STATUSTEXT(t) => t.clone())
 }
 
 fn mission_acks(out: &[Outbound]) -> Vec<apm::MavMissionResult> {
-    decode(out)
-        .into_iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::MISSION_ACK(a) => Some(a.mavtype),
-            _ => None,
-        })
-        .collect()
+    each!(decode(out), MISSION_ACK(a) => a.mavtype)
 }
 
 #[allow(deprecated)] // MISSION_REQUEST: what ArduPilot (and so the twin) asks with
 fn requests(out: &[Outbound]) -> Vec<u16> {
-    decode(out)
-        .into_iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::MISSION_REQUEST(r) => Some(r.seq),
-            _ => None,
-        })
-        .collect()
+    each!(decode(out), MISSION_REQUEST(r) => r.seq)
 }
 
 fn reached(out: &[Outbound]) -> Vec<u16> {
-    decode(out)
-        .into_iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::MISSION_ITEM_REACHED(r) => Some(r.seq),
-            _ => None,
-        })
-        .collect()
-}
-
-fn run_until(ep: &mut Endpoint, until_us: u64) -> Vec<Outbound> {
-    let mut out = Vec::new();
-    let mut t = ep.now_us();
-    while t < until_us {
-        t = (t + 5_000).min(until_us);
-        out.extend(ep.tick(t));
-    }
-    out
+    each!(decode(out), MISSION_ITEM_REACHED(r) => r.seq)
 }
 
 fn command(command: u16, p: [f32; 7]) -> Frame {
@@ -123,14 +89,7 @@ fn command_int(command: u16, frame_no: u8, p: [f32; 4], x: i32, y: i32, z: f32) 
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
     payload[32] = frame_no;
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        5,
-        75,
-        &payload,
-    )
-    .unwrap()
+    from_gcs(5, 75, &payload)
 }
 
 fn set_mode(ep: &mut Endpoint, mode: FlightMode) -> Vec<Outbound> {
@@ -154,14 +113,7 @@ fn count_msg(count: u16) -> apm::MavMessage {
 }
 
 fn item_frame(seq: u16, it: &MissionItem) -> Frame {
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        9,
-        MISSION_ITEM_INT_ID,
-        &item_payload(seq, it, (1, 1), true),
-    )
-    .unwrap()
+    from_gcs(9, MISSION_ITEM_INT_ID, &item_payload(seq, it, (1, 1), true))
 }
 
 /// A point `north_m`, `east_m` from the origin at `alt` m above home.
@@ -630,14 +582,7 @@ fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
     it.frame = frame::GLOBAL_RELATIVE_ALT;
     it.current = 2;
     let p = item_payload(0, &it, (0, 0), false);
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        4,
-        MISSION_ITEM_ID,
-        &p,
-    )
-    .unwrap()
+    from_gcs(4, MISSION_ITEM_ID, &p)
 }
 
 #[test]

@@ -154,14 +154,7 @@ fn param_set_with_type_outside_the_enum_is_still_handled() {
     id[..9].copy_from_slice(b"HOVER_ALT");
     payload.extend_from_slice(&id);
     payload.push(0);
-    let frame = Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        0,
-        23,
-        &payload,
-    )
-    .unwrap();
+    let frame = from_gcs(0, 23, &payload);
     let msgs = decode(&ep.handle(GCS, &frame));
     assert_eq!(param_values(&msgs)[0].param_value, 2.5);
 }

@@ -29,6 +29,19 @@ pub(super) fn v2(msg: &apm::MavMessage) -> Frame {
     )
 }
 
+/// A raw payload of `message_id` framed (v2, sequence number `seq`) as the test's ground
+/// station sends it.
+pub(super) fn from_gcs(seq: u8, message_id: u32, payload: &[u8]) -> Frame {
+    Frame::encode_payload_v2(
+        vtol_link::SystemId(GCS_SYSID),
+        vtol_link::ComponentId(GCS_COMPID),
+        seq,
+        message_id,
+        payload,
+    )
+    .unwrap()
+}
+
 pub(super) fn v1(msg: &apm::MavMessage) -> Frame {
     Frame::encode_v1(
         vtol_link::SystemId(GCS_SYSID),
@@ -104,31 +117,31 @@ pub(super) fn param_set(name: &str, value: f32) -> apm::MavMessage {
     })
 }
 
+/// Every message of the slice `$msgs` of the variant named, mapped by the expression, in order:
+/// `each!(msgs, PARAM_VALUE(v) => v.param_value)`.
+macro_rules! each {
+    ($msgs:expr, $variant:ident($v:pat) => $f:expr) => {
+        $msgs
+            .iter()
+            .filter_map(|m| match m {
+                apm::MavMessage::$variant($v) => Some($f),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+}
+pub(super) use each;
+
 pub(super) fn param_values(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_VALUE_DATA> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::PARAM_VALUE(v) => Some(v.clone()),
-            _ => None,
-        })
-        .collect()
+    each!(msgs, PARAM_VALUE(v) => v.clone())
 }
 
 pub(super) fn param_errors(msgs: &[apm::MavMessage]) -> Vec<apm::PARAM_ERROR_DATA> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::PARAM_ERROR(v) => Some(v.clone()),
-            _ => None,
-        })
-        .collect()
+    each!(msgs, PARAM_ERROR(v) => v.clone())
 }
 
 pub(super) fn texts(msgs: &[apm::MavMessage]) -> Vec<String> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            apm::MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_owned()),
-            _ => None,
-        })
-        .collect()
+    each!(msgs, STATUSTEXT(t) => t.text.to_str().unwrap_or("").to_owned())
 }
 
 /// Ticks in 5 ms steps up to `until_us`, collecting everything.
@@ -152,12 +165,5 @@ pub(super) fn raw_command(message_id: u32, len: usize, command: u16, p: &[f32]) 
     }
     payload[28..30].copy_from_slice(&command.to_le_bytes());
     payload[30] = 1;
-    Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        5,
-        message_id,
-        &payload,
-    )
-    .unwrap()
+    from_gcs(5, message_id, &payload)
 }

@@ -36,14 +36,7 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     let mut payload = vec![0u8; 33];
     payload[28..30].copy_from_slice(&65000u16.to_le_bytes());
     payload[30] = 1;
-    let frame = Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        0,
-        vtol_link::protocol::id::COMMAND_LONG,
-        &payload,
-    )
-    .unwrap();
+    let frame = from_gcs(0, vtol_link::protocol::id::COMMAND_LONG, &payload);
     let out = ep.handle(GCS, &frame);
     assert_eq!(acks(&out), vec![(65000, commands::result::UNSUPPORTED)]);
     // A known but unimplemented command too.
@@ -58,14 +51,7 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     assert_eq!(acks(&out), vec![(183, commands::result::UNSUPPORTED)]);
     // Addressed to another system: no ACK at all.
     payload[30] = 42;
-    let frame = Frame::encode_payload_v2(
-        vtol_link::SystemId(GCS_SYSID),
-        vtol_link::ComponentId(GCS_COMPID),
-        0,
-        vtol_link::protocol::id::COMMAND_LONG,
-        &payload,
-    )
-    .unwrap();
+    let frame = from_gcs(0, vtol_link::protocol::id::COMMAND_LONG, &payload);
     assert!(acks(&ep.handle(GCS, &frame)).is_empty());
 }
 
