@@ -6,19 +6,10 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
+use walkdir::WalkDir;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn markdown_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
-        let path = entry.expect("directory entry").path();
-        if path.is_dir() {
-            markdown_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "md") {
-            out.push(path);
-        }
-    }
 }
 
 /// The lines of a document outside fenced code blocks, with their line numbers.
@@ -205,7 +196,12 @@ fn broken_links(file: &Path) -> Vec<String> {
 fn every_relative_link_and_anchor_resolves() {
     let root = root();
     let mut files = vec![root.join("README.md"), root.join("BENCHMARKS.md")];
-    markdown_files(&root.join("docs"), &mut files);
+    files.extend(
+        WalkDir::new(root.join("docs"))
+            .into_iter()
+            .map(|e| e.expect("directory entry").into_path())
+            .filter(|p| p.extension().is_some_and(|e| e == "md")),
+    );
     assert!(files.len() > 5, "the documents moved: {files:?}");
     let broken: Vec<String> = files.iter().flat_map(|f| broken_links(f)).collect();
     assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));

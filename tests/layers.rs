@@ -2,18 +2,9 @@
 //! tracker, the client, the terminal UI, the status line) share the `tap` and `trust` rooms with
 //! the router and never reach into the router itself.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
-        let path = entry.expect("directory entry").path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
+use walkdir::WalkDir;
 
 /// Every `crate::ROOM` and `vtol_gcs::ROOM` a file names, with its line number.
 fn rooms_named(text: &str) -> Vec<(usize, String)> {
@@ -42,7 +33,11 @@ fn consumers_of_frames_never_import_the_router() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
     for room in ["tracker", "client", "tui", "tap", "trust"] {
-        rust_files(&src.join(room), &mut files);
+        let walk = WalkDir::new(src.join(room)).into_iter();
+        files.extend(
+            walk.map(|e| e.expect("directory entry").into_path())
+                .filter(|p| p.extension().is_some_and(|e| e == "rs")),
+        );
     }
     files.push(src.join("status.rs"));
     assert!(files.len() > 10, "the rooms moved: {files:?}");

@@ -4,24 +4,18 @@
 
 use std::path::{Path, PathBuf};
 
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
-        let path = entry.expect("directory entry").path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
+use walkdir::WalkDir;
 
 /// Lines of the files under `layer` that name one of `forbidden`.
 fn violations(layer: &str, forbidden: &[&str]) -> Vec<String> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("src")
         .join(layer);
-    let mut files = Vec::new();
-    rust_files(&dir, &mut files);
+    let files: Vec<PathBuf> = WalkDir::new(&dir)
+        .into_iter()
+        .map(|e| e.expect("directory entry").into_path())
+        .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+        .collect();
     assert!(!files.is_empty(), "no layer {layer}");
     let mut found = Vec::new();
     for file in files {
