@@ -13,7 +13,7 @@ use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
-use vtol_link::{Frame, LinkId, LinkStatsSnapshot};
+use vtol_link::{Frame, FrameSource, LinkId, LinkStatsSnapshot};
 
 const VEHICLE_LINK: LinkId = LinkId(1);
 const OWN_LINK: LinkId = LinkId(2);
@@ -23,7 +23,7 @@ struct Recording {
     t0: Instant,
     state: VehicleState,
     history: History,
-    seq: u8,
+    vehicle: FrameSource,
 }
 
 impl Recording {
@@ -33,7 +33,7 @@ impl Recording {
             t0,
             state: VehicleState::new(t0),
             history: History::new(t0),
-            seq: 0,
+            vehicle: FrameSource::new(vtol_link::SystemId(1), vtol_link::ComponentId(1)),
         }
     }
 
@@ -42,13 +42,7 @@ impl Recording {
     }
 
     fn feed(&mut self, ms: u64, msg: &MavMessage) {
-        let frame = Frame::encode_v2(
-            vtol_link::SystemId(1),
-            vtol_link::ComponentId(1),
-            self.seq,
-            msg,
-        );
-        self.seq = self.seq.wrapping_add(1);
+        let frame = self.vehicle.encode_v2(msg);
         let now = self.at(ms);
         let decoded = self.state.apply(VEHICLE_LINK, Side::Vehicle, &frame, now);
         self.history.record(&frame, decoded.as_ref(), now);

@@ -19,7 +19,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega as apm;
-use vtol_link::{Frame, FrameDecoder};
+use vtol_link::{Frame, FrameDecoder, FrameSource};
 
 const BIN: &str = env!("CARGO_BIN_EXE_firmware-sim");
 const BOUND: Duration = Duration::from_secs(20);
@@ -74,7 +74,7 @@ fn started(mut child: Child, control: bool) -> Proc {
 struct Client {
     s: TcpStream,
     dec: FrameDecoder,
-    seq: u8,
+    out: FrameSource,
 }
 
 impl Client {
@@ -85,7 +85,7 @@ impl Client {
         Self {
             s,
             dec: FrameDecoder::new(),
-            seq: 0,
+            out: FrameSource::new(vtol_link::SystemId(255), vtol_link::ComponentId(190)),
         }
     }
 
@@ -112,13 +112,7 @@ impl Client {
     }
 
     fn send(&mut self, msg: &apm::MavMessage) {
-        let f = Frame::encode_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            self.seq,
-            msg,
-        );
-        self.seq = self.seq.wrapping_add(1);
+        let f = self.out.encode_v2(msg);
         self.s.write_all(f.as_bytes()).unwrap();
     }
 

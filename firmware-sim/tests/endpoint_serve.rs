@@ -12,7 +12,7 @@ use mavlink::types::CharArray;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{Frame, FrameDecoder};
+use vtol_link::{Frame, FrameDecoder, FrameSource};
 
 const BOUND: Duration = Duration::from_secs(10);
 
@@ -32,7 +32,7 @@ impl Drop for KillOnDrop {
 struct Gcs<S> {
     stream: S,
     decoder: FrameDecoder,
-    seq: u8,
+    out: FrameSource,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Gcs<S> {
@@ -40,18 +40,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Gcs<S> {
         Self {
             stream,
             decoder: FrameDecoder::new(),
-            seq: 0,
+            out: FrameSource::new(vtol_link::SystemId(255), vtol_link::ComponentId(190)),
         }
     }
 
     async fn send(&mut self, msg: &apm::MavMessage) {
-        let f = Frame::encode_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            self.seq,
-            msg,
-        );
-        self.seq = self.seq.wrapping_add(1);
+        let f = self.out.encode_v2(msg);
         self.stream.write_all(f.as_bytes()).await.unwrap();
     }
 

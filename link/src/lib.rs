@@ -28,8 +28,8 @@ pub use mavlink::dialects::ardupilotmega as dialect;
 
 pub use decoder::{DecodeStats, FrameDecoder};
 pub use frame::{
-    Frame, FrameError, RawCommand, RawCommandAck, RawCommandKind, frame_len_from_prefix,
-    gcs_heartbeat,
+    Frame, FrameError, FrameSource, RawCommand, RawCommandAck, RawCommandKind,
+    frame_len_from_prefix, gcs_heartbeat,
 };
 pub use ids::{ComponentId, SystemId};
 pub use signing::{

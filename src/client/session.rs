@@ -18,7 +18,7 @@ use std::time::Duration;
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
-use vtol_link::{ComponentId, Frame, LinkEvent, LinkId, LinkSender, SystemId};
+use vtol_link::{ComponentId, Frame, FrameSource, LinkEvent, LinkId, LinkSender, SystemId};
 
 use super::machine::Inbound;
 use crate::trust::signing::DaemonSigning;
@@ -141,14 +141,13 @@ impl Session {
         let mut hello_tick = tokio::time::interval(HELLO_EVERY);
         hello_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut links: HashMap<LinkId, LinkSender> = HashMap::new();
-        let mut seq: u8 = 0;
+        let mut source = FrameSource::new(me.0, me.1);
         let mut beat = tokio::time::interval(Duration::from_secs(1));
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut send = |links: &HashMap<LinkId, LinkSender>,
                         msg: &MavMessage,
                         signing: &mut Option<DaemonSigning>| {
-            let mut frame = Frame::encode_v2(me.0, me.1, seq, msg);
-            seq = seq.wrapping_add(1);
+            let mut frame = source.encode_v2(msg);
             if let Some(s) = signing {
                 match s.sign_own(&frame) {
                     Ok(f) => frame = f,

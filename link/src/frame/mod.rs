@@ -8,6 +8,7 @@
 
 mod command;
 mod dialect;
+mod source;
 #[cfg(test)]
 mod tests;
 
@@ -23,6 +24,7 @@ use crate::protocol::id;
 pub use command::{RawCommand, RawCommandAck, RawCommandKind, gcs_heartbeat};
 use dialect::dialect_table;
 pub use dialect::{crc_extra, frame_crc, frame_len_from_prefix, known_message_ids, message_name};
+pub use source::FrameSource;
 
 /// First byte of a MAVLink 1 frame.
 pub const MAGIC_V1: u8 = 0xFE;
