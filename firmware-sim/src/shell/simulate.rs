@@ -305,6 +305,39 @@ continuous time"
                 .into(),
         ));
     }
+    let control = params.value("CTRL_RATE_HZ");
+    let dt_us = check_rates(cfg, control)?;
+    check_start(cfg)?;
+    check_setpoint(cfg)?;
+    check_pushes(cfg)?;
+    let rc_us = offline_rc(cfg.mode);
+    let vc = VehicleConfig {
+        rc_us,
+        position_setpoint_m: Some(
+            cfg.setpoint_m
+                .unwrap_or_else(|| Vector3::new(0.0, 0.0, params.value("HOVER_ALT"))),
+        ),
+        model: cfg.model,
+        ideal_sensors: cfg.ideal_sensors,
+        perfect_state: cfg.ideal_sensors,
+        seed: cfg.seed,
+        physics_dt_us: dt_us.round() as u64,
+        initial: InitialState {
+            pos_m: cfg.initial.pos_m,
+            euler: cfg.initial.euler,
+        },
+        mode: cfg.mode,
+        armed: true,
+        gains: params.gains(),
+        control_rate_hz: control,
+        ..VehicleConfig::default()
+    };
+    Ok((vc, params))
+}
+
+/// The physics step, whole µs, after checking the physics rate, that the control rate `control`
+/// divides it (physical model) and the output rate.
+fn check_rates(cfg: &SimulateConfig, control: f64) -> Result<f64, SimulateError> {
     // Physics step: whole microseconds, a whole number of steps per control period.
     let physics = cfg.physics_rate_hz;
     let dt_us = 1e6 / physics;
@@ -313,7 +346,6 @@ continuous time"
             "--physics-rate {physics} must be in [1000, 10000] Hz with a whole number of µs per step"
         )));
     }
-    let control = params.value("CTRL_RATE_HZ");
     let per_tick = physics / control;
     if cfg.model == ModelMode::Physical && (per_tick - per_tick.round()).abs() > 1e-9 {
         return Err(bad(format!(
@@ -325,7 +357,11 @@ continuous time"
             "--rate must be in (0, {physics}] rows/s (the physics rate)"
         )));
     }
-    // Start state.
+    Ok(dt_us)
+}
+
+/// Checks the start state: z up from the ground, level on it, and not past the crash tilt.
+fn check_start(cfg: &SimulateConfig) -> Result<(), SimulateError> {
     let init = &cfg.initial;
     let tilt = (init.euler.theta.cos() * init.euler.phi.cos()).acos();
     if init.pos_m.z < 0.0 {
@@ -344,7 +380,11 @@ continuous time"
             "--initial tilt {tilt:.3} rad is beyond the crash tilt {CRASH_TILT_RAD:.3} rad"
         )));
     }
-    // Setpoint: QLOITER's, inside the vehicle's limits.
+    Ok(())
+}
+
+/// Checks the setpoint: QLOITER's, inside the vehicle's limits.
+fn check_setpoint(cfg: &SimulateConfig) -> Result<(), SimulateError> {
     if let Some(sp) = cfg.setpoint_m {
         if cfg.mode != FlightMode::QLoiter {
             return Err(bad(format!(
@@ -367,7 +407,11 @@ continuous time"
             )));
         }
     }
-    // Pushes: inside the flight, within SIM_PUSH_*'s ranges.
+    Ok(())
+}
+
+/// Checks the pushes: inside the flight, within SIM_PUSH_*'s ranges.
+fn check_pushes(cfg: &SimulateConfig) -> Result<(), SimulateError> {
     let torque_def = &crate::nav::params::TABLE[Params::index_of("SIM_PUSH_ROLL").unwrap_or(0)];
     let ms_def = &crate::nav::params::TABLE[Params::index_of("SIM_PUSH_MS").unwrap_or(0)];
     for p in &cfg.pushes {
@@ -390,38 +434,21 @@ continuous time"
             )));
         }
     }
-    // No pilot offline: in QSTABILIZE the sticks are centred and the throttle at hover, as a
-    // pilot holding the vehicle in the paper's hover experiments would.
+    Ok(())
+}
+
+/// The RC input of an offline flight, µs. No pilot offline: in QSTABILIZE the sticks are
+/// centred and the throttle at hover, as a pilot holding the vehicle in the paper's hover
+/// experiments would; in other modes no RC at all.
+fn offline_rc(mode: FlightMode) -> [u16; 8] {
     let af = crate::model::airframe::Airframe::default();
     let fz_max = 2.0 * af.k_thrust_n_per_rad2_s2 * af.rotor_speed_max_rad_s.powi(2);
     let throttle_us = (1000.0 + 1000.0 * af.weight_n() / fz_max).round() as u16;
-    let rc_us = if cfg.mode == FlightMode::QStabilize {
+    if mode == FlightMode::QStabilize {
         [1500, 1500, throttle_us, 1500, 0, 0, 0, 0]
     } else {
         [0; 8]
-    };
-    let vc = VehicleConfig {
-        rc_us,
-        position_setpoint_m: Some(
-            cfg.setpoint_m
-                .unwrap_or_else(|| Vector3::new(0.0, 0.0, params.value("HOVER_ALT"))),
-        ),
-        model: cfg.model,
-        ideal_sensors: cfg.ideal_sensors,
-        perfect_state: cfg.ideal_sensors,
-        seed: cfg.seed,
-        physics_dt_us: dt_us.round() as u64,
-        initial: InitialState {
-            pos_m: init.pos_m,
-            euler: init.euler,
-        },
-        mode: cfg.mode,
-        armed: true,
-        gains: params.gains(),
-        control_rate_hz: control,
-        ..VehicleConfig::default()
-    };
-    Ok((vc, params))
+    }
 }
 
 /// Writes one CSV row of `t`.
