@@ -16,6 +16,15 @@ use super::{Events, LinkError, LinkEvent, LinkEventHandler, LinkId, LinkStats, s
 use crate::decoder::FrameDecoder;
 use crate::frame::Frame;
 use crate::transport::SocketEndpoint;
+use crate::url::LinkUrl;
+
+/// The sockets of a udpout link: the one it sends from, its local address, and for a connected
+/// socket the second one that hears other senders, with the connection they share.
+type Sockets = (
+    Arc<UdpSocket>,
+    SocketAddr,
+    Option<(tokio::net::UdpSocket, Arc<Connection>)>,
+);
 
 /// Binds an ephemeral socket for udpout and starts its single link.
 pub(crate) fn spawn_udpout(
@@ -23,43 +32,9 @@ pub(crate) fn spawn_udpout(
 ) -> Result<(SocketAddr, LinkId, JoinHandle<()>), LinkError> {
     let url = at.url;
     let dest = at.addrs[0];
-    // A loopback destination is answered from loopback: the socket binds there, as listeners
-    // bind 127.0.0.1, instead of on every interface.
-    let any: SocketAddr = match (dest.ip().is_loopback(), dest.is_ipv4()) {
-        (true, _) => (dest.ip(), 0).into(),
-        (false, true) => (Ipv4Addr::UNSPECIFIED, 0).into(),
-        (false, false) => (Ipv6Addr::UNSPECIFIED, 0).into(),
-    };
-    // An inline owner's socket is connected, with a second one for the other senders (whose
-    // reader is a task: it calls the owner from the runtime, which a queue owner's handler
-    // must not be called from).
-    let pair = match &at.events {
-        Events::Inline(_) => connected_pair(any, dest)
-            .inspect_err(|e| tracing::debug!(%url, "udpout unconnected: {e}"))
-            .ok(),
-        Events::Queue(_) => None,
-    };
+    let inline = matches!(at.events, Events::Inline(_));
+    let (sock, local, strays) = open_sockets(url, dest, inline)?;
     let handler = handler(at.events, &at.cancel);
-    let (sock, local, strays) = match pair {
-        Some((main, local, strays)) => {
-            let strays =
-                tokio::net::UdpSocket::from_std(strays).map_err(|source| LinkError::Io {
-                    url: url.to_string(),
-                    source,
-                })?;
-            let connection = Arc::new(Connection {
-                dest,
-                on: AtomicBool::new(true),
-                change: std::sync::Mutex::new(()),
-            });
-            (Arc::new(main), local, Some((strays, connection)))
-        }
-        None => {
-            let sock = bind(url, &[any])?;
-            let local = local_addr(url, &sock)?;
-            (sock, local, None)
-        }
-    };
     let connection = strays.as_ref().map(|(_, c)| Arc::clone(c));
     let id = LinkId::next();
     tracing::info!(%url, %local, %id, connected = connection.is_some(), "udpout sending to {dest}");
@@ -91,39 +66,92 @@ pub(crate) fn spawn_udpout(
         cancel,
     };
     let runtime = tokio::runtime::Handle::current();
-    let task = tokio::task::spawn_blocking(move || {
-        let reason = if handler.event(up) {
-            let strays = strays.map(|(sock, connection)| {
-                let stop = link.cancel.child_token();
-                let task = runtime.spawn(udpout_strays(
-                    Strays {
-                        sock,
-                        connection,
-                        main: Arc::clone(&link.sock),
-                        alarm: link.wake.alarm,
-                        id,
-                        stats: Arc::clone(&link.stats),
-                        handler: Arc::clone(&handler),
-                    },
-                    stop.clone(),
-                ));
-                (stop, task)
-            });
-            let reason = udpout_blocking(&link, &*handler);
-            // No frame after the link's end.
-            if let Some((stop, task)) = strays {
-                stop.cancel();
-                let _ = runtime.block_on(task);
-            }
-            reason
-        } else {
-            "shutdown".to_string()
-        };
-        link.writer_cancel.cancel();
-        let _ = runtime.block_on(link.writer);
-        handler.event(LinkEvent::Down { id, reason });
-    });
+    let task =
+        tokio::task::spawn_blocking(move || run_udpout(link, up, strays, &handler, &runtime));
     Ok((local, id, task))
+}
+
+/// Opens the sockets of a udpout link to `dest`. A loopback destination is answered from
+/// loopback: the socket binds there, as listeners bind 127.0.0.1, instead of on every interface.
+/// An `inline` owner's socket is connected, with a second one for the other senders (whose
+/// reader is a task: it calls the owner from the runtime, which a queue owner's handler must not
+/// be called from); if connecting fails, or for a queue owner, one unconnected socket.
+fn open_sockets(url: &LinkUrl, dest: SocketAddr, inline: bool) -> Result<Sockets, LinkError> {
+    let any: SocketAddr = match (dest.ip().is_loopback(), dest.is_ipv4()) {
+        (true, _) => (dest.ip(), 0).into(),
+        (false, true) => (Ipv4Addr::UNSPECIFIED, 0).into(),
+        (false, false) => (Ipv6Addr::UNSPECIFIED, 0).into(),
+    };
+    let pair = if inline {
+        connected_pair(any, dest)
+            .inspect_err(|e| tracing::debug!(%url, "udpout unconnected: {e}"))
+            .ok()
+    } else {
+        None
+    };
+    Ok(match pair {
+        Some((main, local, strays)) => {
+            let strays =
+                tokio::net::UdpSocket::from_std(strays).map_err(|source| LinkError::Io {
+                    url: url.to_string(),
+                    source,
+                })?;
+            let connection = Arc::new(Connection {
+                dest,
+                on: AtomicBool::new(true),
+                change: std::sync::Mutex::new(()),
+            });
+            (Arc::new(main), local, Some((strays, connection)))
+        }
+        None => {
+            let sock = bind(url, &[any])?;
+            let local = local_addr(url, &sock)?;
+            (sock, local, None)
+        }
+    })
+}
+
+/// The link's thread: announces it, reads until it ends (with the strays' reader beside it on
+/// the runtime, stopped first: no frame after the link's end), then stops its writer and says
+/// it is down.
+fn run_udpout(
+    link: UdpOut,
+    up: LinkEvent,
+    strays: Option<(tokio::net::UdpSocket, Arc<Connection>)>,
+    handler: &Arc<dyn LinkEventHandler>,
+    runtime: &tokio::runtime::Handle,
+) {
+    let id = link.id;
+    let reason = if handler.event(up) {
+        let strays = strays.map(|(sock, connection)| {
+            let stop = link.cancel.child_token();
+            let task = runtime.spawn(udpout_strays(
+                Strays {
+                    sock,
+                    connection,
+                    main: Arc::clone(&link.sock),
+                    alarm: link.wake.alarm,
+                    id,
+                    stats: Arc::clone(&link.stats),
+                    handler: Arc::clone(handler),
+                },
+                stop.clone(),
+            ));
+            (stop, task)
+        });
+        let reason = udpout_blocking(&link, &**handler);
+        // No frame after the link's end.
+        if let Some((stop, task)) = strays {
+            stop.cancel();
+            let _ = runtime.block_on(task);
+        }
+        reason
+    } else {
+        "shutdown".to_string()
+    };
+    link.writer_cancel.cancel();
+    let _ = runtime.block_on(link.writer);
+    handler.event(LinkEvent::Down { id, reason });
 }
 
 /// A udpout link: its socket, counters and writer.
