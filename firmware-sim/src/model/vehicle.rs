@@ -274,11 +274,38 @@ impl Vehicle {
 
     /// Advances the twin by one physics step ([`PHYSICS_DT_S`] by default).
     pub fn step(&mut self) {
+        self.hold_inputs();
         let af = &self.config.airframe;
         let model = self.config.model;
         let dt = self.dt_s;
 
-        // Actuators: hold the controller's outputs between control ticks.
+        if self.on_ground {
+            let trig = EulerTrig::new(&self.plant.euler);
+            let loads = plant::loads(af, model, &trig, &self.plant, &self.input);
+            let vertical = (trig.rotation_body_to_inertial() * loads.force_body_n).z;
+            if ground::lifts_off(vertical, af.weight_n()) {
+                self.on_ground = false;
+            }
+        }
+        if !self.on_ground {
+            self.fly(dt);
+        }
+        self.landed_bookkeeping(dt);
+
+        self.steps += 1;
+        self.telemetry.t_us += self.dt_us;
+        self.refresh_truth();
+        if self.steps.is_multiple_of(self.control_every_steps) {
+            self.control_tick();
+        }
+    }
+
+    /// The plant's inputs for this step. Actuators: hold the controller's outputs between
+    /// control ticks; the paper's thrust, a push's torque, the wind's step and (physical model)
+    /// the airframe's aerodynamics.
+    fn hold_inputs(&mut self) {
+        let af = &self.config.airframe;
+        let model = self.config.model;
         match model {
             ModelMode::Physical => self.actuators.step(af, &self.telemetry.pwm_us),
             ModelMode::Paper => {
@@ -307,82 +334,80 @@ impl Vehicle {
             let v_air = self.air_velocity_body_m_s();
             self.input.aero = aero::loads(af, &v_air, &self.input.actuators.rotor_speed_rad_s);
         }
+    }
 
-        if self.on_ground {
-            let trig = EulerTrig::new(&self.plant.euler);
-            let loads = plant::loads(af, model, &trig, &self.plant, &self.input);
-            let vertical = (trig.rotation_body_to_inertial() * loads.force_body_n).z;
-            if ground::lifts_off(vertical, af.weight_n()) {
-                self.on_ground = false;
-            }
-        }
-        if !self.on_ground {
-            let input = self.input;
-            let start = self.plant.euler;
-            let start_trig = self.plant_trig;
-            // `paper`: the controller is part of the vector field. The first stage is the
-            // step's start, where the last tick already evaluated it on the same state. The
-            // sampled path keeps its own closure: copying the input per stage costs ~10 %.
-            if model == ModelMode::Paper && self.telemetry.armed {
-                let (controller, gains) = (&self.controller, &self.config.gains);
-                let template = self.last_control_input;
-                let mut first_stage = true;
-                self.plant = rk4_step(&self.plant, dt, |s| {
-                    let trig = start_trig.shifted(&start, &s.euler);
-                    let mut u = input;
-                    if !first_stage {
-                        let ci = ControlInput {
-                            euler: s.euler,
-                            omega_body_rad_s: s.omega_body_rad_s,
-                            pos_m: s.pos_m,
-                            vel_m_s: trig.rotate_body_to_inertial(&s.vel_body_m_s),
-                            ..template
-                        };
-                        // A copy: the stages are trial points, only the tick updates the state.
-                        let out = controller.clone().update(&ci, gains);
-                        u.actuators = out.actuators;
-                        u.fx_paper_n = out.fx_n;
-                    }
-                    first_stage = false;
-                    plant::derivative_with_trig(af, model, s, &u, &trig)
-                });
-            } else {
-                // The input is held over the step: its loads are computed once.
-                let held = plant::HeldLoads::new(af, model, &input);
-                let body = &self.body;
-                let mut first_stage = true;
-                self.plant = rk4_step(&self.plant, dt, |s| {
-                    // The first stage is the step's start, whose trig is known.
-                    let trig = if first_stage {
-                        first_stage = false;
-                        start_trig
-                    } else {
-                        start_trig.shifted(&start, &s.euler)
+    /// One step in the air: the plant integrated over `dt`, then touchdown (a crash if too hard
+    /// or tilted) or a crash by tilt.
+    fn fly(&mut self, dt: f64) {
+        let af = &self.config.airframe;
+        let model = self.config.model;
+        let input = self.input;
+        let start = self.plant.euler;
+        let start_trig = self.plant_trig;
+        // `paper`: the controller is part of the vector field. The first stage is the
+        // step's start, where the last tick already evaluated it on the same state. The
+        // sampled path keeps its own closure: copying the input per stage costs ~10 %.
+        if model == ModelMode::Paper && self.telemetry.armed {
+            let (controller, gains) = (&self.controller, &self.config.gains);
+            let template = self.last_control_input;
+            let mut first_stage = true;
+            self.plant = rk4_step(&self.plant, dt, |s| {
+                let trig = start_trig.shifted(&start, &s.euler);
+                let mut u = input;
+                if !first_stage {
+                    let ci = ControlInput {
+                        euler: s.euler,
+                        omega_body_rad_s: s.omega_body_rad_s,
+                        pos_m: s.pos_m,
+                        vel_m_s: trig.rotate_body_to_inertial(&s.vel_body_m_s),
+                        ..template
                     };
-                    plant::derivative_held(af, body, s, &held, &trig)
-                });
-            }
-            let touchdown = ground::touchdown(&mut self.plant);
-            // The step moves the angles by a few mrad, so the next step's trig comes from this
-            // one by angle addition; it is recomputed exactly once per control period so
-            // rounding never accumulates, and after a touchdown (which may reset the attitude).
-            self.plant_trig =
-                if touchdown.is_some() || self.steps.is_multiple_of(self.control_every_steps) {
-                    EulerTrig::new(&self.plant.euler)
-                } else {
-                    start_trig.shifted(&start, &self.plant.euler)
-                };
-            if let Some(td) = touchdown {
-                self.on_ground = true;
-                if td.sink_rate_m_s > CRASH_SINK_RATE_M_S || td.tilt_rad > CRASH_TILT_RAD {
-                    self.crash();
+                    // A copy: the stages are trial points, only the tick updates the state.
+                    let out = controller.clone().update(&ci, gains);
+                    u.actuators = out.actuators;
+                    u.fx_paper_n = out.fx_n;
                 }
-            } else if self.plant_trig.cos_tilt() < CRASH_COS_TILT {
+                first_stage = false;
+                plant::derivative_with_trig(af, model, s, &u, &trig)
+            });
+        } else {
+            // The input is held over the step: its loads are computed once.
+            let held = plant::HeldLoads::new(af, model, &input);
+            let body = &self.body;
+            let mut first_stage = true;
+            self.plant = rk4_step(&self.plant, dt, |s| {
+                // The first stage is the step's start, whose trig is known.
+                let trig = if first_stage {
+                    first_stage = false;
+                    start_trig
+                } else {
+                    start_trig.shifted(&start, &s.euler)
+                };
+                plant::derivative_held(af, body, s, &held, &trig)
+            });
+        }
+        let touchdown = ground::touchdown(&mut self.plant);
+        // The step moves the angles by a few mrad, so the next step's trig comes from this
+        // one by angle addition; it is recomputed exactly once per control period so
+        // rounding never accumulates, and after a touchdown (which may reset the attitude).
+        self.plant_trig =
+            if touchdown.is_some() || self.steps.is_multiple_of(self.control_every_steps) {
+                EulerTrig::new(&self.plant.euler)
+            } else {
+                start_trig.shifted(&start, &self.plant.euler)
+            };
+        if let Some(td) = touchdown {
+            self.on_ground = true;
+            if td.sink_rate_m_s > CRASH_SINK_RATE_M_S || td.tilt_rad > CRASH_TILT_RAD {
                 self.crash();
             }
+        } else if self.plant_trig.cos_tilt() < CRASH_COS_TILT {
+            self.crash();
         }
+    }
 
-        // Landed bookkeeping and the automatic disarm of QLAND's law.
+    /// Landed bookkeeping and the automatic disarm of QLAND's law.
+    fn landed_bookkeeping(&mut self, dt: f64) {
         if self.on_ground {
             self.landed_time_s += dt;
             if self.telemetry.armed
@@ -393,13 +418,6 @@ impl Vehicle {
             }
         } else {
             self.landed_time_s = 0.0;
-        }
-
-        self.steps += 1;
-        self.telemetry.t_us += self.dt_us;
-        self.refresh_truth();
-        if self.steps.is_multiple_of(self.control_every_steps) {
-            self.control_tick();
         }
     }
 
