@@ -462,43 +462,10 @@ impl Vehicle {
             self.estimator.update(&imu, Some(&fix.pos_m), heading);
         }
 
-        let truth_vel = self.telemetry.vel_m_s;
         // The law flown this tick: the mode's own, or the autonomous modes' guidance (None:
         // armed and idle on the ground).
         let law = self.law();
-        let truth = model == ModelMode::Paper || self.config.perfect_state;
-        let input = if truth {
-            ControlInput {
-                dt_s: self.control_dt_s,
-                mode: law.unwrap_or(FlightMode::QStabilize),
-                euler: self.plant.euler,
-                omega_body_rad_s: self.plant.omega_body_rad_s,
-                pos_m: self.plant.pos_m,
-                vel_m_s: truth_vel,
-                setpoint_m: self.setpoint_m,
-                yaw_setpoint_rad: 0.0,
-                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
-                pilot,
-            }
-        } else {
-            ControlInput {
-                dt_s: self.control_dt_s,
-                mode: law.unwrap_or(FlightMode::QStabilize),
-                euler: Euler {
-                    psi: crate::model::frames::wrap_pi(
-                        self.estimator.euler().psi + self.chain_heading_error_rad,
-                    ),
-                    ..self.estimator.euler()
-                },
-                omega_body_rad_s: self.estimator.omega_rad_s(),
-                pos_m: fix.pos_m,
-                vel_m_s: fix.vel_m_s,
-                setpoint_m: self.setpoint_m,
-                yaw_setpoint_rad: 0.0,
-                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
-                pilot,
-            }
-        };
+        let input = self.control_input(law.unwrap_or(FlightMode::QStabilize), pilot, &fix);
         self.last_control_input = input;
 
         let out = if self.telemetry.armed && law.is_some() {
@@ -516,6 +483,66 @@ impl Vehicle {
         self.telemetry.adc_counts = imu.adc_counts;
         self.telemetry.euler_est = input.euler;
         self.telemetry.omega_est_rad_s = input.omega_body_rad_s;
+        self.step_battery();
+        if self.telemetry.armed && self.telemetry.state != SystemState::Emergency {
+            // Failsafe: flying on pilot throttle with no receiver signal.
+            let rc_lost = !sensors::rc_has_signal(&rc);
+            self.telemetry.state = if rc_lost && self.telemetry.mode == FlightMode::QStabilize {
+                SystemState::Critical
+            } else {
+                SystemState::Active
+            };
+        }
+    }
+
+    /// What the controller flies `mode` on this tick: the true state (paper model, or perfect
+    /// state), or the estimator's attitude and rates with the position fix.
+    fn control_input(
+        &self,
+        mode: FlightMode,
+        pilot: PilotInput,
+        fix: &sensors::PositionFix,
+    ) -> ControlInput {
+        let truth_vel = self.telemetry.vel_m_s;
+        let truth = self.config.model == ModelMode::Paper || self.config.perfect_state;
+        if truth {
+            ControlInput {
+                dt_s: self.control_dt_s,
+                mode,
+                euler: self.plant.euler,
+                omega_body_rad_s: self.plant.omega_body_rad_s,
+                pos_m: self.plant.pos_m,
+                vel_m_s: truth_vel,
+                setpoint_m: self.setpoint_m,
+                yaw_setpoint_rad: 0.0,
+                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
+                pilot,
+            }
+        } else {
+            ControlInput {
+                dt_s: self.control_dt_s,
+                mode,
+                euler: Euler {
+                    psi: crate::model::frames::wrap_pi(
+                        self.estimator.euler().psi + self.chain_heading_error_rad,
+                    ),
+                    ..self.estimator.euler()
+                },
+                omega_body_rad_s: self.estimator.omega_rad_s(),
+                pos_m: fix.pos_m,
+                vel_m_s: fix.vel_m_s,
+                setpoint_m: self.setpoint_m,
+                yaw_setpoint_rad: 0.0,
+                rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
+                pilot,
+            }
+        }
+    }
+
+    /// The battery's integration over the control ticks since its last step, once per
+    /// [`BATTERY_PERIOD_S`]; the motors' supply follows its voltage.
+    fn step_battery(&mut self) {
+        let af = &self.config.airframe;
         self.battery_pending_s += self.control_dt_s;
         if self.battery_pending_s >= BATTERY_PERIOD_S - 1e-9 {
             self.battery.step(
@@ -527,15 +554,6 @@ impl Vehicle {
             self.battery_pending_s = 0.0;
             self.telemetry.battery = *self.battery.state();
             self.actuators.set_supply(self.battery.supply_ratio());
-        }
-        if self.telemetry.armed && self.telemetry.state != SystemState::Emergency {
-            // Failsafe: flying on pilot throttle with no receiver signal.
-            let rc_lost = !sensors::rc_has_signal(&rc);
-            self.telemetry.state = if rc_lost && self.telemetry.mode == FlightMode::QStabilize {
-                SystemState::Critical
-            } else {
-                SystemState::Active
-            };
         }
     }
 
