@@ -236,6 +236,7 @@ impl FileConfig {
     ///
     /// # Errors
     /// [`ConfigError::Value`] for a bad URL or number.
+    // Long: one `if let` per key of the file, applied in the order the file documents them.
     pub fn apply(self, config: &mut Config) -> Result<(), ConfigError> {
         if let Some(v) = self.vehicle {
             config.vehicle = v.parse().map_err(|e| ConfigError::Value {

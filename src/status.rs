@@ -13,6 +13,8 @@ use crate::trust::signing::SigningSnapshot;
 use crate::tui::vitals::{Severity, Vitals, vitals};
 
 /// Formats the status line for the first vehicle (or says none is heard yet).
+// Long: the status line's segments appended in the order the line shows them (vehicle, reboots,
+// parameters, vehicle links, clients, tlog); one pass over one string.
 #[must_use]
 pub fn line(
     state: &VehicleState,

@@ -121,6 +121,8 @@ pub fn hello() -> MavMessage {
 
 impl Session {
     /// Runs the session until `cancel` fires or every sender is gone.
+    // Long: one `select!` over the session's event sources (links, outgoing messages, the hello and
+    // heartbeat ticks) sharing its send closure and link table.
     pub(crate) async fn run(
         self,
         mut links_rx: mpsc::Receiver<LinkEvent>,

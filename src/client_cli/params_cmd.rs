@@ -73,6 +73,8 @@ enum ParamsCommand {
 }
 
 /// `params ...`.
+// Long: one arm per `params` subcommand, each a few client calls and its output, inside the
+// one client session they share.
 pub fn params(args: ParamsArgs) -> ExitCode {
     // Files are read before any link is opened: a bad file sends nothing.
     let wanted = match &args.command {

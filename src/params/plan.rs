@@ -282,6 +282,9 @@ impl Transaction {
     }
 
     /// The next step.
+    // Long: the transactional upload's state machine, one arm per phase (apply, verify, roll back,
+    // inspect), each saying what follows it; kept in one match so every transition is seen
+    // together.
     pub fn next_step(&mut self) -> Step {
         loop {
             match self.phase {

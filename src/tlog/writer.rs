@@ -258,6 +258,8 @@ impl Drop for TlogHandle {
 /// records, and counted as lost; the error is logged once per failure streak and shown through
 /// [`TlogStats::failing`]. The next batch is tried as usual, so logging resumes as soon as the
 /// disk has room again. Routing never waits for any of this.
+// Long: the writer thread's one loop (wait, take a batch, write it or cut a failed one back,
+// report); its state (the failure streak, the last good length) lives across all of it.
 pub(super) fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats) {
     let mut out = writer.into_file();
     let mut batch: Vec<u8> = Vec::new();

@@ -188,6 +188,8 @@ pub enum PolicyError {
 impl FromStr for ServeSpec {
     type Err = PolicyError;
 
+    // Long: parses the URL and each query key, then checks the combinations (trust, rate, burst),
+    // each with its own one-line error.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
         let (base, query) = match s.split_once('?') {

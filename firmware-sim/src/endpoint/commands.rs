@@ -204,6 +204,8 @@ impl Endpoint {
 
     /// Runs a command. Messages that must follow the ACK go to `after` (ArduPilot ACKs a
     /// REQUEST_MESSAGE first and sends the message after).
+    // Long: one arm per MAV_CMD the twin answers, most a line or two that call the command's own
+    // handler; the dispatch table reads best in one place.
     fn execute(&mut self, link: LinkKey, c: &Command, after: &mut Vec<apm::MavMessage>) -> u8 {
         let p = c.params;
         match c.command {

@@ -209,6 +209,8 @@ impl Endpoint {
         true
     }
 
+    // Long: the MISSION_ITEM(_INT) rules of the upload protocol in the order ArduPilot applies them
+    // (type, guided waypoint, partner, sequence, item check, completion), each ending the handling.
     fn on_mission_item(&mut self, link: LinkKey, frame: &Frame, r: &RawItem) {
         use apm::MavMissionResult as R;
         let from = (frame.system_id(), frame.component_id());

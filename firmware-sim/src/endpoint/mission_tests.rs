@@ -453,6 +453,8 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
 }
 
 /// Arm in GUIDED, take off, reposition (a refused one too), fly the mission in AUTO, land.
+// Long: one flight told in order (arm, take off, reposition, a refusal, AUTO, land); each step
+// starts from where the previous one left the vehicle.
 #[test]
 fn guided_take_off_reposition_and_auto_mission() {
     let mut ep = endpoint();

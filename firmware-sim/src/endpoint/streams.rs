@@ -377,6 +377,8 @@ fn sensors() -> apm::MavSysStatusSensor {
 }
 
 /// Builds a streamable telemetry message (not HEARTBEAT, which needs endpoint state).
+// Long: one arm per streamed message, each the message's fields from the telemetry; a table
+// read top to bottom, which split would only scatter.
 #[must_use]
 pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMessage> {
     use apm::MavMessage as M;

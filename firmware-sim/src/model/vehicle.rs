@@ -183,6 +183,8 @@ impl Vehicle {
     /// A vehicle at rest at `config.initial`. With `initial.pos_m.z ≤ 0` it stands on the
     /// ground (level, at z = 0). A vehicle configured `armed` starts calibrated and, if it
     /// starts in the air, with its rotors at hover speed (it was launched from a hover).
+    // Long: most of it is the one struct literal of the vehicle's state; the rest picks its start
+    // (on the ground or in the air, calibrated or not, armed or not).
     #[must_use]
     pub fn new(config: VehicleConfig) -> Self {
         let af = &config.airframe;

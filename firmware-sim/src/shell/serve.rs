@@ -346,6 +346,8 @@ impl Twin {
 
     /// [`Twin::start`] for a member of a fleet, which also hears the fleet's shared endpoints:
     /// `shared_local` are the links among them that are local (serial).
+    // Long: the twin's start-up in order (clock, control port, tlog, signing, harness, listeners,
+    // shell task), each step's result feeding the shell built at the end.
     pub(crate) async fn start_member(
         mut config: ServeConfig,
         cancel: CancellationToken,
