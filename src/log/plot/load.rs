@@ -7,6 +7,7 @@ use vtol_link::protocol::CONTROLLER_OUTPUT_NAMES;
 
 use super::{Altitude, AltitudeRef, FlightData, Points};
 use crate::log::{LogError, finish_read, open_tlog};
+use crate::tracker::state::servo_outputs;
 
 /// Reads a tlog or a `firmware-sim simulate` CSV (recognised by its `t,` header).
 ///
@@ -152,14 +153,8 @@ impl Scan {
                 }
             }
             M::SERVO_OUTPUT_RAW(s) => {
-                let raw = [
-                    s.servo1_raw,
-                    s.servo2_raw,
-                    s.servo3_raw,
-                    s.servo4_raw,
-                    s.servo5_raw,
-                ];
-                for (p, v) in self.pwm.iter_mut().zip(raw) {
+                // The first five outputs: zip stops at the five series.
+                for (p, v) in self.pwm.iter_mut().zip(servo_outputs(&s)) {
                     p.push((t, f64::from(v)));
                 }
             }
