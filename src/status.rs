@@ -254,33 +254,24 @@ mod tests {
         })
     }
 
+    /// Applies a heartbeat of system `sys` on vehicle link 1 at `at`.
+    fn apply_heartbeat(s: &mut VehicleState, sys: u8, armed: bool, at: Instant) {
+        let f = Frame::encode_v2(
+            SystemId(sys),
+            vtol_link::ComponentId(1),
+            0,
+            &heartbeat(armed),
+        );
+        s.apply(LinkId(1), Side::Vehicle, &f, at);
+    }
+
     #[test]
     fn fleet_part_lists_vehicles_and_conflicts() {
         let t0 = Instant::now();
         let mut s = VehicleState::new(t0);
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(
-                vtol_link::SystemId(1),
-                vtol_link::ComponentId(1),
-                0,
-                &heartbeat(false),
-            ),
-            t0,
-        );
+        apply_heartbeat(&mut s, 1, false, t0);
         assert_eq!(fleet_part(&s, &[], t0), "", "one vehicle: nothing to add");
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(
-                vtol_link::SystemId(2),
-                vtol_link::ComponentId(1),
-                0,
-                &heartbeat(true),
-            ),
-            t0 + Duration::from_secs(6),
-        );
+        apply_heartbeat(&mut s, 2, true, t0 + Duration::from_secs(6));
         let conflict = SysidConflict {
             system: SystemId(2),
             owner: LinkId(1),
