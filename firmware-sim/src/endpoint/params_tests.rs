@@ -2,6 +2,19 @@
 
 use super::test_support::*;
 
+/// What the twin answers a PARAM_SET of `name` to `value` from the ground station.
+fn set(ep: &mut Endpoint, name: &str, value: f32) -> Vec<apm::MavMessage> {
+    decode(&ep.handle(GCS, &v2(&param_set(name, value))))
+}
+
+/// The one PARAM_VALUE among `msgs`.
+fn the_echo(msgs: &[apm::MavMessage]) -> apm::PARAM_VALUE_DATA {
+    let [echo] = &param_values(msgs)[..] else {
+        panic!("one echo: {msgs:?}")
+    };
+    echo.clone()
+}
+
 #[test]
 fn param_list_is_complete_and_paced() {
     let mut ep = endpoint();
@@ -31,10 +44,8 @@ fn param_list_is_complete_and_paced() {
 #[test]
 fn param_set_echoes_stored_value_type_and_index() {
     let mut ep = endpoint();
-    let msgs = decode(&ep.handle(GCS, &v2(&param_set("LAT_SAT_A", 1.5))));
-    let [echo] = &param_values(&msgs)[..] else {
-        panic!("one echo: {msgs:?}")
-    };
+    let msgs = set(&mut ep, "LAT_SAT_A", 1.5);
+    let echo = the_echo(&msgs);
     assert_eq!(echo.param_id.to_str().unwrap(), "LAT_SAT_A");
     assert_eq!(echo.param_value, 1.5);
     assert_eq!(echo.param_type, apm::MavParamType::MAV_PARAM_TYPE_REAL32);
@@ -50,10 +61,8 @@ fn param_set_echoes_stored_value_type_and_index() {
     );
 
     // An integer parameter sent as REAL32 (pymavlink's default) is C-cast and echoed as INT16.
-    let msgs = decode(&ep.handle(GCS, &v2(&param_set("SR0_EXTRA1", 4.6))));
-    let [echo] = &param_values(&msgs)[..] else {
-        panic!()
-    };
+    let msgs = set(&mut ep, "SR0_EXTRA1", 4.6);
+    let echo = the_echo(&msgs);
     assert_eq!(
         (echo.param_value, echo.param_type),
         (5.0, apm::MavParamType::MAV_PARAM_TYPE_INT16)
@@ -64,10 +73,8 @@ fn param_set_echoes_stored_value_type_and_index() {
 fn refused_param_write_keeps_value_and_says_why() {
     let mut ep = endpoint();
     // a = 0.9 breaks a > b + c + d (= 1.0).
-    let msgs = decode(&ep.handle(GCS, &v2(&param_set("LAT_SAT_A", 0.9))));
-    let [echo] = &param_values(&msgs)[..] else {
-        panic!("{msgs:?}")
-    };
+    let msgs = set(&mut ep, "LAT_SAT_A", 0.9);
+    let echo = the_echo(&msgs);
     assert_eq!(echo.param_value, 1.2, "unchanged value echoed");
     let [err] = &param_errors(&msgs)[..] else {
         panic!("{msgs:?}")
@@ -99,7 +106,7 @@ fn refused_param_write_keeps_value_and_says_why() {
             apm::MavParamError::MAV_PARAM_ERROR_READ_ONLY,
         ),
     ] {
-        let msgs = decode(&ep.handle(GCS, &v2(&param_set(name, value))));
+        let msgs = set(&mut ep, name, value);
         assert_eq!(param_errors(&msgs)[0].error, code, "{name}");
         assert_eq!(param_values(&msgs).len(), 1, "{name}: current value echoed");
     }
@@ -108,7 +115,7 @@ fn refused_param_write_keeps_value_and_says_why() {
 #[test]
 fn unknown_param_gets_param_error_and_no_value() {
     let mut ep = endpoint();
-    let msgs = decode(&ep.handle(GCS, &v2(&param_set("NO_SUCH_PARAM", 1.0))));
+    let msgs = set(&mut ep, "NO_SUCH_PARAM", 1.0);
     assert!(param_values(&msgs).is_empty());
     let [err] = &param_errors(&msgs)[..] else {
         panic!("{msgs:?}")
