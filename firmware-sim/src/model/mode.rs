@@ -2,7 +2,8 @@
 //!
 //! The pilot and hover modes (QSTABILIZE, QHOVER, QLOITER, QLAND) are control laws. The
 //! autonomous modes (GUIDED, AUTO, QRTL) fly those laws towards targets the navigator chooses
-//! (`navigation`): each control tick they fly one [`Guidance`].
+//! (`navigation`): each control tick they fly one [`Guidance`]. The fixed-wing modes (FBWA,
+//! CRUISE) fly the forward-flight law (`control::forward`) after a tailsitter transition.
 
 /// A flight mode of the twin (ArduPlane custom_mode numbers).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -22,6 +23,12 @@ pub enum FlightMode {
     Auto,
     /// Fly home and land (ArduPlane's QRTL; RTL requests land here too).
     QRtl,
+    /// Fixed-wing fly-by-wire: the sticks command bank and pitch, the throttle thrust
+    /// (`forward-flight.md`). Picked in the air it starts a forward transition.
+    Fbwa,
+    /// Fixed-wing cruise: heading, altitude and airspeed (`TRIM_ARSPD_CM`) held, the sticks
+    /// move them. Picked in the air it starts a forward transition.
+    Cruise,
 }
 
 /// What an autonomous mode flies during one control tick.
@@ -34,11 +41,27 @@ pub enum Guidance {
     Position(nalgebra::Vector3<f64>),
     /// QLAND's law: descend where the vehicle is, touch down, disarm.
     Land,
+    /// Fixed-wing flight (after a forward transition): what the energy controller and the
+    /// lateral guidance ask for.
+    Forward(ForwardGuidance),
+}
+
+/// A fixed-wing leg's demands for one control tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ForwardGuidance {
+    /// Height, m (z up).
+    pub height_m: f64,
+    /// Airspeed, m/s.
+    pub airspeed_m_s: f64,
+    /// Bank, rad (positive: a turn to the right).
+    pub bank_rad: f64,
 }
 
 impl FlightMode {
     /// Every mode, in number order.
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 9] = [
+        Self::Fbwa,
+        Self::Cruise,
         Self::Auto,
         Self::Guided,
         Self::QStabilize,
@@ -59,6 +82,8 @@ impl FlightMode {
             Self::Guided => 15,
             Self::Auto => 10,
             Self::QRtl => 21,
+            Self::Fbwa => 5,
+            Self::Cruise => 7,
         }
     }
 
@@ -79,6 +104,8 @@ impl FlightMode {
             Self::Guided => "GUIDED",
             Self::Auto => "AUTO",
             Self::QRtl => "QRTL",
+            Self::Fbwa => "FBWA",
+            Self::Cruise => "CRUISE",
         }
     }
 
@@ -92,7 +119,24 @@ impl FlightMode {
     /// (ArduPilot refuses to arm in a mode that cannot take off).
     #[must_use]
     pub const fn allows_arming(self) -> bool {
-        !matches!(self, Self::QLand | Self::QRtl)
+        !matches!(self, Self::QLand | Self::QRtl | Self::Fbwa | Self::Cruise)
+    }
+
+    /// Whether the mode flies as an aeroplane (picked in the air, it starts a forward
+    /// transition). AUTO flies fixed-wing legs by its mission items instead.
+    #[must_use]
+    pub const fn is_fixed_wing(self) -> bool {
+        matches!(self, Self::Fbwa | Self::Cruise)
+    }
+
+    /// Whether the mode is a hover (Q) mode: picked in forward flight, it starts a back
+    /// transition.
+    #[must_use]
+    pub const fn is_q_mode(self) -> bool {
+        matches!(
+            self,
+            Self::QStabilize | Self::QHover | Self::QLoiter | Self::QLand | Self::QRtl
+        )
     }
 
     /// Whether the mode holds altitude (and so needs the external position sensor).
@@ -116,5 +160,27 @@ impl std::str::FromStr for FlightMode {
 impl std::fmt::Display for FlightMode {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+/// Where the convertible is between hover and forward flight (MAVLink's `MAV_VTOL_STATE`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum VtolState {
+    /// Hovering (or on the ground): the paper's controller flies.
+    #[default]
+    Mc,
+    /// Pitching over and accelerating to `ARSPD_FBW_MIN`.
+    TransitionToFw,
+    /// Flying on the wing: the forward-flight law flies.
+    Fw,
+    /// Pitching up and slowing to a hover.
+    TransitionToMc,
+}
+
+impl VtolState {
+    /// Whether the forward-flight law flies (every phase but the hover).
+    #[must_use]
+    pub const fn is_forward(self) -> bool {
+        !matches!(self, Self::Mc)
     }
 }

@@ -31,12 +31,15 @@ use crate::model::mode::{FlightMode, Guidance};
 use crate::model::plant::actuators::{ActuatorModel, DISARMED_PWM_US};
 use crate::model::plant::battery::{Battery, BatteryConfig};
 use crate::model::plant::rigid_body::{EulerTrig, RigidBody};
-use crate::model::plant::{self, PlantInput, PlantState, aero, ground};
+use crate::model::plant::{self, PlantInput, PlantState, aero, ground, surface_airflow};
 use crate::model::sensors::{self, Sensors};
 
+mod arming;
+mod forward_flight;
 mod telemetry;
 mod wind;
 
+pub use forward_flight::ForwardFlight;
 pub use telemetry::{ArmError, SystemState, Telemetry};
 pub use wind::GUST_TIME_CONSTANT_S;
 use wind::Wind;
@@ -176,6 +179,8 @@ pub struct Vehicle {
     battery: Battery,
     /// Time not yet drawn from the battery, s.
     battery_pending_s: f64,
+    /// Forward flight and the transitions (`forward_flight`).
+    forward: ForwardFlight,
     telemetry: Telemetry,
 }
 
@@ -251,6 +256,7 @@ impl Vehicle {
             guidance: Guidance::Idle,
             battery: Battery::new(config.battery),
             battery_pending_s: 0.0,
+            forward: ForwardFlight::default(),
             telemetry: Telemetry {
                 mode: config.mode,
                 armed: config.armed,
@@ -334,7 +340,11 @@ impl Vehicle {
             // The airframe's aerodynamics, held over [`AERO_EVERY_STEPS`] steps like the
             // actuators over a control period: its time constants are hundreds of steps long.
             let v_air = self.air_velocity_body_m_s();
-            self.input.aero = aero::loads(af, &v_air, &self.input.actuators.rotor_speed_rad_s);
+            let mut loads = aero::loads(af, &v_air, &self.input.actuators.rotor_speed_rad_s);
+            let stream = surface_airflow::free_stream_loads(af, &v_air, &self.input.actuators);
+            loads.force_body_n += stream.force_body_n;
+            loads.torque_body_nm += stream.torque_body_nm;
+            self.input.aero = loads;
         }
     }
 
@@ -403,7 +413,9 @@ impl Vehicle {
             if td.sink_rate_m_s > CRASH_SINK_RATE_M_S || td.tilt_rad > CRASH_TILT_RAD {
                 self.crash();
             }
-        } else if self.plant_trig.cos_tilt() < CRASH_COS_TILT {
+        } else if self.plant_trig.cos_tilt() < CRASH_COS_TILT && !self.forward.state().is_forward()
+        {
+            // The tilt check is the hover's: forward flight flies the nose level.
             self.crash();
         }
     }
@@ -471,7 +483,10 @@ impl Vehicle {
         self.last_control_input = input;
 
         let out = if self.telemetry.armed && law.is_some() {
-            self.controller.update(&input, &self.config.gains)
+            match self.forward_tick(&input) {
+                Some(out) => out,
+                None => self.controller.update(&input, &self.config.gains),
+            }
         } else {
             ControlOutput {
                 pwm_us: DISARMED_PWM_US,
@@ -550,8 +565,8 @@ impl Vehicle {
             self.battery.step(
                 self.battery_pending_s,
                 self.actuators.state.rotor_speed_rad_s,
-                af.rotor_arm_m,
-                af.k_drag_n_per_rad2_s2,
+                self.config.airframe.rotor_arm_m,
+                self.config.airframe.k_drag_n_per_rad2_s2,
             );
             self.battery_pending_s = 0.0;
             self.telemetry.battery = *self.battery.state();
@@ -593,6 +608,8 @@ impl Vehicle {
             Guidance::Idle => None,
             Guidance::Position(_) => Some(FlightMode::QLoiter),
             Guidance::Land => Some(FlightMode::QLand),
+            // Until the transition starts, hold the point where the leg was asked for.
+            Guidance::Forward(_) => Some(FlightMode::QLoiter),
         }
     }
 
@@ -617,6 +634,7 @@ impl Vehicle {
     }
 
     fn set_disarmed(&mut self) {
+        self.forward_reset();
         self.telemetry.armed = false;
         self.telemetry.pwm_us = DISARMED_PWM_US;
         self.telemetry.control = ControlOutput {
@@ -684,82 +702,13 @@ impl Vehicle {
         Ok(())
     }
 
-    /// Arms the motors. Without `force`, pre-arm checks apply (calibration done, level, landed).
-    ///
-    /// # Errors
-    /// [`ArmError::PreArm`] saying which check failed.
-    pub fn arm(&mut self, force: bool) -> Result<(), ArmError> {
-        if self.telemetry.armed {
-            return Ok(());
-        }
-        if !force {
-            if self.telemetry.state == SystemState::Emergency {
-                return Err(ArmError::PreArm("vehicle crashed"));
-            }
-            if !self.telemetry.mode.allows_arming() {
-                return Err(ArmError::Mode(self.telemetry.mode));
-            }
-            self.pre_arm_check()?;
-        }
-        self.controller.reset();
-        self.telemetry.armed = true;
-        self.telemetry.state = SystemState::Active;
-        Ok(())
-    }
-
-    /// The pre-arm checks that do not depend on the mode (calibration done, landed, level, not
-    /// crashed): what SYS_STATUS reports as `MAV_SYS_STATUS_PREARM_CHECK`.
-    ///
-    /// # Errors
-    /// [`ArmError::PreArm`] saying which check fails.
-    pub fn pre_arm_check(&self) -> Result<(), ArmError> {
-        if self.telemetry.state == SystemState::Emergency {
-            return Err(ArmError::PreArm("vehicle crashed"));
-        }
-        if !self.estimator.is_calibrated() {
-            return Err(ArmError::PreArm("gyro calibration in progress"));
-        }
-        if !self.on_ground {
-            return Err(ArmError::PreArm("not landed"));
-        }
-        let e = self.estimator_or_truth_euler();
-        if tilt_rad(&e) > ARM_MAX_TILT_RAD {
-            return Err(ArmError::PreArm("not level"));
-        }
-        Ok(())
-    }
-
-    /// The attitude and position estimator (read only).
-    #[must_use]
-    pub fn estimator(&self) -> &Estimator {
-        &self.estimator
-    }
-
-    fn estimator_or_truth_euler(&self) -> Euler {
-        match self.config.model {
-            ModelMode::Physical if !self.config.perfect_state => self.estimator.euler(),
-            _ => self.plant.euler,
-        }
-    }
-
-    /// Disarms. In flight only with `force`.
-    ///
-    /// # Errors
-    /// [`ArmError::InFlight`].
-    pub fn disarm(&mut self, force: bool) -> Result<(), ArmError> {
-        if self.telemetry.armed && !self.on_ground && !force {
-            return Err(ArmError::InFlight);
-        }
-        self.set_disarmed();
-        Ok(())
-    }
-
     /// Changes the flight mode.
     pub fn set_mode(&mut self, mode: FlightMode) {
         if mode != self.telemetry.mode {
             self.controller.reset();
         }
         self.telemetry.mode = mode;
+        self.vtol_mode_changed(mode);
     }
 
     /// RC receiver input: pulse widths in µs for channels 1–8 (1 roll, 2 pitch, 3 throttle,
@@ -814,5 +763,7 @@ fn tilt_rad(e: &Euler) -> f64 {
     (e.theta.cos() * e.phi.cos()).clamp(-1.0, 1.0).acos()
 }
 
+#[cfg(test)]
+mod forward_tests;
 #[cfg(test)]
 mod tests;

@@ -79,7 +79,7 @@ impl World {
                         self.armed = false;
                     }
                 }
-                Guidance::Idle => {}
+                Guidance::Idle | Guidance::Forward(_) => {}
             }
             out.push(g);
         }

@@ -29,6 +29,8 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::model::control::forward_gains::ForwardGains;
+use crate::model::control::tecs::TecsLimits;
 use crate::model::control::{GainError, Gains, SaturationLevels};
 
 /// How a parameter is stored and sent (`MAV_PARAM_TYPE`).
@@ -197,6 +199,19 @@ pub static TABLE: &[ParamDef] = &[
     def("BATT_FS_LOW_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Low battery action: 0 none, 1 RTL (QRTL), 2 Land, 3 Terminate, 4 QLand, 6 Loiter to QLand"),
     def("BATT_FS_CRT_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Critical battery action: as BATT_FS_LOW_ACT"),
     def("ARMING_CHECK", I32, "", (0.0, 1.0), 1.0, RO, "Pre-arm checks (calibration, crash, mode, landed, level): 1 = all, always on"),
+    def("ARSPD_FBW_MIN", I16, "m/s", (1.0, 50.0), 10.0, RW, "Lowest fixed-wing airspeed; the forward transition ends here; above the stall speed"),
+    def("ARSPD_FBW_MAX", I16, "m/s", (2.0, 60.0), 18.0, RW, "Highest airspeed demanded; above TRIM_ARSPD_CM"),
+    def("TRIM_ARSPD_CM", I32, "cm/s", (100.0, 5000.0), 1200.0, RW, "Cruise airspeed; between ARSPD_FBW_MIN and ARSPD_FBW_MAX"),
+    def("TECS_TIME_CONST", F32, "s", (0.5, 20.0), 3.0, RW, "Time constant of the height and airspeed demands"),
+    def("TECS_CLMB_MAX", F32, "m/s", (0.1, 10.0), 3.0, RW, "Largest climb rate in forward flight"),
+    def("TECS_SINK_MAX", F32, "m/s", (0.1, 10.0), 3.0, RW, "Largest sink rate in forward flight"),
+    def("LIM_ROLL_CD", I16, "cdeg", (100.0, 6500.0), 4500.0, RW, "Largest bank in forward flight"),
+    def("Q_TAILSIT_RAT_FW", I16, "deg/s", (5.0, 500.0), 50.0, RW, "Nose-down rate of the forward transition"),
+    def("Q_TAILSIT_RAT_VT", I16, "deg/s", (5.0, 500.0), 50.0, RW, "Nose-up rate of the back transition"),
+    def("Q_TAILSIT_ANGLE", I8, "deg", (5.0, 80.0), 45.0, RW, "Nose angle from vertical before a forward transition may end"),
+    def("Q_TAILSIT_ANG_VT", I8, "deg", (5.0, 89.0), 75.0, RW, "Nose angle above the horizon that ends a back transition"),
+    def("Q_TRANSITION_MS", I32, "ms", (500.0, 30000.0), 8000.0, RW, "A forward transition not done by then is aborted to QLOITER"),
+    def("FW_ATT_BW", F32, "rad/s", (0.5, 20.0), 5.0, RW, "Bandwidth of the forward-flight attitude law"),
 ];
 
 /// Why a write was refused or a name not found.
@@ -617,6 +632,23 @@ fn gains_of(values: &[f64]) -> Gains {
         yaw_kp: v("YAW_KP"),
         hover_alt_m: v("HOVER_ALT"),
         land_speed_m_s: v("LAND_SPEED"),
+        forward: ForwardGains {
+            airspeed_min_m_s: v("ARSPD_FBW_MIN"),
+            airspeed_max_m_s: v("ARSPD_FBW_MAX"),
+            airspeed_trim_m_s: v("TRIM_ARSPD_CM") / 100.0,
+            tecs: TecsLimits {
+                time_const_s: v("TECS_TIME_CONST"),
+                climb_max_m_s: v("TECS_CLMB_MAX"),
+                sink_max_m_s: v("TECS_SINK_MAX"),
+            },
+            roll_limit_rad: (v("LIM_ROLL_CD") / 100.0).to_radians(),
+            transition_rate_fw_rad_s: v("Q_TAILSIT_RAT_FW").to_radians(),
+            transition_rate_vt_rad_s: v("Q_TAILSIT_RAT_VT").to_radians(),
+            transition_angle_fw_rad: v("Q_TAILSIT_ANGLE").to_radians(),
+            transition_angle_vt_rad: v("Q_TAILSIT_ANG_VT").to_radians(),
+            transition_timeout_s: v("Q_TRANSITION_MS") / 1000.0,
+            attitude_bandwidth_rad_s: v("FW_ATT_BW"),
+        },
     }
 }
 
@@ -634,161 +666,5 @@ fn shortest(v: f64) -> String {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn table_invariants() {
-        let mut names = std::collections::HashSet::new();
-        for d in TABLE {
-            assert!(d.name.len() <= MAX_NAME_LEN, "{} too long", d.name);
-            assert_eq!(d.name, d.name.to_ascii_uppercase());
-            assert!(names.insert(d.name), "{} twice", d.name);
-            assert!(
-                d.min <= d.default && d.default <= d.max,
-                "{} default out of range",
-                d.name
-            );
-            if d.ty.is_integer() {
-                assert_eq!(d.default.fract(), 0.0, "{}", d.name);
-            }
-        }
-        let p = Params::new();
-        assert_eq!(p.count(), TABLE.len());
-        assert_eq!(
-            p.gains(),
-            Gains::default(),
-            "defaults must match PHYSICS.md §0"
-        );
-        p.gains().validate().unwrap();
-    }
-
-    #[test]
-    fn refused_writes_leave_the_value() {
-        let mut p = Params::new();
-        assert!(matches!(
-            p.set("LAT_SAT_A", f64::NAN),
-            Err(ParamError::NotFinite { .. })
-        ));
-        assert!(matches!(
-            p.set("ALT_KP", 1e6),
-            Err(ParamError::OutOfRange { .. })
-        ));
-        assert!(matches!(
-            p.set("SERVO1_FUNCTION", 33.0),
-            Err(ParamError::ReadOnly(_))
-        ));
-        assert!(matches!(p.set("NOPE", 1.0), Err(ParamError::Unknown(_))));
-        // a = 0.9 breaks a > b + c + d = 1.0.
-        let e = p.set("LAT_SAT_A", 0.9).unwrap_err();
-        assert!(e.to_string().contains("a > b + c + d"), "{e}");
-        assert_eq!(e.mav_error(), 2);
-        // c = 0.1 breaks c > d = 0.18.
-        assert!(matches!(
-            p.set("LON_SAT_C", 0.1),
-            Err(ParamError::Gains { .. })
-        ));
-        assert_eq!(p, Params::new());
-        let ok = p.set("LAT_SAT_A", 1.5).unwrap();
-        assert_eq!((ok.old, ok.new), (1.2, 1.5));
-        // C cast: an integer parameter rounds.
-        assert_eq!(p.set("SR0_EXTRA1", 4.6).unwrap().new, 5.0);
-    }
-
-    #[test]
-    fn a_set_is_validated_as_a_whole() {
-        let mut p = Params::new();
-        let w = |n: &str, v: f64| (n.to_owned(), v);
-        // d = 0.3 alone breaks c > d; with c = 0.35, b = 0.7 and a = 1.5 the set holds.
-        p.set_all(&[
-            w("LAT_SAT_D", 0.3),
-            w("LAT_SAT_C", 0.35),
-            w("LAT_SAT_B", 0.7),
-            w("LAT_SAT_A", 1.5),
-        ])
-        .unwrap();
-        assert_eq!(p.gains().lateral.d, 0.3);
-        let before = p.clone();
-        let e = p.set_all(&[w("ALT_KP", 1e6)]).unwrap_err();
-        assert_eq!(e.to_string(), "ALT_KP: 1000000 outside [0, 100]");
-        assert!(p.set_all(&[w("LAT_SAT_D", 0.5)]).is_err());
-        assert!(p.set_all(&[w("SERVO1_FUNCTION", 1.0)]).is_err());
-        assert_eq!(p, before, "a refused set changes nothing");
-    }
-
-    /// Values are saved at full precision: a float32 from PARAM_SET as its shortest decimal, a
-    /// finer value given in a file exactly (six decimals would round both).
-    #[test]
-    fn parm_file_keeps_full_precision() {
-        let mut p = Params::new();
-        p.set("ALT_KP", f64::from(1.2345678_f32)).unwrap();
-        p.set("ALT_KD", 0.123_456_789_012).unwrap();
-        let text = p.to_parm_string();
-        assert!(text.contains("ALT_KP           1.2345678\n"), "{text}");
-        assert!(text.contains("ALT_KD           0.123456789012\n"), "{text}");
-        let back = Params::from_parm_str(&text, Path::new("x.parm")).unwrap();
-        // The same float32 on the wire.
-        #[allow(clippy::cast_possible_truncation)]
-        let kp = back.value("ALT_KP") as f32;
-        assert_eq!(kp, 1.2345678_f32);
-        assert_eq!(back.value("ALT_KD"), 0.123_456_789_012);
-    }
-
-    #[test]
-    fn parm_round_trip() {
-        let mut p = Params::new();
-        p.set("LAT_SAT_A", 1.75).unwrap();
-        p.set("SYSID_MYGCS", 250.0).unwrap();
-        p.set("SIM_PUSH_ROLL", 0.1).unwrap();
-        let text = p.to_parm_string();
-        assert!(text.contains("LAT_SAT_A        1.75\n"), "{text}");
-        assert!(text.contains("SYSID_MYGCS      250\n"), "{text}");
-        assert!(
-            !text.contains("SIM_PUSH_ROLL"),
-            "volatile params are not saved"
-        );
-        let back = Params::from_parm_str(&text, Path::new("x.parm")).unwrap();
-        let mut expected = p.clone();
-        expected.set("SIM_PUSH_ROLL", 0.0).unwrap();
-        assert_eq!(back, expected);
-        // MAVProxy / Mission Planner spellings.
-        let mp =
-            Params::from_parm_str("ALT_KP,6 # comment\n\nYAW_KD\t0x3\n", Path::new("m")).unwrap();
-        assert_eq!((mp.value("ALT_KP"), mp.value("YAW_KD")), (6.0, 3.0));
-    }
-
-    #[test]
-    fn corrupt_files_are_errors() {
-        let path = Path::new("bad.parm");
-        for (text, needle) in [
-            ("ALT_KP\n", "expected NAME VALUE"),
-            ("ALT_KP 1 2\n", "expected NAME VALUE"),
-            ("ALT_KP abc\n", "bad value"),
-            ("NOT_A_PARAM 1\n", "unknown parameter"),
-            ("ALT_KP 1000\n", "outside"),
-            ("ALT_KP 1\nALT_KP 2\n", "already set"),
-        ] {
-            let e = Params::from_parm_str(text, path).unwrap_err();
-            assert!(e.to_string().contains(needle), "{text:?}: {e}");
-            assert!(e.to_string().starts_with("bad.parm:"), "{e}");
-        }
-        let e = Params::from_parm_str("LAT_SAT_D 0.5\n", path).unwrap_err();
-        assert!(matches!(e, ParamFileError::Gains { .. }), "{e}");
-    }
-
-    #[test]
-    fn save_is_atomic_and_loads_back() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("twin.parm");
-        let mut p = Params::new();
-        p.set("HOVER_ALT", 2.5).unwrap();
-        p.save(&path).unwrap();
-        assert_eq!(Params::load(&path).unwrap(), p);
-        let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-        assert_eq!(leftovers.len(), 1, "no temporary file left behind");
-        assert!(matches!(
-            Params::load(&dir.path().join("missing.parm")),
-            Err(ParamFileError::Io { .. })
-        ));
-    }
-}
+#[path = "params_tests.rs"]
+mod tests;

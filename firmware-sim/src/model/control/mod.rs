@@ -21,9 +21,12 @@
 
 pub mod altitude;
 pub mod chains;
+pub mod forward;
+pub mod forward_gains;
 pub mod input_change;
 pub mod mixer;
 pub mod saturation;
+pub mod tecs;
 pub mod yaw;
 
 #[cfg(test)]
@@ -164,6 +167,8 @@ pub struct Gains {
     pub hover_alt_m: f64,
     /// Descent speed in QLAND, m/s.
     pub land_speed_m_s: f64,
+    /// Forward flight and the transitions (`forward_gains`).
+    pub forward: forward_gains::ForwardGains,
 }
 
 impl Default for Gains {
@@ -177,6 +182,7 @@ impl Default for Gains {
             yaw_kp: 5.0,
             hover_alt_m: 1.0,
             land_speed_m_s: 0.5,
+            forward: forward_gains::ForwardGains::default(),
         }
     }
 }
@@ -207,7 +213,8 @@ impl Gains {
                 value: self.hover_alt_m,
             });
         }
-        Ok(())
+        // The twin flies one airframe (Table I): the stall speed is checked against it.
+        self.forward.validate(&Airframe::default())
     }
 }
 
@@ -229,6 +236,12 @@ pub enum GainError {
         c: f64,
         /// Level d.
         d: f64,
+    },
+    /// A forward-flight parameter set breaks one of its cross-checks.
+    #[error("forward-flight parameters break the rule: {rule}")]
+    Forward {
+        /// The broken rule.
+        rule: &'static str,
     },
     /// A gain that must be positive and finite is not.
     #[error("{name} must be positive and finite, got {value}")]
@@ -432,7 +445,9 @@ impl Controller {
             | FlightMode::QLand
             | FlightMode::Guided
             | FlightMode::Auto
-            | FlightMode::QRtl => {
+            | FlightMode::QRtl
+            | FlightMode::Fbwa
+            | FlightMode::Cruise => {
                 let target = match (mode, self.land_hold_xy_m) {
                     (FlightMode::QLand, Some(hold)) => hold,
                     _ => setpoint.xy(),
@@ -489,7 +504,9 @@ impl Controller {
             | FlightMode::QLand
             | FlightMode::Guided
             | FlightMode::Auto
-            | FlightMode::QRtl => (yaw_setpoint, 0.0),
+            | FlightMode::QRtl
+            | FlightMode::Fbwa
+            | FlightMode::Cruise => (yaw_setpoint, 0.0),
         };
         self.yaw_target_rad = psi_target;
         let tau_psi = yaw::yaw_tau(
@@ -505,9 +522,18 @@ impl Controller {
         // 3. Thrust.
         let fz_max = 2.0 * a.k_thrust_n_per_rad2_s2 * a.rotor_speed_max_rad_s.powi(2);
         let r_z = match mode {
-            FlightMode::QLoiter | FlightMode::Guided | FlightMode::Auto | FlightMode::QRtl => Some(
-                altitude::altitude_accel_m_s2(gains.alt_kd, gains.alt_kp, pos.z, vel.z, setpoint.z),
-            ),
+            FlightMode::QLoiter
+            | FlightMode::Guided
+            | FlightMode::Auto
+            | FlightMode::QRtl
+            | FlightMode::Fbwa
+            | FlightMode::Cruise => Some(altitude::altitude_accel_m_s2(
+                gains.alt_kd,
+                gains.alt_kp,
+                pos.z,
+                vel.z,
+                setpoint.z,
+            )),
             FlightMode::QHover => Some(altitude::altitude_accel_m_s2(
                 gains.alt_kd,
                 gains.alt_kp,

@@ -16,6 +16,7 @@ pub mod disturbances;
 pub mod ground;
 pub mod rigid_body;
 pub mod rotors;
+pub mod surface_airflow;
 pub mod surfaces;
 
 use nalgebra::Vector3;

@@ -5,7 +5,7 @@ use nalgebra::Vector3;
 
 use crate::model::control::{ControlOutput, PwmOutputs};
 use crate::model::frames::Euler;
-use crate::model::mode::FlightMode;
+use crate::model::mode::{FlightMode, VtolState};
 use crate::model::plant::aero;
 use crate::model::plant::battery::BatteryState;
 
@@ -82,6 +82,8 @@ pub struct Telemetry {
     pub battery: BatteryState,
     /// The body's true velocity relative to the air (wind and gusts included), in B, m/s.
     pub air_velocity_body_m_s: Vector3<f64>,
+    /// Hover, forward flight or a transition between them.
+    pub vtol_state: VtolState,
 }
 
 impl Telemetry {

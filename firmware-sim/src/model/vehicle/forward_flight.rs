@@ -1,0 +1,315 @@
+//! The tailsitter's phases (`docs/forward-flight.md`): what the vehicle flies in each, when a
+//! transition starts, ends or is aborted. ArduPlane's QuadPlane tailsitter is the model: a
+//! fixed-wing mode picked in the air starts a forward transition (nose down at
+//! `Q_TAILSIT_RAT_FW`, thrust holding the height, done at `ARSPD_FBW_MIN` once the nose is
+//! `Q_TAILSIT_ANGLE` from vertical, aborted to QLOITER after `Q_TRANSITION_MS`), a Q mode picked
+//! in forward flight a back transition (nose up at `Q_TAILSIT_RAT_VT`, done when the nose is
+//! `Q_TAILSIT_ANG_VT` above the horizon; the hover then holds where it ended).
+
+use super::Vehicle;
+use crate::model::control::forward::{
+    self, ForwardCommand, ForwardInput, ForwardLaw, Longitudinal,
+};
+use crate::model::control::{ControlInput, ControlOutput, PilotInput, forward_gains};
+use crate::model::frames::wrap_pi;
+use crate::model::mode::{FlightMode, Guidance, VtolState};
+use crate::model::plant::aero;
+
+/// Time constant of CRUISE's heading hold, s.
+const HEADING_TIME_CONST_S: f64 = 2.0;
+/// Full-stick nose angle change in FBWA, rad.
+const FBWA_PITCH_RANGE_RAD: f64 = 0.35;
+/// The back transition's pull-up starts at this multiple of the stall speed: slow enough that
+/// the climb it trades the speed for stays small (½ V² / g ≈ 2 m at 7 m/s), fast enough that the
+/// wing still turns the path up with the nose, so the plate never meets the air broadside at
+/// speed.
+const PULL_UP_STALL_RATIO: f64 = 1.1;
+/// Nose angle above which the pull-up's thrust floor applies, rad.
+const PULL_UP_FLOOR_NOSE_RAD: f64 = 0.45;
+/// Lag of the nose behind its command above which the pull-up's thrust floor applies, rad.
+const PULL_UP_LAG_RAD: f64 = 0.15;
+/// Least thrust of the pull-up, in weights.
+const PULL_UP_THRUST_WEIGHTS: f64 = 0.5;
+/// Margin above the pull-up speed at which the slowing stage ends, m/s.
+const PULL_UP_SPEED_MARGIN_M_S: f64 = 0.3;
+/// Longest slowing stage, s.
+const SLOWING_MAX_S: f64 = 6.0;
+
+/// The forward-flight side of the vehicle: the phase, its clock and targets, and the law.
+#[derive(Debug, Clone, Default)]
+pub struct ForwardFlight {
+    state: VtolState,
+    law: ForwardLaw,
+    phase_time_s: f64,
+    nose_cmd_rad: f64,
+    heading_rad: f64,
+    height_m: f64,
+    /// What the last forward transition ended in (for the record: aborted or not).
+    aborted: bool,
+    /// The back transition's first stage: slowing down on the wing at constant height.
+    slowing: bool,
+}
+
+impl ForwardFlight {
+    /// The phase.
+    #[must_use]
+    pub fn state(&self) -> VtolState {
+        self.state
+    }
+
+    /// Whether the last forward transition was aborted by `Q_TRANSITION_MS`.
+    #[must_use]
+    pub fn last_transition_aborted(&self) -> bool {
+        self.aborted
+    }
+}
+
+/// The nose's angle above the horizon for this rotation body → inertial: asin of z_B's
+/// vertical component.
+fn nose_angle_rad(r: &nalgebra::Matrix3<f64>) -> f64 {
+    r[(2, 2)].clamp(-1.0, 1.0).asin()
+}
+
+impl Vehicle {
+    /// The phase between hover and forward flight.
+    #[must_use]
+    pub fn vtol_state(&self) -> VtolState {
+        self.forward.state
+    }
+
+    /// The forward-flight side (phase, abort record).
+    #[must_use]
+    pub fn forward_flight(&self) -> &ForwardFlight {
+        &self.forward
+    }
+
+    /// Starts a forward transition if the vehicle hovers in the air (or is coming back to a
+    /// hover). Returns whether it started.
+    pub fn start_forward_transition(&mut self) -> bool {
+        if !self.telemetry.armed || self.on_ground {
+            return false;
+        }
+        if !matches!(
+            self.forward.state,
+            VtolState::Mc | VtolState::TransitionToMc
+        ) {
+            return false;
+        }
+        let r = self.plant_trig.rotation_body_to_inertial();
+        let f = &mut self.forward;
+        if f.state == VtolState::Mc {
+            f.law.reset();
+            f.height_m = self.plant.pos_m.z;
+            f.heading_rad = self.telemetry.euler_est.psi;
+        }
+        f.state = VtolState::TransitionToFw;
+        f.phase_time_s = 0.0;
+        f.nose_cmd_rad = nose_angle_rad(&r);
+        f.aborted = false;
+        self.telemetry.vtol_state = f.state;
+        true
+    }
+
+    /// Starts a back transition if the vehicle flies forward (or is transitioning to). Returns
+    /// whether it started.
+    pub fn start_back_transition(&mut self) -> bool {
+        if !self.forward.state.is_forward() || self.forward.state == VtolState::TransitionToMc {
+            return false;
+        }
+        let r = self.plant_trig.rotation_body_to_inertial();
+        let air = r * self.telemetry.air_velocity_body_m_s;
+        let f = &mut self.forward;
+        f.state = VtolState::TransitionToMc;
+        f.phase_time_s = 0.0;
+        f.slowing = true;
+        f.nose_cmd_rad = nose_angle_rad(&r);
+        f.height_m = self.plant.pos_m.z;
+        f.heading_rad = if air.xy().norm() > 1.0 {
+            air.y.atan2(air.x)
+        } else {
+            self.telemetry.euler_est.psi
+        };
+        self.telemetry.vtol_state = f.state;
+        true
+    }
+
+    /// A mode change's effect on the phase: a fixed-wing mode in the air starts a forward
+    /// transition, a Q mode in forward flight a back transition.
+    pub(super) fn vtol_mode_changed(&mut self, mode: FlightMode) {
+        if mode.is_fixed_wing() {
+            self.start_forward_transition();
+        } else if mode.is_q_mode() {
+            self.start_back_transition();
+        }
+    }
+
+    /// Drops back to hover at once (disarm, crash, landing).
+    pub(super) fn forward_reset(&mut self) {
+        self.forward.state = VtolState::Mc;
+        self.forward.law.reset();
+        self.telemetry.vtol_state = VtolState::Mc;
+    }
+
+    /// The forward-flight law's output this tick, or `None` in hover (the paper's law flies).
+    pub(super) fn forward_tick(&mut self, input: &ControlInput) -> Option<ControlOutput> {
+        if !self.forward.state.is_forward() || !self.telemetry.armed {
+            return None;
+        }
+        let gains = self.config.gains.forward;
+        let dt = input.dt_s;
+        let r = input.euler.rotation_body_to_inertial();
+        let airspeed = self.telemetry.air_velocity_body_m_s.norm();
+        self.forward.phase_time_s += dt;
+        let cmd = match self.forward.state {
+            VtolState::TransitionToFw => {
+                let f = &mut self.forward;
+                // The nose goes down to the angle of level flight at the trim airspeed.
+                let v_end = gains.airspeed_trim_m_s.max(airspeed);
+                let q = 0.5 * aero::AIR_DENSITY_KG_M3 * v_end.powi(2);
+                let level = forward::alpha_for_lift(
+                    self.config.airframe.weight_n() / (q * aero::WING_AREA_M2),
+                );
+                f.nose_cmd_rad = (f.nose_cmd_rad - gains.transition_rate_fw_rad_s * dt).max(level);
+                let from_vertical = std::f64::consts::FRAC_PI_2 - nose_angle_rad(&r);
+                if airspeed >= gains.airspeed_min_m_s
+                    && from_vertical >= gains.transition_angle_fw_rad
+                {
+                    f.state = VtolState::Fw;
+                    f.phase_time_s = 0.0;
+                } else if f.phase_time_s > gains.transition_timeout_s {
+                    // Abort: back to a hover where the transition began its height.
+                    f.aborted = true;
+                    self.telemetry.mode = FlightMode::QLoiter;
+                    self.controller.reset();
+                    self.start_back_transition();
+                }
+                self.transition_command()
+            }
+            VtolState::TransitionToMc if self.forward.slowing => {
+                // Slow down on the wing first: the stalled plate's moment at speed is more
+                // than the elevator can hold, so the nose comes up only near the pull-up speed.
+                let f = &mut self.forward;
+                let slow =
+                    PULL_UP_STALL_RATIO * forward_gains::stall_speed_m_s(&self.config.airframe);
+                if airspeed <= slow + PULL_UP_SPEED_MARGIN_M_S || f.phase_time_s > SLOWING_MAX_S {
+                    f.slowing = false;
+                    f.nose_cmd_rad = nose_angle_rad(&r);
+                }
+                ForwardCommand {
+                    longitudinal: Longitudinal::Energy {
+                        height_m: f.height_m,
+                        airspeed_m_s: slow,
+                    },
+                    bank_rad: 0.0,
+                    heading_rad: f.heading_rad,
+                }
+            }
+            VtolState::TransitionToMc => {
+                let f = &mut self.forward;
+                f.nose_cmd_rad = (f.nose_cmd_rad + gains.transition_rate_vt_rad_s * dt)
+                    .min(std::f64::consts::FRAC_PI_2);
+                if nose_angle_rad(&r) >= gains.transition_angle_vt_rad
+                    || f.phase_time_s > gains.transition_timeout_s
+                {
+                    // The hover holds where the transition ended, as ArduPlane's does.
+                    let hold = input.pos_m;
+                    self.forward_reset();
+                    self.controller.reset();
+                    if !self.telemetry.mode.is_autonomous() {
+                        self.setpoint_m = hold;
+                    }
+                    return None;
+                }
+                self.transition_command()
+            }
+            VtolState::Fw => self.fixed_wing_command(input, airspeed),
+            VtolState::Mc => return None,
+        };
+        self.telemetry.vtol_state = self.forward.state;
+        let fin = ForwardInput {
+            dt_s: dt,
+            euler: input.euler,
+            omega_body_rad_s: input.omega_body_rad_s,
+            pos_m: input.pos_m,
+            vel_m_s: input.vel_m_s,
+            air_velocity_body_m_s: self.telemetry.air_velocity_body_m_s,
+            rotor_speed_rad_s: input.rotor_speed_rad_s,
+        };
+        Some(
+            self.forward
+                .law
+                .update(&self.config.airframe, &gains, &fin, &cmd),
+        )
+    }
+
+    fn transition_command(&self) -> ForwardCommand {
+        let f = &self.forward;
+        let nose = nose_angle_rad(&self.plant_trig.rotation_body_to_inertial());
+        ForwardCommand {
+            longitudinal: Longitudinal::NoseAngle {
+                nose_rad: f.nose_cmd_rad,
+                height_m: f.height_m,
+                // Once the nose is up and lags its command (the elevator saturated against the
+                // wing's moment near the stall), the pull-up raises the thrust toward the
+                // hover's for that angle: its wash gives the elevator the authority it lacks.
+                thrust_min_n: if f.state == VtolState::TransitionToMc
+                    && nose >= PULL_UP_FLOOR_NOSE_RAD
+                    && f.nose_cmd_rad - nose > PULL_UP_LAG_RAD
+                {
+                    PULL_UP_THRUST_WEIGHTS * self.config.airframe.weight_n() / nose.sin().max(0.5)
+                } else {
+                    0.0
+                },
+            },
+            bank_rad: 0.0,
+            heading_rad: f.heading_rad,
+        }
+    }
+
+    /// What the fixed-wing modes fly: CRUISE holds the height, the trim airspeed and the
+    /// heading it was entered with; FBWA flies the sticks; AUTO and GUIDED their guidance.
+    fn fixed_wing_command(&mut self, input: &ControlInput, airspeed: f64) -> ForwardCommand {
+        let gains = self.config.gains.forward;
+        let f = &self.forward;
+        let g = self.config.airframe.gravity_m_s2;
+        let course = input.vel_m_s.y.atan2(input.vel_m_s.x);
+        let heading_hold = |target: f64| {
+            let lateral = airspeed * wrap_pi(target - course) / HEADING_TIME_CONST_S;
+            -(lateral / g).atan()
+        };
+        let energy = |height_m: f64, airspeed_m_s: f64| Longitudinal::Energy {
+            height_m,
+            airspeed_m_s,
+        };
+        match (self.telemetry.mode, self.guidance) {
+            (FlightMode::Fbwa, _) => {
+                let p: PilotInput = input.pilot;
+                let fz_max = 2.0
+                    * self.config.airframe.k_thrust_n_per_rad2_s2
+                    * self.config.airframe.rotor_speed_max_rad_s.powi(2);
+                ForwardCommand {
+                    longitudinal: Longitudinal::Manual {
+                        nose_rad: 0.1 + FBWA_PITCH_RANGE_RAD * p.pitch,
+                        thrust_n: p.throttle * fz_max,
+                    },
+                    bank_rad: gains.roll_limit_rad * p.roll,
+                    heading_rad: f.heading_rad,
+                }
+            }
+            (_, Guidance::Forward(fw)) if self.telemetry.mode.is_autonomous() => ForwardCommand {
+                longitudinal: energy(
+                    fw.height_m,
+                    fw.airspeed_m_s
+                        .clamp(gains.airspeed_min_m_s, gains.airspeed_max_m_s),
+                ),
+                bank_rad: fw.bank_rad,
+                heading_rad: f.heading_rad,
+            },
+            _ => ForwardCommand {
+                longitudinal: energy(f.height_m, gains.airspeed_trim_m_s),
+                bank_rad: heading_hold(f.heading_rad),
+                heading_rad: f.heading_rad,
+            },
+        }
+    }
+}
