@@ -13,6 +13,7 @@ use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
 use crate::model::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
+use crate::model::mode::VtolState;
 use crate::model::vehicle::Telemetry;
 
 /// Message ids the twin produces (the dialect's, from vtol-link's table).
@@ -24,6 +25,9 @@ pub mod id {
         MISSION_CURRENT, NAMED_VALUE_FLOAT, NAV_CONTROLLER_OUTPUT, RAW_IMU, RC_CHANNELS,
         SCALED_IMU, SERVO_OUTPUT_RAW, SYS_STATUS, SYSTEM_TIME, VFR_HUD,
     };
+    /// AOA_SSA (ardupilotmega 11020): angle of attack and sideslip.
+    pub const AOA_SSA: u32 =
+        <mavlink::dialects::ardupilotmega::AOA_SSA_DATA as mavlink::MessageData>::ID;
 }
 
 pub use vtol_link::protocol::CONTROLLER_OUTPUT_NAMES;
@@ -105,7 +109,7 @@ pub struct StreamDef {
 }
 
 /// Every message the twin streams, with its default rate.
-pub const STREAMABLE: [StreamDef; 20] = [
+pub const STREAMABLE: [StreamDef; 21] = [
     StreamDef {
         msgid: id::HEARTBEAT,
         default_hz: 1.0,
@@ -182,6 +186,12 @@ pub const STREAMABLE: [StreamDef; 20] = [
         msgid: id::VFR_HUD,
         default_hz: 4.0,
         group: Some(Group::Extra2),
+    },
+    // Angle of attack and sideslip, in ArduPlane's EXTRA3 group.
+    StreamDef {
+        msgid: id::AOA_SSA,
+        default_hz: 2.0,
+        group: Some(Group::Extra3),
     },
     StreamDef {
         msgid: id::BATTERY_STATUS,
@@ -539,12 +549,22 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
             })
         }
         id::EXTENDED_SYS_STATE => M::EXTENDED_SYS_STATE(apm::EXTENDED_SYS_STATE_DATA {
-            vtol_state: apm::MavVtolState::MAV_VTOL_STATE_MC,
+            vtol_state: match t.vtol_state {
+                VtolState::Mc => apm::MavVtolState::MAV_VTOL_STATE_MC,
+                VtolState::TransitionToFw => apm::MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_FW,
+                VtolState::Fw => apm::MavVtolState::MAV_VTOL_STATE_FW,
+                VtolState::TransitionToMc => apm::MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_MC,
+            },
             landed_state: if t.landed {
                 apm::MavLandedState::MAV_LANDED_STATE_ON_GROUND
             } else {
                 apm::MavLandedState::MAV_LANDED_STATE_IN_AIR
             },
+        }),
+        id::AOA_SSA => M::AOA_SSA(apm::AOA_SSA_DATA {
+            time_usec: t.t_us,
+            AOA: t.angle_of_attack_rad().to_degrees() as f32,
+            SSA: t.sideslip_rad().to_degrees() as f32,
         }),
         id::AUTOPILOT_VERSION => {
             return Some(super::identity::autopilot_version(vtol_link::SystemId(0)));
@@ -582,6 +602,32 @@ pub fn statustext(severity: apm::MavSeverity, text: &str) -> apm::MavMessage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn extended_sys_state_carries_the_vtol_state_and_aoa_ssa_the_angles() {
+        let t = Telemetry {
+            vtol_state: VtolState::TransitionToFw,
+            air_velocity_body_m_s: Vector3::new(1.0, -1.0, 10.0),
+            ..Telemetry::default()
+        };
+        let Some(apm::MavMessage::EXTENDED_SYS_STATE(e)) = build(id::EXTENDED_SYS_STATE, &t, 0)
+        else {
+            panic!("no EXTENDED_SYS_STATE");
+        };
+        assert_eq!(
+            e.vtol_state,
+            apm::MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_FW
+        );
+        let Some(apm::MavMessage::AOA_SSA(a)) = build(id::AOA_SSA, &t, 0) else {
+            panic!("no AOA_SSA");
+        };
+        assert!(
+            (f64::from(a.AOA) - 0.1f64.atan().to_degrees()).abs() < 1e-3,
+            "{a:?}"
+        );
+        assert!(a.SSA > 0.0, "moving toward the right wing (-y_B): {a:?}");
+        assert!(can_produce(id::AOA_SSA));
+    }
 
     #[test]
     fn default_rates_and_overrides() {

@@ -3,6 +3,7 @@
 
 pub mod failsafe;
 pub mod globe;
+pub mod l1;
 pub mod mission;
 pub mod navigation;
 pub mod params;

@@ -98,4 +98,17 @@ impl Telemetry {
     pub fn angle_of_attack_rad(&self) -> f64 {
         aero::angle_of_attack_rad(&self.air_velocity_body_m_s)
     }
+
+    /// Sideslip, rad: the air-relative velocity's angle toward the right wing (−y_B in forward
+    /// flight, where x_B points down), asin(−v_y / V); 0 in still air.
+    #[must_use]
+    pub fn sideslip_rad(&self) -> f64 {
+        let v = &self.air_velocity_body_m_s;
+        let speed = v.norm();
+        if speed < 1e-9 {
+            0.0
+        } else {
+            (-v.y / speed).clamp(-1.0, 1.0).asin()
+        }
+    }
 }
