@@ -262,19 +262,7 @@ impl Endpoint {
                 after.push(super::identity::autopilot_version(self.sysid));
                 result::ACCEPTED
             }
-            cmd::DO_VTOL_TRANSITION => match p[0] as u32 {
-                // Hover (MC) is all the twin models; asking for it is a no-op success.
-                3 => result::ACCEPTED,
-                4 => {
-                    self.say(
-                        link,
-                        apm::MavSeverity::MAV_SEVERITY_WARNING,
-                        "Forward flight is not modelled",
-                    );
-                    result::DENIED
-                }
-                _ => result::DENIED,
-            },
+            cmd::DO_VTOL_TRANSITION => self.cmd_vtol_transition(link, p[0]),
             cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF => self.cmd_takeoff(link, p[6]),
             cmd::DO_REPOSITION => self.cmd_reposition(link, c),
             cmd::NAV_RETURN_TO_LAUNCH => self.apply_custom_mode(link, RTL_MODE),
@@ -308,6 +296,50 @@ impl Endpoint {
                 _ => result::UNSUPPORTED,
             },
             _ => result::UNSUPPORTED,
+        }
+    }
+
+    /// MAV_CMD_DO_VTOL_TRANSITION, where ArduPlane takes it: in AUTO, in the air. `to` is the
+    /// MAV_VTOL_STATE asked for (3 MC, 4 FW); asking for the phase the vehicle is in or going
+    /// to succeeds and changes nothing.
+    fn cmd_vtol_transition(&mut self, link: LinkKey, to: f32) -> u8 {
+        use crate::model::mode::VtolState;
+        let forward = match to as u32 {
+            3 => false,
+            4 => true,
+            _ => return result::DENIED,
+        };
+        let t = self.vehicle.telemetry();
+        let already = if forward {
+            matches!(t.vtol_state, VtolState::Fw | VtolState::TransitionToFw)
+        } else {
+            matches!(t.vtol_state, VtolState::Mc | VtolState::TransitionToMc)
+        };
+        if already {
+            return result::ACCEPTED;
+        }
+        if t.mode != FlightMode::Auto {
+            self.say(
+                link,
+                apm::MavSeverity::MAV_SEVERITY_WARNING,
+                "VTOL transition: only in AUTO",
+            );
+            return result::DENIED;
+        }
+        let started = if forward {
+            self.vehicle.start_forward_transition()
+        } else {
+            self.vehicle.start_back_transition()
+        };
+        if started {
+            result::ACCEPTED
+        } else {
+            self.say(
+                link,
+                apm::MavSeverity::MAV_SEVERITY_WARNING,
+                "VTOL transition: not flying",
+            );
+            result::DENIED
         }
     }
 

@@ -25,7 +25,9 @@ use super::commands::result;
 use super::{Endpoint, LinkKey, position};
 use crate::model::frames::paper_to_ned;
 use crate::model::mode::FlightMode;
+use crate::nav::fixed_wing::FixedWingInput;
 use crate::nav::globe::{deg_to_e7, valid_lat_lon};
+use crate::nav::l1::L1Params;
 use crate::nav::mission::{Limits, frame};
 use crate::nav::navigation::{
     NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused, loiter_entry_point,
@@ -69,6 +71,17 @@ impl Endpoint {
             wp_radius_m: self.params.value("WP_RADIUS"),
             speed_up_m_s: self.params.value("WP_SPEED_UP"),
             speed_dn_m_s: self.params.value("WP_SPEED_DN"),
+            fixed_wing: FixedWingInput {
+                vtol: t.vtol_state,
+                vel_ned_m_s: paper_to_ned(&t.vel_m_s),
+                airspeed_m_s: self.params.value("TRIM_ARSPD_CM") / 100.0,
+                l1: L1Params {
+                    period_s: self.params.value("NAVL1_PERIOD"),
+                    damping: self.params.value("NAVL1_DAMPING"),
+                },
+                loiter_radius_m: self.params.value("WP_LOITER_RAD"),
+                gravity_m_s2: self.vehicle.config().airframe.gravity_m_s2,
+            },
         };
         let r = f(&mut self.navigator, &inp, &mut events);
         self.apply_nav_events(events);
@@ -85,6 +98,13 @@ impl Endpoint {
                 }
                 NavEvent::SetMode(m) => self.vehicle.set_mode(m),
                 NavEvent::Info(text) => self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, &text),
+                NavEvent::Transition(forward) => {
+                    if forward {
+                        self.vehicle.start_forward_transition();
+                    } else {
+                        self.vehicle.start_back_transition();
+                    }
+                }
             }
         }
     }

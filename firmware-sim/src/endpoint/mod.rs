@@ -625,6 +625,8 @@ impl Endpoint {
 }
 
 #[cfg(test)]
+mod forward_mission_tests;
+#[cfg(test)]
 mod mission_tests;
 #[cfg(test)]
 mod params_tests;

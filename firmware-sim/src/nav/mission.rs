@@ -49,6 +49,16 @@ pub mod cmd {
     pub const NAV_VTOL_TAKEOFF: u16 = 84;
     /// MAV_CMD_NAV_VTOL_LAND: fly to the point (or stay) and land.
     pub const NAV_VTOL_LAND: u16 = 85;
+    /// MAV_CMD_DO_VTOL_TRANSITION: `param1` the MAV_VTOL_STATE to go to (3 MC, 4 FW).
+    pub const DO_VTOL_TRANSITION: u16 = 3000;
+}
+
+/// `MAV_VTOL_STATE` numbers a transition goes to.
+pub mod mav_vtol_state {
+    /// Multicopter (hover).
+    pub const MC: u8 = 3;
+    /// Fixed wing.
+    pub const FW: u8 = 4;
 }
 
 /// `MAV_FRAME` numbers.
@@ -321,11 +331,22 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
             | cmd::NAV_TAKEOFF
             | cmd::NAV_VTOL_TAKEOFF
             | cmd::NAV_VTOL_LAND
+            | cmd::DO_VTOL_TRANSITION
     );
     if !supported {
         return Err(Refusal::new(
             R::MAV_MISSION_UNSUPPORTED,
             format!("Mission item {seq}: {} is not supported", command_name(c)),
+        ));
+    }
+    let to = item.params[0];
+    if c == cmd::DO_VTOL_TRANSITION
+        && to != f32::from(mav_vtol_state::MC)
+        && to != f32::from(mav_vtol_state::FW)
+    {
+        return Err(Refusal::new(
+            R::MAV_MISSION_INVALID_PARAM1,
+            format!("Mission item {seq}: transition to state {to}, not 3 (MC) or 4 (FW)"),
         ));
     }
     if !item.has_position() {

@@ -2,6 +2,7 @@
 //! turns a mode and a mission into setpoints, and the vehicle's parameter table.
 
 pub mod failsafe;
+pub mod fixed_wing;
 pub mod globe;
 pub mod l1;
 pub mod mission;

@@ -30,9 +30,10 @@
 use nalgebra::{Vector2, Vector3};
 
 use crate::model::frames::ned_to_paper;
-use crate::model::mode::{FlightMode, Guidance};
+use crate::model::mode::{FlightMode, Guidance, VtolState};
+use crate::nav::fixed_wing::{self, FixedWingInput};
 use crate::nav::globe::horizontal_distance_m;
-use crate::nav::mission::{Limits, Mission, cmd};
+use crate::nav::mission::{Limits, Mission, cmd, mav_vtol_state};
 
 /// Navigation period, µs of sim time (50 Hz).
 pub const NAV_PERIOD_US: u64 = 20_000;
@@ -68,6 +69,8 @@ pub struct NavInput<'a> {
     pub speed_up_m_s: f64,
     /// `WP_SPEED_DN`, m/s.
     pub speed_dn_m_s: f64,
+    /// The vehicle's phase and what the fixed-wing legs need.
+    pub fixed_wing: FixedWingInput,
 }
 
 /// What the endpoint must tell the ground stations or do.
@@ -81,6 +84,8 @@ pub enum NavEvent {
     SetMode(FlightMode),
     /// An information text (STATUSTEXT, severity INFO).
     Info(String),
+    /// Start a transition: to forward flight (`true`) or back to a hover.
+    Transition(bool),
 }
 
 /// Why a GUIDED request is refused.
@@ -122,6 +127,21 @@ enum Leg {
     LandAt { xy: Vector2<f64>, z: f64 },
     /// Descending over the point to touch down (`last`: below [`LAND_FINAL_ALT_M`], on QLAND's law).
     Landing { xy: Vector2<f64>, last: bool },
+    /// On the wing: fly the line to the point (a waypoint or a loiter's centre).
+    Cruise {
+        from: Vector2<f64>,
+        xy: Vector2<f64>,
+        z: f64,
+    },
+    /// On the wing: circle the point (NAV_LOITER_TIME reached).
+    Circle { xy: Vector2<f64>, z: f64 },
+    /// On the wing toward a VTOL landing: the back transition starts
+    /// [`APPROACH_DISTANCE_M`] from the point.
+    Approach {
+        from: Vector2<f64>,
+        xy: Vector2<f64>,
+        z: f64,
+    },
 }
 
 /// The navigator (see the module docs).
@@ -183,12 +203,39 @@ impl Navigator {
     #[must_use]
     pub fn target_ned_m(&self) -> Option<Vector3<f64>> {
         match self.leg {
-            Leg::Takeoff { xy, z } | Leg::Goto { xy, z } | Leg::LandAt { xy, z } => {
-                Some(Vector3::new(xy.x, xy.y, z))
-            }
+            Leg::Takeoff { xy, z }
+            | Leg::Goto { xy, z }
+            | Leg::LandAt { xy, z }
+            | Leg::Cruise { xy, z, .. }
+            | Leg::Circle { xy, z }
+            | Leg::Approach { xy, z, .. } => Some(Vector3::new(xy.x, xy.y, z)),
             Leg::Landing { xy, .. } => Some(Vector3::new(xy.x, xy.y, 0.0)),
             Leg::Idle => None,
         }
+    }
+
+    /// The leg follows the vehicle's phase: a point is flown to on the wing once the vehicle
+    /// flies forward, in hover once it is back in a hover.
+    fn follow_phase(&mut self, inp: &NavInput<'_>) {
+        let here = inp.pos_ned_m.xy();
+        let wing = inp.fixed_wing.on_the_wing();
+        let hover = inp.fixed_wing.vtol == VtolState::Mc;
+        self.leg = match self.leg {
+            Leg::Goto { xy, z } if wing => Leg::Cruise { from: here, xy, z },
+            Leg::LandAt { xy, z } if wing => Leg::Approach { from: here, xy, z },
+            Leg::Cruise { xy, z, .. } | Leg::Circle { xy, z } if hover => {
+                self.z_cmd = inp.pos_ned_m.z;
+                Leg::Goto { xy, z }
+            }
+            Leg::Approach { xy, .. } if hover => {
+                self.z_cmd = inp.pos_ned_m.z;
+                Leg::LandAt {
+                    xy,
+                    z: inp.pos_ned_m.z,
+                }
+            }
+            leg => leg,
+        };
     }
 
     /// Takes note of mode changes, arming and disarming since the last call, starting what
@@ -313,6 +360,12 @@ impl Navigator {
                     Leg::LandAt { xy, z: here.z }
                 }
             }
+            cmd::DO_VTOL_TRANSITION => {
+                let forward = item.params[0] as u8 == mav_vtol_state::FW;
+                events.push(NavEvent::Transition(forward));
+                self.item_done(inp, events, "Transition");
+                return;
+            }
             cmd::NAV_RETURN_TO_LAUNCH => {
                 if inp.landed {
                     landing_here(&here)
@@ -368,10 +421,34 @@ impl Navigator {
         if !inp.mode.is_autonomous() || !inp.armed {
             return Guidance::Idle;
         }
+        self.follow_phase(inp);
         let here = inp.pos_ned_m;
         let radius = self.item_radius(inp);
         match self.leg {
-            Leg::Idle => {}
+            Leg::Idle | Leg::Circle { .. } => {}
+            Leg::Cruise { from, xy, z } => {
+                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
+                let loiter =
+                    inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
+                if inp.mode == FlightMode::Auto
+                    && (close <= radius || fixed_wing::passed(&from, &xy, &here.xy()))
+                {
+                    if loiter {
+                        let hold_s = self.item_hold_s(inp);
+                        self.hold_until_us = Some(inp.now_us + (hold_s * 1e6) as u64);
+                        self.leg = Leg::Circle { xy, z };
+                    } else {
+                        self.item_done(inp, events, "Reached waypoint");
+                    }
+                }
+            }
+            Leg::Approach { xy, .. } => {
+                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
+                if close <= fixed_wing::APPROACH_DISTANCE_M && inp.fixed_wing.vtol == VtolState::Fw
+                {
+                    events.push(NavEvent::Transition(false));
+                }
+            }
             Leg::Takeoff { xy, z } => {
                 if here.z <= z + TAKEOFF_ALT_TOLERANCE_M {
                     // At altitude: hold there.
@@ -410,6 +487,11 @@ impl Navigator {
                 }
             }
             Leg::Landing { last: true, .. } => {}
+        }
+        if matches!(self.leg, Leg::Circle { .. })
+            && self.hold_until_us.is_some_and(|t| inp.now_us >= t)
+        {
+            self.item_done(inp, events, "Loiter done");
         }
         // In AUTO a landing item is reached at touchdown (the vehicle then disarms itself).
         if inp.landed {
@@ -465,6 +547,12 @@ impl Navigator {
             // Down to the final height over the point, at the descent rate.
             Leg::Landing { xy, last: false } => (xy, 0.0),
             Leg::Takeoff { xy, z } | Leg::Goto { xy, z } | Leg::LandAt { xy, z } => (xy, z),
+            Leg::Cruise { from, xy, z } | Leg::Approach { from, xy, z } => {
+                return fixed_wing::track(&inp.fixed_wing, &inp.pos_ned_m, &from, &xy, z);
+            }
+            Leg::Circle { xy, z } => {
+                return fixed_wing::loiter(&inp.fixed_wing, &inp.pos_ned_m, &xy, z);
+            }
         };
         let dz = z - self.z_cmd;
         // NED: a negative dz is a climb.

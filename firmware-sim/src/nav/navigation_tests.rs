@@ -50,6 +50,7 @@ impl World {
             wp_radius_m: 0.3,
             speed_up_m_s: 1.0,
             speed_dn_m_s: 0.5,
+            fixed_wing: crate::nav::fixed_wing::FixedWingInput::default(),
         }
     }
 

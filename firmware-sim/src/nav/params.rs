@@ -212,6 +212,9 @@ pub static TABLE: &[ParamDef] = &[
     def("Q_TAILSIT_ANG_VT", I8, "deg", (5.0, 89.0), 75.0, RW, "Nose angle above the horizon that ends a back transition"),
     def("Q_TRANSITION_MS", I32, "ms", (500.0, 30000.0), 8000.0, RW, "A forward transition not done by then is aborted to QLOITER"),
     def("FW_ATT_BW", F32, "rad/s", (0.5, 20.0), 5.0, RW, "Bandwidth of the forward-flight attitude law"),
+    def("NAVL1_PERIOD", F32, "s", (1.0, 60.0), 10.0, RW, "Period of the L1 track guidance of the fixed-wing legs"),
+    def("NAVL1_DAMPING", F32, "", (0.6, 1.0), 0.75, RW, "Damping of the L1 track guidance"),
+    def("WP_LOITER_RAD", F32, "m", (10.0, 1000.0), 30.0, RW, "Radius of a fixed-wing NAV_LOITER_TIME circle"),
 ];
 
 /// Why a write was refused or a name not found.

@@ -1,0 +1,189 @@
+//! AUTO with fixed-wing legs: a VTOL take-off, a transition, a rectangle on the wing, a VTOL
+//! landing, frames in and out, sim time only.
+
+use mavlink::dialects::ardupilotmega as apm;
+
+use super::mission::{MISSION_ITEM_INT_ID, item_payload};
+use super::test_support::{acks, decode, param_set, raw_command, v2};
+use super::*;
+use crate::model::mode::{FlightMode, VtolState};
+use crate::nav::globe::GeoPoint;
+use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
+
+const GCS: LinkKey = LinkKey(1);
+
+fn endpoint() -> Endpoint {
+    let mut config = EndpointConfig::default();
+    config.vehicle.ideal_sensors = true;
+    config.vehicle.perfect_state = true;
+    let mut ep = Endpoint::new(config);
+    ep.add_link(GCS);
+    ep
+}
+
+fn command(command: u16, p: [f32; 7]) -> Frame {
+    raw_command(76, 33, command, &p)
+}
+
+/// A point `north_m`, `east_m` from the origin at `alt` m above home.
+fn item(command: u16, north_m: f64, east_m: f64, alt: f32) -> MissionItem {
+    let o = Params::new().origin();
+    let p: GeoPoint = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
+    MissionItem {
+        params: [0.0, 0.0, 0.0, f32::NAN],
+        x: p.lat_e7,
+        y: p.lon_e7,
+        z: alt,
+        command,
+        frame: frame::GLOBAL_RELATIVE_ALT_INT,
+        current: 0,
+        autocontinue: 1,
+    }
+}
+
+/// Uploads `items` as a GCS answering each request (the twin asks with MISSION_REQUEST, as
+/// ArduPilot does).
+#[allow(deprecated)]
+fn upload(ep: &mut Endpoint, items: &[MissionItem]) {
+    let count = apm::MavMessage::MISSION_COUNT(apm::MISSION_COUNT_DATA {
+        count: items.len() as u16,
+        target_system: 1,
+        target_component: 1,
+        mission_type: apm::MavMissionType::MAV_MISSION_TYPE_MISSION,
+        opaque_id: 0,
+    });
+    let mut out = ep.handle(GCS, &v2(&count));
+    loop {
+        let next = decode(&out).iter().find_map(|m| match m {
+            apm::MavMessage::MISSION_REQUEST_INT(r) => Some(r.seq),
+            apm::MavMessage::MISSION_REQUEST(r) => Some(r.seq),
+            _ => None,
+        });
+        let Some(seq) = next else { break };
+        let f = Frame::encode_payload_v2(
+            vtol_link::SystemId(255),
+            vtol_link::ComponentId(190),
+            9,
+            MISSION_ITEM_INT_ID,
+            &item_payload(seq, &items[usize::from(seq)], (1, 1), true),
+        )
+        .unwrap();
+        out = ep.handle(GCS, &f);
+    }
+    let acked = decode(&out).iter().any(|m| {
+        matches!(m, apm::MavMessage::MISSION_ACK(a)
+            if a.mavtype == apm::MavMissionResult::MAV_MISSION_ACCEPTED)
+    });
+    assert!(acked, "mission accepted: {:?}", decode(&out));
+}
+
+fn rectangle_mission() -> Vec<MissionItem> {
+    let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
+    transition.params[0] = 4.0;
+    transition.frame = frame::MISSION;
+    transition.x = 0;
+    transition.y = 0;
+    vec![
+        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        MissionItem {
+            x: 0,
+            y: 0,
+            ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 20.0)
+        },
+        transition,
+        item(mcmd::NAV_WAYPOINT, -100.0, 0.0, 20.0),
+        item(mcmd::NAV_WAYPOINT, -100.0, 100.0, 20.0),
+        item(mcmd::NAV_WAYPOINT, 0.0, 100.0, 20.0),
+        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 20.0),
+        item(mcmd::NAV_VTOL_LAND, -60.0, 50.0, 0.0),
+    ]
+}
+
+#[test]
+fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
+    let mut ep = endpoint();
+    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
+    upload(&mut ep, &rectangle_mission());
+    ep.handle(
+        GCS,
+        &command(
+            176,
+            [
+                1.0,
+                FlightMode::Auto.custom_mode() as f32,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        ),
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+        vec![(400, 0)]
+    );
+    let mut phases = vec![VtolState::Mc];
+    let (mut t, mut v_min_fw, mut z_min_fw, mut z_max_fw) =
+        (0u64, f64::INFINITY, f64::INFINITY, 0.0_f64);
+    let mut trace = Vec::new();
+    while t < 400_000_000 {
+        t += 20_000;
+        ep.tick(t);
+        let tel = ep.vehicle().telemetry();
+        if *phases.last().unwrap() != tel.vtol_state {
+            phases.push(tel.vtol_state);
+        }
+        if t % 1_000_000 == 0 {
+            trace.push(format!(
+                "{:4} {:?} {:?} pos {:6.1} {:6.1} {:5.1} V {:4.1} item {}",
+                t / 1_000_000,
+                tel.mode,
+                tel.vtol_state,
+                tel.pos_m.x,
+                tel.pos_m.y,
+                tel.pos_m.z,
+                tel.airspeed_m_s(),
+                ep.navigator.current()
+            ));
+        }
+        if tel.vtol_state == VtolState::Fw {
+            v_min_fw = v_min_fw.min(tel.airspeed_m_s());
+            z_min_fw = z_min_fw.min(tel.pos_m.z);
+            z_max_fw = z_max_fw.max(tel.pos_m.z);
+        }
+        if !tel.armed && t > 5_000_000 {
+            break;
+        }
+    }
+    let tel = ep.vehicle().telemetry();
+    let trace = trace.join("\n");
+    assert!(!tel.armed, "landed and disarmed:\n{trace}");
+    assert_ne!(
+        tel.state,
+        crate::model::vehicle::SystemState::Emergency,
+        "{trace}"
+    );
+    assert_eq!(
+        phases,
+        [
+            VtolState::Mc,
+            VtolState::TransitionToFw,
+            VtolState::Fw,
+            VtolState::TransitionToMc,
+            VtolState::Mc
+        ],
+        "{trace}"
+    );
+    assert!(
+        v_min_fw >= 10.0,
+        "airspeed on the wing fell to {v_min_fw:.1}:\n{trace}"
+    );
+    assert!(
+        z_min_fw > 17.0 && z_max_fw < 23.0,
+        "height on the wing {z_min_fw:.1}..{z_max_fw:.1}:\n{trace}"
+    );
+    let land = crate::model::frames::ned_to_paper(&nalgebra::Vector3::new(-60.0, 50.0, 0.0));
+    let miss = (tel.pos_m.xy() - land.xy()).norm();
+    assert!(miss <= 2.0, "landed {miss:.2} m from the target:\n{trace}");
+}
