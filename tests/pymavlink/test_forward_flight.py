@@ -1,0 +1,121 @@
+"""Forward flight as a ground station sees it: a mission that takes off vertically, transitions,
+flies a 400 m square on the wing in AUTO, transitions back and lands vertically, flown with
+pymavlink against the twin in lockstep (`docs/forward-flight.md`).
+
+The twin runs with ideal sensors (its controller then flies on the true state): the estimator
+is still the hover's, and forward flight on it is not built yet.
+"""
+
+import math
+
+import pytest
+from pymavlink import mavutil
+
+pytestmark = pytest.mark.vtol_twin(
+    speed="lockstep",
+    ideal_sensors=True,
+    params={"NAV_RADIUS_MAX": 1000, "SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
+)
+
+MAV = mavutil.mavlink
+EARTH_RADIUS_M = 6_378_100.0  # the twin's globe (nav::globe)
+VTOL_STATE_NAMES = {
+    MAV.MAV_VTOL_STATE_MC: "MC",
+    MAV.MAV_VTOL_STATE_TRANSITION_TO_FW: "TRANSITION_TO_FW",
+    MAV.MAV_VTOL_STATE_FW: "FW",
+    MAV.MAV_VTOL_STATE_TRANSITION_TO_MC: "TRANSITION_TO_MC",
+}
+LAND_NE_M = (-60.0, 50.0)
+
+
+def ack_of(m, command):
+    ack = m.recv_match(type="COMMAND_ACK", condition=f"COMMAND_ACK.command=={command}",
+                       blocking=True, timeout=5)
+    assert ack is not None, f"no COMMAND_ACK for command {command}"
+    return ack
+
+
+def square_mission(lat0: float, lon0: float) -> list:
+    """(command, frame, params, lat_e7, lon_e7, alt) of every item; item 0 is home."""
+
+    def at(north_m: float, east_m: float) -> tuple:
+        lat = lat0 + math.degrees(north_m / EARTH_RADIUS_M)
+        lon = lon0 + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+        return round(lat * 1e7), round(lon * 1e7)
+
+    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    wp = MAV.MAV_CMD_NAV_WAYPOINT
+    return [
+        (wp, rel, (0, 0, 0, 0), *at(0, 0), 0.0),
+        (MAV.MAV_CMD_NAV_VTOL_TAKEOFF, rel, (0, 0, 0, 0), 0, 0, 20.0),
+        (MAV.MAV_CMD_DO_VTOL_TRANSITION, MAV.MAV_FRAME_MISSION, (MAV.MAV_VTOL_STATE_FW, 0, 0, 0), 0, 0, 0.0),
+        (wp, rel, (0, 0, 0, 0), *at(-100, 0), 20.0),
+        (wp, rel, (0, 0, 0, 0), *at(-100, 100), 20.0),
+        # Its own acceptance radius: 5 m (WP_RADIUS elsewhere).
+        (wp, rel, (0, 5, 0, 0), *at(0, 100), 20.0),
+        (wp, rel, (0, 0, 0, 0), *at(0, 0), 20.0),
+        (MAV.MAV_CMD_NAV_VTOL_LAND, rel, (0, 0, 0, 0), *at(*LAND_NE_M), 0.0),
+    ]
+
+
+def upload(m, items) -> None:
+    m.mav.mission_count_send(1, 1, len(items), MAV.MAV_MISSION_TYPE_MISSION)
+    while True:
+        msg = m.recv_match(type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"],
+                           blocking=True, timeout=5)
+        assert msg is not None, "the upload stalled"
+        if msg.get_type() == "MISSION_ACK":
+            assert msg.type == MAV.MAV_MISSION_ACCEPTED, msg
+            return
+        command, frame, p, lat, lon, alt = items[msg.seq]
+        m.mav.mission_item_int_send(1, 1, msg.seq, frame, command, 0, 1, *p, lat, lon, alt,
+                                    MAV.MAV_MISSION_TYPE_MISSION)
+
+
+def test_vtol_take_off_square_on_the_wing_and_vtol_landing(vtol_twin):
+    m = vtol_twin.connect()
+    start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+    assert start is not None
+    upload(m, square_mission(start.lat / 1e7, start.lon / 1e7))
+
+    m.set_mode("AUTO")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
+    m.arducopter_arm()
+    assert ack_of(m, MAV.MAV_CMD_COMPONENT_ARM_DISARM).result == MAV.MAV_RESULT_ACCEPTED
+
+    states = ["MC"]
+    alt_at_start = None  # relative altitude when the current transition began, m
+    worst = {"TRANSITION_TO_FW": 0.0, "TRANSITION_TO_MC": 0.0}
+    alt = 0.0
+    fw_airspeeds = []
+    armed = True
+    for _ in range(300):  # two-second steps: at most 600 s of sim time
+        vtol_twin.advance(2)
+        while (msg := m.recv_match(blocking=False)) is not None:
+            kind = msg.get_type()
+            if kind == "GLOBAL_POSITION_INT":
+                alt = msg.relative_alt / 1000.0
+                if states[-1] in worst and alt_at_start is not None:
+                    worst[states[-1]] = max(worst[states[-1]], abs(alt - alt_at_start))
+            elif kind == "EXTENDED_SYS_STATE":
+                name = VTOL_STATE_NAMES[msg.vtol_state]
+                if name != states[-1]:
+                    states.append(name)
+                    alt_at_start = alt
+            elif kind == "VFR_HUD" and states[-1] == "FW":
+                fw_airspeeds.append(msg.airspeed)
+            elif kind == "HEARTBEAT" and msg.get_srcSystem() == 1:
+                armed = bool(msg.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
+        if not armed:
+            break
+
+    truth = vtol_twin.state()
+    assert not truth.armed and truth.landed, f"still flying: {truth}"
+    assert truth.system_status != "EMERGENCY", truth
+    assert states == ["MC", "TRANSITION_TO_FW", "FW", "TRANSITION_TO_MC", "MC"], states
+    assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
+    for phase, dz in worst.items():
+        assert dz <= 3.0, f"{phase} moved the altitude {dz:.2f} m"
+    north, east, _ = truth.position_ned_m
+    miss = math.hypot(north - LAND_NE_M[0], east - LAND_NE_M[1])
+    assert miss <= 2.0, f"landed {miss:.2f} m from the target"
