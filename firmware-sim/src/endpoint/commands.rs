@@ -378,7 +378,12 @@ impl Endpoint {
 
     pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
         let wanted = if custom_mode == RTL_MODE {
-            FlightMode::QRtl.custom_mode()
+            // RTL on the wing flies home as a plane; in a hover it is QRTL (Q_RTL_MODE).
+            use crate::model::mode::VtolState;
+            match self.vehicle.telemetry().vtol_state {
+                VtolState::Fw | VtolState::TransitionToFw => RTL_MODE,
+                _ => FlightMode::QRtl.custom_mode(),
+            }
         } else {
             custom_mode
         };

@@ -187,3 +187,90 @@ fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
     let miss = (tel.pos_m.xy() - land.xy()).norm();
     assert!(miss <= 2.0, "landed {miss:.2} m from the target:\n{trace}");
 }
+
+#[test]
+fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
+    let mut ep = endpoint();
+    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
+    let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
+    transition.params[0] = 4.0;
+    transition.frame = frame::MISSION;
+    let mut loiter = item(mcmd::NAV_LOITER_TIME, -100.0, 0.0, 20.0);
+    loiter.params[0] = 20.0;
+    upload(
+        &mut ep,
+        &[
+            item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+            MissionItem {
+                x: 0,
+                y: 0,
+                ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 20.0)
+            },
+            transition,
+            loiter,
+            item(mcmd::NAV_WAYPOINT, -200.0, 100.0, 20.0),
+        ],
+    );
+    ep.handle(
+        GCS,
+        &command(
+            176,
+            [
+                1.0,
+                FlightMode::Auto.custom_mode() as f32,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        ),
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+        vec![(400, 0)]
+    );
+    // Fly until the loiter is done and the next leg has begun.
+    let mut t = 0u64;
+    let mut circled_from = None;
+    while ep.navigator.current() < 4 || circled_from.is_none() {
+        t += 20_000;
+        ep.tick(t);
+        if ep.navigator.current() == 3 && circled_from.is_none() {
+            let p = ep.vehicle().telemetry().pos_m;
+            let d = (p.xy() - nalgebra::Vector2::new(100.0, 0.0)).norm();
+            if (20.0..40.0).contains(&d) && ep.vehicle().vtol_state() == VtolState::Fw {
+                circled_from = Some(t);
+            }
+        }
+        assert!(t < 200_000_000, "the loiter never ended");
+    }
+    assert_eq!(ep.navigator.current(), 4);
+    assert_eq!(ep.vehicle().vtol_state(), VtolState::Fw);
+    // RTL on the wing: RTL, then QRTL at home, landing there.
+    let out = ep.handle(GCS, &command(176, [1.0, 11.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
+    assert_eq!(acks(&out), vec![(176, 0)]);
+    assert_eq!(ep.vehicle().telemetry().mode, FlightMode::Rtl);
+    let mut modes = vec![FlightMode::Rtl];
+    while ep.vehicle().telemetry().armed {
+        t += 20_000;
+        ep.tick(t);
+        let m = ep.vehicle().telemetry().mode;
+        if *modes.last().unwrap() != m {
+            modes.push(m);
+        }
+        assert!(
+            t < 600_000_000,
+            "never landed: {:?}",
+            ep.vehicle().telemetry().pos_m
+        );
+    }
+    assert_eq!(modes, [FlightMode::Rtl, FlightMode::QRtl]);
+    let tel = ep.vehicle().telemetry();
+    assert_ne!(tel.state, crate::model::vehicle::SystemState::Emergency);
+    assert!(
+        tel.pos_m.xy().norm() < 2.0,
+        "landed at home: {:?}",
+        tel.pos_m
+    );
+}

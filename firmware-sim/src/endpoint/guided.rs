@@ -81,6 +81,7 @@ impl Endpoint {
                 },
                 loiter_radius_m: self.params.value("WP_LOITER_RAD"),
                 gravity_m_s2: self.vehicle.config().airframe.gravity_m_s2,
+                rtl_vtol_land: self.params.value("Q_RTL_MODE") >= 1.0,
             },
         };
         let r = f(&mut self.navigator, &inp, &mut events);

@@ -23,6 +23,9 @@ pub enum FlightMode {
     Auto,
     /// Fly home and land (ArduPlane's QRTL; RTL requests land here too).
     QRtl,
+    /// Fly home on the wing (picked in forward flight; in a hover RTL is flown as QRTL), then
+    /// land vertically or circle home (`Q_RTL_MODE`).
+    Rtl,
     /// Fixed-wing fly-by-wire: the sticks command bank and pitch, the throttle thrust
     /// (`forward-flight.md`). Picked in the air it starts a forward transition.
     Fbwa,
@@ -59,10 +62,11 @@ pub struct ForwardGuidance {
 
 impl FlightMode {
     /// Every mode, in number order.
-    pub const ALL: [Self; 9] = [
+    pub const ALL: [Self; 10] = [
         Self::Fbwa,
         Self::Cruise,
         Self::Auto,
+        Self::Rtl,
         Self::Guided,
         Self::QStabilize,
         Self::QHover,
@@ -82,6 +86,7 @@ impl FlightMode {
             Self::Guided => 15,
             Self::Auto => 10,
             Self::QRtl => 21,
+            Self::Rtl => 11,
             Self::Fbwa => 5,
             Self::Cruise => 7,
         }
@@ -104,6 +109,7 @@ impl FlightMode {
             Self::Guided => "GUIDED",
             Self::Auto => "AUTO",
             Self::QRtl => "QRTL",
+            Self::Rtl => "RTL",
             Self::Fbwa => "FBWA",
             Self::Cruise => "CRUISE",
         }
@@ -112,14 +118,17 @@ impl FlightMode {
     /// Whether the navigator chooses the targets (GUIDED, AUTO, QRTL).
     #[must_use]
     pub const fn is_autonomous(self) -> bool {
-        matches!(self, Self::Guided | Self::Auto | Self::QRtl)
+        matches!(self, Self::Guided | Self::Auto | Self::QRtl | Self::Rtl)
     }
 
     /// Whether the vehicle may be armed in this mode: not in the modes that can only come down
     /// (ArduPilot refuses to arm in a mode that cannot take off).
     #[must_use]
     pub const fn allows_arming(self) -> bool {
-        !matches!(self, Self::QLand | Self::QRtl | Self::Fbwa | Self::Cruise)
+        !matches!(
+            self,
+            Self::QLand | Self::QRtl | Self::Rtl | Self::Fbwa | Self::Cruise
+        )
     }
 
     /// Whether the mode flies as an aeroplane (picked in the air, it starts a forward

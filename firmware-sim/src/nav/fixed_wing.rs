@@ -27,6 +27,9 @@ pub struct FixedWingInput {
     pub loiter_radius_m: f64,
     /// Gravity, m/s².
     pub gravity_m_s2: f64,
+    /// `Q_RTL_MODE` = 1: RTL on the wing lands vertically at home (QRTL on arrival); 0: it
+    /// circles home at `WP_LOITER_RAD`.
+    pub rtl_vtol_land: bool,
 }
 
 impl Default for FixedWingInput {
@@ -41,6 +44,7 @@ impl Default for FixedWingInput {
             },
             loiter_radius_m: 30.0,
             gravity_m_s2: crate::model::airframe::GRAVITY_M_S2,
+            rtl_vtol_land: true,
         }
     }
 }

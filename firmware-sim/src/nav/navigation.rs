@@ -281,7 +281,7 @@ impl Navigator {
                     }
                 };
             }
-            FlightMode::QRtl => self.start_return(inp),
+            FlightMode::QRtl | FlightMode::Rtl => self.start_return(inp),
             FlightMode::Auto => {
                 // Resume where the mission was; a completed one starts over (ArduPilot).
                 let seq = if self.state == MissionState::Complete {
@@ -389,7 +389,13 @@ impl Navigator {
         // Nothing of AUTO is left to fly: a leg started in another mode (a GUIDED take-off
         // still climbing) must not complete as if it were a mission item.
         self.leg = Leg::Idle;
-        if inp.armed && !inp.landed {
+        if inp.armed && !inp.landed && inp.fixed_wing.on_the_wing() {
+            // On the wing, home as a plane (ArduPlane's RTL), then Q_RTL_MODE.
+            events.push(NavEvent::Info(
+                "Mission complete, changing mode to RTL".into(),
+            ));
+            events.push(NavEvent::SetMode(FlightMode::Rtl));
+        } else if inp.armed && !inp.landed {
             events.push(NavEvent::Info(
                 "Mission complete, changing mode to QRTL".into(),
             ));
@@ -442,11 +448,19 @@ impl Navigator {
                     }
                 }
             }
-            Leg::Approach { xy, .. } => {
+            Leg::Approach { xy, z, .. } => {
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                if close <= fixed_wing::APPROACH_DISTANCE_M && inp.fixed_wing.vtol == VtolState::Fw
-                {
-                    events.push(NavEvent::Transition(false));
+                let on_wing = inp.fixed_wing.vtol == VtolState::Fw;
+                if close <= fixed_wing::APPROACH_DISTANCE_M && on_wing {
+                    if inp.mode != FlightMode::Rtl {
+                        events.push(NavEvent::Transition(false));
+                    } else if inp.fixed_wing.rtl_vtol_land {
+                        // Q_RTL_MODE 1: home reached on the wing, land as QRTL does.
+                        events.push(NavEvent::Info("RTL: switching to QRTL".into()));
+                        events.push(NavEvent::SetMode(FlightMode::QRtl));
+                    } else if close <= inp.fixed_wing.loiter_radius_m {
+                        self.leg = Leg::Circle { xy, z };
+                    }
                 }
             }
             Leg::Takeoff { xy, z } => {

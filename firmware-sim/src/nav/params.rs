@@ -214,6 +214,7 @@ pub static TABLE: &[ParamDef] = &[
     def("FW_ATT_BW", F32, "rad/s", (0.5, 20.0), 5.0, RW, "Bandwidth of the forward-flight attitude law"),
     def("NAVL1_PERIOD", F32, "s", (1.0, 60.0), 10.0, RW, "Period of the L1 track guidance of the fixed-wing legs"),
     def("NAVL1_DAMPING", F32, "", (0.6, 1.0), 0.75, RW, "Damping of the L1 track guidance"),
+    def("Q_RTL_MODE", I8, "", (0.0, 1.0), 1.0, RW, "RTL on the wing: 1 lands vertically at home (QRTL on arrival), 0 circles home"),
     def("WP_LOITER_RAD", F32, "m", (10.0, 1000.0), 30.0, RW, "Radius of a fixed-wing NAV_LOITER_TIME circle"),
 ];
 

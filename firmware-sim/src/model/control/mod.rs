@@ -446,6 +446,7 @@ impl Controller {
             | FlightMode::Guided
             | FlightMode::Auto
             | FlightMode::QRtl
+            | FlightMode::Rtl
             | FlightMode::Fbwa
             | FlightMode::Cruise => {
                 let target = match (mode, self.land_hold_xy_m) {
@@ -505,6 +506,7 @@ impl Controller {
             | FlightMode::Guided
             | FlightMode::Auto
             | FlightMode::QRtl
+            | FlightMode::Rtl
             | FlightMode::Fbwa
             | FlightMode::Cruise => (yaw_setpoint, 0.0),
         };
@@ -526,6 +528,7 @@ impl Controller {
             | FlightMode::Guided
             | FlightMode::Auto
             | FlightMode::QRtl
+            | FlightMode::Rtl
             | FlightMode::Fbwa
             | FlightMode::Cruise => Some(altitude::altitude_accel_m_s2(
                 gains.alt_kd,
