@@ -73,6 +73,22 @@ def upload(m, items) -> None:
 
 
 def test_vtol_take_off_square_on_the_wing_and_vtol_landing(vtol_twin):
+    fly_square(vtol_twin)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the hover's position loops cannot yet hold a 3 m/s wind (no integral action): the "
+    "vertical take-off is blown over; forward flight itself holds its airspeed and height in it "
+    "(model::vehicle::forward_tests::cruise_in_a_3_m_s_wind_with_gusts_holds_airspeed_and_height)",
+)
+def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
+    vtol_twin.wind(3.0, direction_deg=45, turbulence_m_s=0.5)
+    fly_square(vtol_twin)
+
+
+def fly_square(vtol_twin) -> None:
+    """Flies the square mission and checks what a ground station sees of it."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
     assert start is not None

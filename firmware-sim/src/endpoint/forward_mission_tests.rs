@@ -101,8 +101,15 @@ fn rectangle_mission() -> Vec<MissionItem> {
 
 #[test]
 fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
+    fly_rectangle(&[]);
+}
+
+fn fly_rectangle(params: &[(&str, f32)]) {
     let mut ep = endpoint();
     ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
+    for (name, value) in params {
+        ep.handle(GCS, &v2(&param_set(name, *value)));
+    }
     upload(&mut ep, &rectangle_mission());
     ep.handle(
         GCS,

@@ -126,3 +126,31 @@ fn a_fixed_wing_mode_on_the_ground_starts_no_transition() {
     assert_eq!(v.vtol_state(), VtolState::Mc);
     assert!(v.arm(false).is_err(), "no arming in a fixed-wing mode");
 }
+
+#[test]
+fn cruise_in_a_3_m_s_wind_with_gusts_holds_airspeed_and_height() {
+    let mut v = hovering(20.0);
+    v.set_wind(Vector3::new(2.1, 2.1, 0.0), 0.5);
+    v.set_mode(FlightMode::Cruise);
+    let dz_forward = fly_until(&mut v, 10.0, |v| v.vtol_state() == VtolState::Fw);
+    assert_eq!(
+        v.vtol_state(),
+        VtolState::Fw,
+        "forward transition done in the wind"
+    );
+    assert!(
+        dz_forward <= 3.0,
+        "forward transition moved the height {dz_forward:.2} m"
+    );
+    fly_until(&mut v, 10.0, |_| false);
+    let (mut v_min, mut dz_max) = (f64::INFINITY, 0.0_f64);
+    let steps = (20.0 / v.physics_dt_s()).round() as u64;
+    for _ in 0..steps {
+        v.step();
+        v_min = v_min.min(v.telemetry().airspeed_m_s());
+        dz_max = dz_max.max((v.telemetry().pos_m.z - 20.0).abs());
+        assert_ne!(v.telemetry().state, SystemState::Emergency);
+    }
+    assert!(v_min >= 10.0, "airspeed fell to {v_min:.2} m/s");
+    assert!(dz_max <= 2.0, "height off by {dz_max:.2} m in gusts");
+}
