@@ -562,11 +562,22 @@ impl Vehicle {
         let af = &self.config.airframe;
         self.battery_pending_s += self.control_dt_s;
         if self.battery_pending_s >= BATTERY_PERIOD_S - 1e-9 {
-            self.battery.step(
+            let w = self.actuators.state.rotor_speed_rad_s;
+            // The thrust's work on the inflow (forward flight, climbs): `physical` mode only.
+            let work = match self.config.model {
+                ModelMode::Physical => {
+                    af.k_thrust_n_per_rad2_s2
+                        * (w[0] * w[0] + w[1] * w[1])
+                        * self.telemetry.air_velocity_body_m_s.z.max(0.0)
+                }
+                ModelMode::Paper => 0.0,
+            };
+            self.battery.step_with_work(
                 self.battery_pending_s,
-                self.actuators.state.rotor_speed_rad_s,
-                self.config.airframe.rotor_arm_m,
-                self.config.airframe.k_drag_n_per_rad2_s2,
+                w,
+                af.rotor_arm_m,
+                af.k_drag_n_per_rad2_s2,
+                work,
             );
             self.battery_pending_s = 0.0;
             self.telemetry.battery = *self.battery.state();

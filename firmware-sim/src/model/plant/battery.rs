@@ -132,10 +132,25 @@ impl Battery {
     /// Draws the current for `dt_s` with the rotors at these speeds (rad/s): `rotor_arm_m ×
     /// k_drag × ω³` is each shaft's power.
     pub fn step(&mut self, dt_s: f64, rotor_speed_rad_s: [f64; 2], rotor_arm_m: f64, k_drag: f64) {
+        self.step_with_work(dt_s, rotor_speed_rad_s, rotor_arm_m, k_drag, 0.0);
+    }
+
+    /// [`Battery::step`] with the work the thrust does on the air flowing through the rotors,
+    /// T·V with V the inflow along the thrust axis, W: the power a propeller needs on top of its
+    /// static power when the air meets it at speed (forward flight, a climb). Zero in hover.
+    pub fn step_with_work(
+        &mut self,
+        dt_s: f64,
+        rotor_speed_rad_s: [f64; 2],
+        rotor_arm_m: f64,
+        k_drag: f64,
+        thrust_work_w: f64,
+    ) {
         let shaft_w: f64 = rotor_speed_rad_s
             .iter()
             .map(|w| rotor_arm_m * k_drag * w.abs().powi(3))
-            .sum();
+            .sum::<f64>()
+            + thrust_work_w.max(0.0);
         let soc = 1.0 - self.state.consumed_mah / self.config.capacity_mah.max(1.0);
         let ocv = self.open_circuit_v(soc);
         // P = V·I with V = ocv − R·I: the smaller root of R·I² − ocv·I + P = 0.

@@ -154,3 +154,40 @@ fn cruise_in_a_3_m_s_wind_with_gusts_holds_airspeed_and_height() {
     assert!(v_min >= 10.0, "airspeed fell to {v_min:.2} m/s");
     assert!(dz_max <= 2.0, "height off by {dz_max:.2} m in gusts");
 }
+
+/// Mean electrical power over `seconds`, W.
+fn mean_power_w(v: &mut Vehicle, seconds: f64) -> f64 {
+    let j0 = v.telemetry().battery.consumed_j;
+    fly_until(v, seconds, |_| false);
+    (v.telemetry().battery.consumed_j - j0) / seconds
+}
+
+#[test]
+fn the_battery_pays_for_the_rotors_work_in_every_phase_and_cruise_costs_less_than_hover() {
+    let mut v = hovering(20.0);
+    fly_until(&mut v, 2.0, |_| false);
+    let hover_w = mean_power_w(&mut v, 10.0);
+    v.set_mode(FlightMode::Cruise);
+    let t0 = v.time_s();
+    let j0 = v.telemetry().battery.consumed_j;
+    fly_until(&mut v, 10.0, |v| v.vtol_state() == VtolState::Fw);
+    let transition_w = (v.telemetry().battery.consumed_j - j0) / (v.time_s() - t0);
+    fly_until(&mut v, 20.0, |_| false);
+    let cruise_w = mean_power_w(&mut v, 20.0);
+    // Hover: about 16 W of shaft power per rotor through a 60 % efficient drive.
+    assert!((45.0..70.0).contains(&hover_w), "hover {hover_w:.1} W");
+    assert!(
+        transition_w > hover_w,
+        "the transition ({transition_w:.1} W) costs more than hover"
+    );
+    assert!(
+        cruise_w < 0.6 * hover_w,
+        "cruise {cruise_w:.1} W against hover {hover_w:.1} W"
+    );
+    // The thrust's work on the air at 12 m/s is part of it: cruise is not free.
+    let thrust = v.telemetry().control.fz_n;
+    assert!(
+        cruise_w > thrust * 12.0 / 0.6,
+        "cruise {cruise_w:.1} W for {thrust:.2} N at 12 m/s"
+    );
+}
