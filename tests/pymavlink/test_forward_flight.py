@@ -2,8 +2,8 @@
 flies a 400 m square on the wing in AUTO, transitions back and lands vertically, flown with
 pymavlink against the twin in lockstep (`docs/forward-flight.md`).
 
-The twin runs with ideal sensors (its controller then flies on the true state): the estimator
-is still the hover's, and forward flight on it is not built yet.
+The twin flies on its noisy sensors and its estimators (the hover's, and the forward-flight
+attitude filter from the forward transition to the end of the back transition).
 """
 
 import math
@@ -13,7 +13,6 @@ from pymavlink import mavutil
 
 pytestmark = pytest.mark.vtol_twin(
     speed="lockstep",
-    ideal_sensors=True,
     params={"NAV_RADIUS_MAX": 1000, "SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
 )
 

@@ -13,9 +13,14 @@ use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
 const GCS: LinkKey = LinkKey(1);
 
 fn endpoint() -> Endpoint {
+    endpoint_with(true)
+}
+
+/// The endpoint on the true state (`perfect`) or on the noisy sensors and the estimators.
+fn endpoint_with(perfect: bool) -> Endpoint {
     let mut config = EndpointConfig::default();
-    config.vehicle.ideal_sensors = true;
-    config.vehicle.perfect_state = true;
+    config.vehicle.ideal_sensors = perfect;
+    config.vehicle.perfect_state = perfect;
     let mut ep = Endpoint::new(config);
     ep.add_link(GCS);
     ep
@@ -101,11 +106,15 @@ fn rectangle_mission() -> Vec<MissionItem> {
 
 #[test]
 fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
-    fly_rectangle(&[]);
+    fly_rectangle(endpoint(), &[]);
 }
 
-fn fly_rectangle(params: &[(&str, f32)]) {
-    let mut ep = endpoint();
+#[test]
+fn the_same_mission_on_the_noisy_sensors_and_the_estimators() {
+    fly_rectangle(endpoint_with(false), &[]);
+}
+
+fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
     ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
     for (name, value) in params {
         ep.handle(GCS, &v2(&param_set(name, *value)));
@@ -126,13 +135,18 @@ fn fly_rectangle(params: &[(&str, f32)]) {
             ],
         ),
     );
+    // The gyros calibrate for 1 s after power-up.
+    let mut t = 0u64;
+    while t < 2_000_000 {
+        t += 20_000;
+        ep.tick(t);
+    }
     assert_eq!(
         acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
         vec![(400, 0)]
     );
     let mut phases = vec![VtolState::Mc];
-    let (mut t, mut v_min_fw, mut z_min_fw, mut z_max_fw) =
-        (0u64, f64::INFINITY, f64::INFINITY, 0.0_f64);
+    let (mut v_min_fw, mut z_min_fw, mut z_max_fw) = (f64::INFINITY, f64::INFINITY, 0.0_f64);
     let mut trace = Vec::new();
     while t < 400_000_000 {
         t += 20_000;
@@ -141,9 +155,11 @@ fn fly_rectangle(params: &[(&str, f32)]) {
         if *phases.last().unwrap() != tel.vtol_state {
             phases.push(tel.vtol_state);
         }
-        if t % 1_000_000 == 0 {
+        if t.is_multiple_of(500_000) {
+            let e =
+                tel.euler.rotation_body_to_inertial() - tel.euler_est.rotation_body_to_inertial();
             trace.push(format!(
-                "{:4} {:?} {:?} pos {:6.1} {:6.1} {:5.1} V {:4.1} item {}",
+                "{:4} {:?} {:?} pos {:6.1} {:6.1} {:5.1} V {:4.1} item {} err {:.3}",
                 t / 1_000_000,
                 tel.mode,
                 tel.vtol_state,
@@ -151,7 +167,8 @@ fn fly_rectangle(params: &[(&str, f32)]) {
                 tel.pos_m.y,
                 tel.pos_m.z,
                 tel.airspeed_m_s(),
-                ep.navigator.current()
+                ep.navigator.current(),
+                e.norm()
             ));
         }
         if tel.vtol_state == VtolState::Fw {

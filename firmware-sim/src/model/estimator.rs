@@ -285,6 +285,18 @@ impl Estimator {
         self.gyro_bias_rad_s.x += k4 / g * r_yh * dt;
     }
 
+    /// Takes over from the forward-flight filter at the end of a back transition: its
+    /// attitude, and the position sensor's position and velocity for the position-aided part
+    /// (this filter was not updated in forward flight). The gyro biases are kept.
+    pub fn realign(&mut self, euler: Euler, pos_m: &Vector3<f64>, vel_m_s: &Vector3<f64>) {
+        self.euler = euler;
+        self.psi_history_rad = [euler.psi - self.psi_shift_rad; NAV_HISTORY];
+        self.pos_m = *pos_m;
+        self.vel_m_s = *vel_m_s;
+        self.pos_history_m = [*pos_m; NAV_HISTORY];
+        self.nav_initialised = true;
+    }
+
     /// Estimated attitude.
     #[must_use]
     pub fn euler(&self) -> Euler {

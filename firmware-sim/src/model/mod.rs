@@ -5,6 +5,7 @@
 pub mod airframe;
 pub mod control;
 pub mod estimator;
+pub mod estimator_forward;
 pub mod frames;
 pub mod integrator;
 pub mod mode;

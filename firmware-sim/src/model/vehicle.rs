@@ -468,12 +468,15 @@ impl Vehicle {
             let heading = (self.config.heading_sensor
                 && self.telemetry.mode != FlightMode::QStabilize)
                 .then_some(fix.heading_rad);
-            // The thrust the firmware commanded last tick stands in for the missing z axis of
-            // the accelerometer (the motors lag it by their 40 ms time constant).
-            let thrust = (self.telemetry.armed && !self.on_ground)
-                .then(|| self.telemetry.control.fz_n / af.mass_kg);
-            self.estimator.set_thrust_accel(thrust);
-            self.estimator.update(&imu, Some(&fix.pos_m), heading);
+            // Forward flight has its own filter (`forward_flight::forward_estimate`).
+            if !self.forward_estimate(&imu, &fix, heading) {
+                // The thrust the firmware commanded last tick stands in for the missing z axis
+                // of the accelerometer (the motors lag it by their 40 ms time constant).
+                let thrust = (self.telemetry.armed && !self.on_ground)
+                    .then(|| self.telemetry.control.fz_n / self.config.airframe.mass_kg);
+                self.estimator.set_thrust_accel(thrust);
+                self.estimator.update(&imu, Some(&fix.pos_m), heading);
+            }
         }
 
         // The law flown this tick: the mode's own, or the autonomous modes' guidance (None:
@@ -536,16 +539,18 @@ impl Vehicle {
                 pilot,
             }
         } else {
+            // The hover estimator's attitude, or the forward-flight filter's on the wing.
+            let (est_euler, est_omega) = self.estimated_attitude();
             ControlInput {
                 dt_s: self.control_dt_s,
                 mode,
                 euler: Euler {
                     psi: crate::model::frames::wrap_pi(
-                        self.estimator.euler().psi + self.chain_heading_error_rad,
+                        est_euler.psi + self.chain_heading_error_rad,
                     ),
-                    ..self.estimator.euler()
+                    ..est_euler
                 },
-                omega_body_rad_s: self.estimator.omega_rad_s(),
+                omega_body_rad_s: est_omega,
                 pos_m: fix.pos_m,
                 vel_m_s: fix.vel_m_s,
                 setpoint_m: self.setpoint_m,

@@ -102,7 +102,6 @@ pub struct ForwardInput {
 pub struct ForwardLaw {
     tecs: Tecs,
     energy_active: bool,
-    last_thrust_n: f64,
     pwm_residual_us: [f64; 5],
 }
 
@@ -189,9 +188,9 @@ impl ForwardLaw {
             } => {
                 let drag = -(loads.force_body_n.z);
                 if !self.energy_active {
+                    // A fresh start: the transition's thrust held the height at a steep nose;
+                    // on the wing the drag and the demanded energy rate set it.
                     self.tecs.reset();
-                    // Start from the thrust of the last tick (no step at the hand-over).
-                    self.tecs.preload_thrust(self.last_thrust_n - drag.max(0.0));
                     self.energy_active = true;
                 }
                 let out = self.tecs.update(
@@ -228,7 +227,6 @@ impl ForwardLaw {
             }
         };
         let thrust = thrust.clamp(THRUST_MIN_WEIGHTS * m * g, fz_max);
-        self.last_thrust_n = thrust;
         let nose_rad = nose_rad.clamp(NOSE_ANGLE_MIN_RAD, std::f64::consts::FRAC_PI_2);
 
         // 2. Attitude: the nose follows the air's heading once the wing flies, the command's

@@ -84,12 +84,6 @@ impl Tecs {
         *self = Self::default();
     }
 
-    /// Starts the thrust integrator at `thrust_n` less the feed-forward the first tick will
-    /// compute, so the thrust does not jump when TECS takes over from a transition.
-    pub fn preload_thrust(&mut self, offset_n: f64) {
-        self.thrust_integ_n = offset_n;
-    }
-
     /// One tick.
     pub fn update(&mut self, lim: &TecsLimits, i: &TecsInput) -> TecsOutput {
         let g = i.gravity_m_s2;

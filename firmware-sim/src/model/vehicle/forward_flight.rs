@@ -11,10 +11,17 @@ use crate::model::control::forward::{
     self, ForwardCommand, ForwardInput, ForwardLaw, Longitudinal,
 };
 use crate::model::control::{ControlInput, ControlOutput, PilotInput, forward_gains};
-use crate::model::frames::wrap_pi;
+use nalgebra::Vector3;
+
+use crate::model::estimator_forward::ForwardAttitude;
+use crate::model::frames::{Euler, wrap_pi};
 use crate::model::mode::{FlightMode, Guidance, VtolState};
 use crate::model::plant::aero;
+use crate::model::sensors::{ImuSample, PositionFix};
 
+/// The forward transition ends this far above `ARSPD_FBW_MIN`, m/s: the energy controller
+/// takes over with the thrust of level flight, and the airspeed dips a little as it does.
+const FW_ENTRY_MARGIN_M_S: f64 = 0.5;
 /// Time constant of CRUISE's heading hold, s.
 const HEADING_TIME_CONST_S: f64 = 2.0;
 /// Full-stick nose angle change in FBWA, rad.
@@ -48,6 +55,9 @@ pub struct ForwardFlight {
     aborted: bool,
     /// The back transition's first stage: slowing down on the wing at constant height.
     slowing: bool,
+    /// The attitude filter of forward flight (estimator mode only; from the first tick of a
+    /// forward transition to the end of the back transition).
+    attitude: Option<ForwardAttitude>,
 }
 
 impl ForwardFlight {
@@ -145,6 +155,7 @@ impl Vehicle {
 
     /// Drops back to hover at once (disarm, crash, landing).
     pub(super) fn forward_reset(&mut self) {
+        self.forward.attitude = None;
         self.forward.state = VtolState::Mc;
         self.forward.law.reset();
         self.telemetry.vtol_state = VtolState::Mc;
@@ -171,7 +182,7 @@ impl Vehicle {
                 );
                 f.nose_cmd_rad = (f.nose_cmd_rad - gains.transition_rate_fw_rad_s * dt).max(level);
                 let from_vertical = std::f64::consts::FRAC_PI_2 - nose_angle_rad(&r);
-                if airspeed >= gains.airspeed_min_m_s
+                if airspeed >= gains.airspeed_min_m_s + FW_ENTRY_MARGIN_M_S
                     && from_vertical >= gains.transition_angle_fw_rad
                 {
                     f.state = VtolState::Fw;
@@ -213,6 +224,10 @@ impl Vehicle {
                 {
                     // The hover holds where the transition ended, as ArduPlane's does.
                     let hold = input.pos_m;
+                    if let Some(att) = self.forward.attitude.take() {
+                        self.estimator
+                            .realign(att.euler(), &input.pos_m, &input.vel_m_s);
+                    }
                     self.forward_reset();
                     self.controller.reset();
                     if !self.telemetry.mode.is_autonomous() {
@@ -240,6 +255,58 @@ impl Vehicle {
                 .law
                 .update(&self.config.airframe, &gains, &fin, &cmd),
         )
+    }
+
+    /// Updates the forward-flight attitude filter in the forward phases (`estimator_forward`);
+    /// returns false in hover, where the hover estimator runs.
+    pub(super) fn forward_estimate(
+        &mut self,
+        imu: &ImuSample,
+        fix: &PositionFix,
+        heading_rad: Option<f64>,
+    ) -> bool {
+        if !self.forward.state.is_forward() || !self.telemetry.armed {
+            self.forward.attitude = None;
+            return false;
+        }
+        let af = &self.config.airframe;
+        let estimator = &self.estimator;
+        let att = self.forward.attitude.get_or_insert_with(|| {
+            ForwardAttitude::new(estimator.euler(), estimator.gyro_bias_rad_s())
+        });
+        // The accelerometer's missing z axis: the commanded thrust and the modelled
+        // aerodynamic force along the nose, from the airspeed sensor's air velocity.
+        let aero_z = aero::loads(
+            af,
+            &self.telemetry.air_velocity_body_m_s,
+            &self.actuators.state.rotor_speed_rad_s,
+        )
+        .force_body_n
+        .z;
+        let bias = estimator.accel_bias_m_s2();
+        let force = Vector3::new(
+            imu.accel_m_s2[0] - bias[0],
+            imu.accel_m_s2[1] - bias[1],
+            (self.telemetry.control.fz_n + aero_z) / af.mass_kg,
+        );
+        att.update(
+            self.control_dt_s,
+            af.gravity_m_s2,
+            &imu.gyro_rad_s,
+            &force,
+            &fix.vel_m_s,
+            heading_rad,
+        );
+        true
+    }
+
+    /// The attitude and body rates the controller flies on in estimator mode: the forward
+    /// filter's in the forward phases, the hover estimator's otherwise.
+    pub(super) fn estimated_attitude(&self) -> (Euler, Vector3<f64>) {
+        match &self.forward.attitude {
+            Some(att) if self.forward.state.is_forward() => (att.euler(), att.omega_rad_s()),
+            _ => (self.estimator.euler(), self.estimator.omega_rad_s()),
+        }
     }
 
     fn transition_command(&self) -> ForwardCommand {

@@ -7,9 +7,14 @@ use crate::model::mode::VtolState;
 
 /// A vehicle hovering armed at `height` in QLOITER, on the true state.
 fn hovering(height: f64) -> Vehicle {
+    hovering_with(height, true)
+}
+
+/// As [`hovering`], on the true state (`perfect`) or on its noisy sensors and estimators.
+fn hovering_with(height: f64, perfect: bool) -> Vehicle {
     Vehicle::new(VehicleConfig {
-        ideal_sensors: true,
-        perfect_state: true,
+        ideal_sensors: perfect,
+        perfect_state: perfect,
         armed: true,
         mode: FlightMode::QLoiter,
         initial: InitialState {
@@ -44,7 +49,16 @@ fn fly_until(v: &mut Vehicle, limit_s: f64, done: impl Fn(&Vehicle) -> bool) -> 
 
 #[test]
 fn cruise_transitions_flies_level_and_comes_back_to_a_hover() {
-    let mut v = hovering(20.0);
+    cruise_and_back(hovering(20.0));
+}
+
+#[test]
+fn the_same_on_the_noisy_sensors_and_the_estimators() {
+    cruise_and_back(hovering_with(20.0, false));
+}
+
+/// Hover at 20 m, CRUISE, forward transition, 20 s level, QLOITER, back transition, hover.
+fn cruise_and_back(mut v: Vehicle) {
     fly_until(&mut v, 2.0, |_| false);
     v.set_mode(FlightMode::Cruise);
     assert_eq!(v.vtol_state(), VtolState::TransitionToFw);
