@@ -155,3 +155,20 @@ fn save_is_atomic_and_loads_back() {
         Err(ParamFileError::Io { .. })
     ));
 }
+
+#[test]
+fn forward_flight_cross_checks_refuse_a_write_and_say_why() {
+    let mut p = Params::new();
+    // Below the stall speed (5.5 m/s).
+    let e = p.set("ARSPD_FBW_MIN", 5.0).unwrap_err();
+    assert!(e.to_string().contains("stall speed"), "{e}");
+    assert_eq!(p.value("ARSPD_FBW_MIN"), 10.0);
+    // The trim airspeed above ARSPD_FBW_MAX.
+    let e = p.set("TRIM_ARSPD_CM", 2000.0).unwrap_err();
+    assert!(e.to_string().contains("TRIM_ARSPD_CM"), "{e}");
+    assert_eq!(p.value("TRIM_ARSPD_CM"), 1200.0);
+    // A consistent change is taken and reaches the gains.
+    p.set("ARSPD_FBW_MAX", 20.0).unwrap();
+    p.set("TRIM_ARSPD_CM", 1500.0).unwrap();
+    assert!((p.gains().forward.airspeed_trim_m_s - 15.0).abs() < 1e-9);
+}
