@@ -432,37 +432,7 @@ impl Navigator {
         let radius = self.item_radius(inp);
         match self.leg {
             Leg::Idle | Leg::Circle { .. } => {}
-            Leg::Cruise { from, xy, z } => {
-                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                let loiter =
-                    inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
-                if inp.mode == FlightMode::Auto
-                    && (close <= radius || fixed_wing::passed(&from, &xy, &here.xy()))
-                {
-                    if loiter {
-                        let hold_s = self.item_hold_s(inp);
-                        self.hold_until_us = Some(inp.now_us + (hold_s * 1e6) as u64);
-                        self.leg = Leg::Circle { xy, z };
-                    } else {
-                        self.item_done(inp, events, "Reached waypoint");
-                    }
-                }
-            }
-            Leg::Approach { xy, z, .. } => {
-                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                let on_wing = inp.fixed_wing.vtol == VtolState::Fw;
-                if close <= fixed_wing::APPROACH_DISTANCE_M && on_wing {
-                    if inp.mode != FlightMode::Rtl {
-                        events.push(NavEvent::Transition(false));
-                    } else if inp.fixed_wing.rtl_vtol_land {
-                        // Q_RTL_MODE 1: home reached on the wing, land as QRTL does.
-                        events.push(NavEvent::Info("RTL: switching to QRTL".into()));
-                        events.push(NavEvent::SetMode(FlightMode::QRtl));
-                    } else if close <= inp.fixed_wing.loiter_radius_m {
-                        self.leg = Leg::Circle { xy, z };
-                    }
-                }
-            }
+            Leg::Cruise { .. } | Leg::Approach { .. } => self.wing_leg_step(inp, events, radius),
             Leg::Takeoff { xy, z } => {
                 if here.z <= z + TAKEOFF_ALT_TOLERANCE_M {
                     // At altitude: hold there.
@@ -512,6 +482,47 @@ impl Navigator {
             self.landing_done(inp, events);
         }
         self.guidance(dt_s, inp)
+    }
+
+    /// A fixed-wing leg's step: a waypoint reached (inside its radius or passed), a loiter
+    /// point reached (the circle starts), an approach close enough for the back transition (or,
+    /// in RTL, for QRTL or the circle of `Q_RTL_MODE`).
+    fn wing_leg_step(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>, radius: f64) {
+        let here = inp.pos_ned_m;
+        match self.leg {
+            Leg::Cruise { from, xy, z } => {
+                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
+                let loiter =
+                    inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
+                if inp.mode == FlightMode::Auto
+                    && (close <= radius || fixed_wing::passed(&from, &xy, &here.xy()))
+                {
+                    if loiter {
+                        let hold_s = self.item_hold_s(inp);
+                        self.hold_until_us = Some(inp.now_us + (hold_s * 1e6) as u64);
+                        self.leg = Leg::Circle { xy, z };
+                    } else {
+                        self.item_done(inp, events, "Reached waypoint");
+                    }
+                }
+            }
+            Leg::Approach { xy, z, .. } => {
+                let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
+                let on_wing = inp.fixed_wing.vtol == VtolState::Fw;
+                if close <= fixed_wing::APPROACH_DISTANCE_M && on_wing {
+                    if inp.mode != FlightMode::Rtl {
+                        events.push(NavEvent::Transition(false));
+                    } else if inp.fixed_wing.rtl_vtol_land {
+                        // Q_RTL_MODE 1: home reached on the wing, land as QRTL does.
+                        events.push(NavEvent::Info("RTL: switching to QRTL".into()));
+                        events.push(NavEvent::SetMode(FlightMode::QRtl));
+                    } else if close <= inp.fixed_wing.loiter_radius_m {
+                        self.leg = Leg::Circle { xy, z };
+                    }
+                }
+            }
+            _ => {}
+        }
     }
 
     /// AUTO: the landing the current item asked for is over (touchdown or disarm).

@@ -162,6 +162,8 @@ impl Vehicle {
     }
 
     /// The forward-flight law's output this tick, or `None` in hover (the paper's law flies).
+    /// One function for the three phases: each ends or aborts on the state the others read,
+    /// and splitting them would pass the same half-dozen values back and forth.
     pub(super) fn forward_tick(&mut self, input: &ControlInput) -> Option<ControlOutput> {
         if !self.forward.state.is_forward() || !self.telemetry.armed {
             return None;
