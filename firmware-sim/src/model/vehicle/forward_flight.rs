@@ -7,6 +7,7 @@
 //! `Q_TAILSIT_ANG_VT` above the horizon; the hover then holds where it ended).
 
 use super::Vehicle;
+use crate::model::airframe::ModelMode;
 use crate::model::control::forward::{
     self, ForwardCommand, ForwardInput, ForwardLaw, Longitudinal,
 };
@@ -96,7 +97,8 @@ impl Vehicle {
     /// Starts a forward transition if the vehicle hovers in the air (or is coming back to a
     /// hover). Returns whether it started.
     pub fn start_forward_transition(&mut self) -> bool {
-        if !self.telemetry.armed || self.on_ground {
+        // `paper` mode is the paper's hover model: it has no forward flight.
+        if !self.telemetry.armed || self.on_ground || self.config.model == ModelMode::Paper {
             return false;
         }
         if !matches!(
