@@ -103,6 +103,7 @@ def fly_square(vtol_twin) -> None:
     worst = {"TRANSITION_TO_FW": 0.0, "TRANSITION_TO_MC": 0.0}
     alt = 0.0
     fw_airspeeds = []
+    fw_aoa = []
     armed = True
     for _ in range(300):  # two-second steps: at most 600 s of sim time
         vtol_twin.advance(2)
@@ -119,6 +120,8 @@ def fly_square(vtol_twin) -> None:
                     alt_at_start = alt
             elif kind == "VFR_HUD" and states[-1] == "FW":
                 fw_airspeeds.append(msg.airspeed)
+            elif kind == "AOA_SSA" and states[-1] == "FW":
+                fw_aoa.append(msg.AOA)
             elif kind == "HEARTBEAT" and msg.get_srcSystem() == 1:
                 armed = bool(msg.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
         if not armed:
@@ -129,6 +132,10 @@ def fly_square(vtol_twin) -> None:
     assert truth.system_status != "EMERGENCY", truth
     assert states == ["MC", "TRANSITION_TO_FW", "FW", "TRANSITION_TO_MC", "MC"], states
     assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
+    # AOA_SSA: the wing flies at a small positive angle of attack.
+    assert fw_aoa, "no AOA_SSA on the wing"
+    median_aoa = sorted(fw_aoa)[len(fw_aoa) // 2]
+    assert 0.0 < median_aoa < 15.0, f"angle of attack on the wing {median_aoa:.1f}°"
     for phase, dz in worst.items():
         assert dz <= 3.0, f"{phase} moved the altitude {dz:.2f} m"
     north, east, _ = truth.position_ned_m
