@@ -1,5 +1,5 @@
-"""QLOITER: SET_POSITION_TARGET_LOCAL_NED moves the hover point, and a SIM_WIND_* wind pushes the
-vehicle downwind while the controller keeps it flying near its point."""
+"""QLOITER: SET_POSITION_TARGET_LOCAL_NED moves the hover point, and the hover hold keeps the
+vehicle near its point in a gusty SIM_WIND_* wind."""
 
 import statistics
 
@@ -48,39 +48,36 @@ def test_position_target_moves_the_hover_point(loiter):
     assert abs(p.x - target[0]) <= 0.05 and abs(p.y - target[1]) <= 0.05, p
 
 
-def test_wind_pushes_downwind_by_what_the_control_law_predicts(loiter):
+def test_a_gusty_wind_is_held_near_the_point(loiter):
     g = loiter
     target = (0.0, 0.0, -1.0)
     g.m.mav.set_position_target_local_ned_send(
         0, 1, 1, MAV_FRAME_LOCAL_NED, TYPE_MASK_POSITION_ONLY, *target, 0, 0, 0, 0, 0, 0, 0, 0
     )
     wait_near(g, target, tol=0.05)
-    wind_m_s = 0.2
-    g.param_set("SIM_WIND_DIR", 0.0)  # from the north: pushes south (−x)
-    g.param_set("SIM_WIND_SPD", wind_m_s)
-    # The chain has no integrator, so a steady force F leaves a steady offset. At rest the law
-    # reads 0 = −θ − 2θ − (3θ + x/g) (levels unsaturated), with tilt θ = F/(m g) holding the
-    # wind off: x = −6 g θ = −6 F / m, m = 0.5 kg. The wind meets the plate's face: F is the
-    # slipstream's crossflow force (its mass flow, 0.55 kg/s) plus the rotors' H-force
-    # (0.177 N·s/m at hover), times the wind (docs/model.md).
-    predicted_x = -6.0 * (0.551 + 0.177) * wind_m_s / 0.5
+    # 3 m/s from the east with 0.5 m/s gusts: along the plate's span at heading north. The hover
+    # hold learns the wind (integral action) and leans into it (docs/model.md, "Hover position
+    # hold"); the paper's chains alone held only 0.4-0.8 m/s.
+    g.param_set("SIM_WIND_DIR", 90.0)
+    g.param_set("SIM_WIND_TURB", 0.5)
+    g.param_set("SIM_WIND_SPD", 3.0)
     first = g.recv("LOCAL_POSITION_NED")
-    samples = []
+    worst = 0.0
+    rolls = []
     while True:
         p = g.recv("LOCAL_POSITION_NED")
         elapsed = p.time_boot_ms - first.time_boot_ms
-        # The same drag slows the chain (a pole near −0.08 /s): settled after a minute.
-        if elapsed >= 60000:
-            samples.append(p)
-        if elapsed >= 65000:
+        worst = max(worst, (p.x**2 + p.y**2) ** 0.5)
+        if elapsed >= 30000:
+            a = g.recv("ATTITUDE")
+            rolls.append(a.roll)
+        if elapsed >= 40000:
             break
     g.param_set("SIM_WIND_SPD", 0.0)
-    mean_x = statistics.fmean(p.x for p in samples)
-    mean_z = statistics.fmean(p.z for p in samples)
-    # Within 25 %: F is the aerodynamic model's slope at hover, not its exact value in flight.
-    assert abs(mean_x - predicted_x) < 0.25 * abs(predicted_x), (
-        f"offset {mean_x:+.3f} m, law predicts {predicted_x:+.3f} m"
-    )
-    assert abs(mean_z - target[2]) < 0.1, f"altitude lost in the wind: z {mean_z:+.3f} m"
-    # And it comes back once the wind stops.
+    g.param_set("SIM_WIND_TURB", 0.0)
+    assert worst < 2.0, f"carried {worst:.2f} m from the point"
+    # Leaning into the wind: the steady tilt that holds 3 m/s along the span is about 0.1 rad.
+    mean_roll = statistics.fmean(rolls)
+    assert abs(mean_roll) > 0.05, f"roll {mean_roll:+.3f} rad: not leaning into the wind"
+    # And it comes back onto its point once the wind stops.
     wait_near(g, target, tol=0.05)

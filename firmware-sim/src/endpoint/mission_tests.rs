@@ -521,9 +521,7 @@ fn guided_take_off_reposition_and_auto_mission() {
         "Reposition refused: 150.0 m from home, beyond NAV_RADIUS_MAX 100 m"
     );
     assert!(t.len() == 2 && t[0].id != 0 && t[0].id == t[1].id);
-    // 3 m broadside: the slipstream's crossflow drag (physical mode, docs/model.md) gives the
-    // position chain a slow pole near −0.08 /s, so the approach's tail takes tens of seconds.
-    run_until(&mut ep, 40_000_000);
+    run_until(&mut ep, 14_000_000);
     let pos = ep.vehicle().telemetry().pos_m;
     // Paper frame: x is south.
     assert!((pos.x + 3.0).abs() < 0.3 && pos.y.abs() < 0.3, "{pos}");
@@ -535,7 +533,6 @@ fn guided_take_off_reposition_and_auto_mission() {
     assert_eq!(reached(&out), vec![1, 2, 3, 4]);
     let t = ep.vehicle().telemetry();
     assert!(!t.armed && t.landed, "landed and disarmed");
-    // Within 0.3 m: the broadside drag's slow pole leaves part of the last leg's tail to QLAND.
     assert!(
         (t.pos_m.y - 2.0).abs() < 0.3 && t.pos_m.x.abs() < 0.3,
         "{}",
@@ -612,9 +609,7 @@ fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
         mission_acks(&out),
         vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
     );
-    // 3 m broadside: the slipstream's crossflow drag (physical mode, docs/model.md) gives the
-    // position chain a slow pole near −0.08 /s, so the approach's tail takes tens of seconds.
-    run_until(&mut ep, 60_000_000);
+    run_until(&mut ep, 13_000_000);
     let pos = ep.vehicle().telemetry().pos_m;
     // Paper frame: x is south.
     assert!(

@@ -30,6 +30,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::model::control::forward_gains::ForwardGains;
+use crate::model::control::position::{HoverHoldGains, HoverLaw};
 use crate::model::control::tecs::TecsLimits;
 use crate::model::control::{GainError, Gains, SaturationLevels};
 
@@ -216,6 +217,16 @@ pub static TABLE: &[ParamDef] = &[
     def("NAVL1_DAMPING", F32, "", (0.6, 1.0), 0.75, RW, "Damping of the L1 track guidance"),
     def("Q_RTL_MODE", I8, "", (0.0, 1.0), 1.0, RW, "RTL on the wing: 1 lands vertically at home (QRTL on arrival), 0 circles home"),
     def("WP_LOITER_RAD", F32, "m", (10.0, 1000.0), 30.0, RW, "Radius of a fixed-wing NAV_LOITER_TIME circle"),
+    def("HOV_POS_LAW", I8, "", (0.0, 1.0), 1.0, RW, "Position modes, physical model: 0 the paper's chains, 1 the cascade with wind estimate"),
+    def("Q_P_POSXY_P", F32, "1/s", (0.1, 5.0), 0.6, RW, "Hover hold: position to velocity gain"),
+    def("Q_P_VELXY_P", F32, "1/s", (0.1, 10.0), 2.0, RW, "Hover hold: velocity to acceleration gain; <= HOV_ATT_BW / 2"),
+    def("Q_P_VELXY_I", F32, "1/s/s", (0.0, 10.0), 0.4, RW, "Hover hold: velocity integral gain (the wind estimate)"),
+    def("Q_P_VELXY_IMAX", F32, "cm/s/s", (0.0, 1000.0), 600.0, RW, "Hover hold: largest wind estimate"),
+    def("Q_WP_SPEED", F32, "cm/s", (10.0, 500.0), 150.0, RW, "Hover hold: horizontal speed limit of the position modes"),
+    def("Q_ANGLE_MAX", I16, "cdeg", (500.0, 5500.0), 3000.0, RW, "Hover hold: tilt limit of the position modes"),
+    def("HOV_ATT_BW", F32, "rad/s", (0.5, 20.0), 10.0, RW, "Hover hold: attitude law bandwidth (both poles)"),
+    def("HOV_ATT_ACC", F32, "rad/s/s", (0.5, 50.0), 12.0, RW, "Hover hold: attitude law's angular acceleration budget"),
+    def("HOV_YAW_ACC", F32, "rad/s/s", (0.5, 100.0), 24.0, RW, "Hover hold: heading law's angular acceleration budget"),
 ];
 
 /// Why a write was refused or a name not found.
@@ -272,6 +283,10 @@ impl ParamError {
             } => {
                 format!("needs {condition}")
             }
+            Self::Gains {
+                source: GainError::CrossCheck(condition),
+                ..
+            } => format!("needs {condition}"),
             Self::Gains { .. } => "must be > 0".to_owned(),
         }
     }
@@ -652,6 +667,22 @@ fn gains_of(values: &[f64]) -> Gains {
             transition_angle_vt_rad: v("Q_TAILSIT_ANG_VT").to_radians(),
             transition_timeout_s: v("Q_TRANSITION_MS") / 1000.0,
             attitude_bandwidth_rad_s: v("FW_ATT_BW"),
+        },
+        hover: HoverHoldGains {
+            law: if v("HOV_POS_LAW") == 0.0 {
+                HoverLaw::PaperChains
+            } else {
+                HoverLaw::Cascade
+            },
+            pos_p: v("Q_P_POSXY_P"),
+            vel_p: v("Q_P_VELXY_P"),
+            vel_i: v("Q_P_VELXY_I"),
+            vel_imax_m_s2: 0.01 * v("Q_P_VELXY_IMAX"),
+            speed_max_m_s: 0.01 * v("Q_WP_SPEED"),
+            angle_max_rad: (0.01 * v("Q_ANGLE_MAX")).to_radians(),
+            att_bw_rad_s: v("HOV_ATT_BW"),
+            att_acc_rad_s2: v("HOV_ATT_ACC"),
+            yaw_acc_rad_s2: v("HOV_YAW_ACC"),
         },
     }
 }

@@ -26,7 +26,7 @@ pwm1,pwm2,pwm3,pwm4,pwm5,fx,gamma_x,gamma_y,gamma_z,w1,w2,phi_est,theta_est,psi_
 /// The parameters an offline flight honours: the control law, the control rate and the wind.
 /// The others (identity, streams, failsafes, the one-shot `SIM_PUSH_*`) have no meaning without
 /// a link, and setting one is an error rather than silently ignored.
-const OFFLINE_PARAMS: [&str; 18] = [
+const OFFLINE_PARAMS: [&str; 28] = [
     "LAT_SAT_A",
     "LAT_SAT_B",
     "LAT_SAT_C",
@@ -45,6 +45,16 @@ const OFFLINE_PARAMS: [&str; 18] = [
     "SIM_WIND_SPD",
     "SIM_WIND_DIR",
     "SIM_WIND_TURB",
+    "HOV_POS_LAW",
+    "Q_P_POSXY_P",
+    "Q_P_VELXY_P",
+    "Q_P_VELXY_I",
+    "Q_P_VELXY_IMAX",
+    "Q_WP_SPEED",
+    "Q_ANGLE_MAX",
+    "HOV_ATT_BW",
+    "HOV_ATT_ACC",
+    "HOV_YAW_ACC",
 ];
 
 /// Largest horizontal setpoint, m: the motion-capture volume the position modes fly in.

@@ -25,6 +25,7 @@ pub mod forward;
 pub mod forward_gains;
 pub mod input_change;
 pub mod mixer;
+pub mod position;
 pub mod saturation;
 pub mod tecs;
 pub mod yaw;
@@ -39,6 +40,7 @@ use nalgebra::{Vector2, Vector3};
 use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::frames::{Euler, wrap_pi};
 use crate::model::mode::FlightMode;
+use position::{HoverHold, HoverHoldGains, HoverLaw};
 
 /// Full-stick tilt setpoint (φ_d, θ_d) in the attitude-hold modes, rad. Equal to c + d of the
 /// default levels, so a full stick stays where the paper's x loop is well behaved (§0).
@@ -169,6 +171,8 @@ pub struct Gains {
     pub land_speed_m_s: f64,
     /// Forward flight and the transitions (`forward_gains`).
     pub forward: forward_gains::ForwardGains,
+    /// The position modes' hold in `physical` mode (`position`).
+    pub hover: HoverHoldGains,
 }
 
 impl Default for Gains {
@@ -183,6 +187,7 @@ impl Default for Gains {
             hover_alt_m: 1.0,
             land_speed_m_s: 0.5,
             forward: forward_gains::ForwardGains::default(),
+            hover: HoverHoldGains::default(),
         }
     }
 }
@@ -213,8 +218,51 @@ impl Gains {
                 value: self.hover_alt_m,
             });
         }
+        self.validate_hover()?;
         // The twin flies one airframe (Table I): the stall speed is checked against it.
         self.forward.validate(&Airframe::default())
+    }
+
+    /// The hold's gains: positive, a tilt limit short of the crash tilt, and the cascade's
+    /// cross-checks (`docs/model.md`, "Hover position hold").
+    fn validate_hover(&self) -> Result<(), GainError> {
+        let h = &self.hover;
+        for (name, v) in [
+            ("Q_P_POSXY_P", h.pos_p),
+            ("Q_P_VELXY_P", h.vel_p),
+            ("Q_WP_SPEED", h.speed_max_m_s),
+            ("Q_ANGLE_MAX", h.angle_max_rad),
+            ("HOV_ATT_BW", h.att_bw_rad_s),
+            ("HOV_ATT_ACC", h.att_acc_rad_s2),
+            ("HOV_YAW_ACC", h.yaw_acc_rad_s2),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(GainError::NotPositive { name, value: v });
+            }
+        }
+        for (name, v) in [
+            ("Q_P_VELXY_I", h.vel_i),
+            ("Q_P_VELXY_IMAX", h.vel_imax_m_s2),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(GainError::NotPositive { name, value: v });
+            }
+        }
+        // s³ + k_v s² + (k_i + k_v k_p) s + k_i k_p (velocity PI under a position P, the
+        // attitude taken as instantaneous) is stable by Routh when k_v (k_i + k_v k_p) > k_i k_p,
+        // which a velocity loop at least as fast as the position loop guarantees.
+        if h.vel_p < h.pos_p {
+            return Err(GainError::CrossCheck("Q_P_VELXY_P >= Q_P_POSXY_P"));
+        }
+        // The velocity loop must be well inside the attitude loop that serves it: with
+        // Q_P_VELXY_P = 3 /s under HOV_ATT_BW = 5 rad/s the lateral loop oscillated.
+        if 2.0 * h.vel_p > h.att_bw_rad_s {
+            return Err(GainError::CrossCheck("Q_P_VELXY_P <= HOV_ATT_BW / 2"));
+        }
+        if h.angle_max_rad >= crate::model::vehicle::CRASH_TILT_RAD {
+            return Err(GainError::CrossCheck("Q_ANGLE_MAX < crash tilt 60 deg"));
+        }
+        Ok(())
     }
 }
 
@@ -243,6 +291,9 @@ pub enum GainError {
         /// The broken rule.
         rule: &'static str,
     },
+    /// A cross-check between gains of the hover hold fails.
+    #[error("the hover hold needs {0}")]
+    CrossCheck(&'static str),
     /// A gain that must be positive and finite is not.
     #[error("{name} must be positive and finite, got {value}")]
     NotPositive {
@@ -342,6 +393,8 @@ pub struct Controller {
     yaw_target_rad: f64,
     /// PWM rounding error carried to the next tick, µs ([`mixer::pwm_us_dithered`]).
     pwm_residual_us: [f64; 5],
+    /// The position modes' hold in `physical` mode: wind estimate and attitude integrators.
+    hold: HoverHold,
 }
 
 impl Controller {
@@ -356,6 +409,7 @@ impl Controller {
             yaw_offset_rad: 0.0,
             yaw_target_rad: 0.0,
             pwm_residual_us: [0.0; 5],
+            hold: HoverHold::default(),
         }
     }
 
@@ -366,6 +420,14 @@ impl Controller {
         self.yaw_offset_rad = 0.0;
         self.yaw_target_rad = 0.0;
         self.pwm_residual_us = [0.0; 5];
+        self.hold.reset();
+    }
+
+    /// The hover hold's wind estimate: the horizontal acceleration it adds against the air,
+    /// paper frame, m/s² (zero unless `physical` mode flies the cascade).
+    #[must_use]
+    pub fn wind_accel_estimate_m_s2(&self) -> Vector2<f64> {
+        self.hold.wind_accel_m_s2()
     }
 
     /// The model mode this controller was built for.
@@ -440,6 +502,10 @@ impl Controller {
 
         // The autonomous modes fly QLOITER's law to the setpoint their navigator chose (the
         // vehicle passes the law itself as the mode; these arms keep a direct caller safe).
+        // `physical` mode flies its position modes on the hover hold (`position`).
+        let hold_flies = model == ModelMode::Physical
+            && gains.hover.law == HoverLaw::Cascade
+            && !matches!(mode, FlightMode::QStabilize | FlightMode::QHover);
         let (tau_theta, tau_phi) = match mode {
             FlightMode::QLoiter
             | FlightMode::QLand
@@ -453,24 +519,45 @@ impl Controller {
                     (FlightMode::QLand, Some(hold)) => hold,
                     _ => setpoint.xy(),
                 };
-                let mut err = pos.xy() - target;
-                let mut v = vel.xy();
-                if model != ModelMode::Paper {
-                    err = chains::to_heading_frame(euler.psi, err);
-                    v = chains::to_heading_frame(euler.psi, v);
-                }
-                (
-                    chains::longitudinal_tau(
-                        &gains.longitudinal,
-                        model,
+                if hold_flies {
+                    let sp = self.hold.tilt_setpoint(
+                        &gains.hover,
+                        target,
+                        pos.xy(),
+                        vel.xy(),
+                        euler.psi,
                         g,
-                        err.x,
-                        v.x,
+                        dt,
+                    );
+                    self.hold.attitude_tau(
+                        &gains.hover,
+                        sp,
                         euler.theta,
                         theta_dot,
-                    ),
-                    chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                )
+                        euler.phi,
+                        phi_dot,
+                        dt,
+                    )
+                } else {
+                    let mut err = pos.xy() - target;
+                    let mut v = vel.xy();
+                    if model != ModelMode::Paper {
+                        err = chains::to_heading_frame(euler.psi, err);
+                        v = chains::to_heading_frame(euler.psi, v);
+                    }
+                    (
+                        chains::longitudinal_tau(
+                            &gains.longitudinal,
+                            model,
+                            g,
+                            err.x,
+                            v.x,
+                            euler.theta,
+                            theta_dot,
+                        ),
+                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
+                    )
+                }
             }
             FlightMode::QStabilize | FlightMode::QHover => (
                 chains::attitude_hold_tau(
@@ -511,14 +598,19 @@ impl Controller {
             | FlightMode::Cruise => (yaw_setpoint, 0.0),
         };
         self.yaw_target_rad = psi_target;
-        let tau_psi = yaw::yaw_tau(
-            gains.yaw_kd,
-            gains.yaw_kp,
-            euler.psi,
-            psi_dot,
-            psi_target,
-            psi_rate_target,
-        );
+        let tau_psi = if hold_flies {
+            self.hold
+                .yaw_tau(&gains.hover, wrap_pi(euler.psi - psi_target), psi_dot, dt)
+        } else {
+            yaw::yaw_tau(
+                gains.yaw_kd,
+                gains.yaw_kp,
+                euler.psi,
+                psi_dot,
+                psi_target,
+                psi_rate_target,
+            )
+        };
         let tau_tilde = Vector3::new(tau_psi, tau_theta, tau_phi);
 
         // 3. Thrust.

@@ -265,12 +265,17 @@ fn check_output(out: &ControlOutput, gains: &Gains, model: ModelMode) -> Result<
     let lat = gains.lateral;
     let lon = gains.longitudinal;
     prop_assert!(out.tau_tilde.iter().all(|v| v.is_finite()), "{out:?}");
+    // `physical` mode's position modes fly the hover hold: its law plus its integrator.
+    let hold = match model {
+        ModelMode::Paper => 0.0,
+        ModelMode::Physical => 1.5 * gains.hover.att_acc_rad_s2,
+    };
     prop_assert!(
-        out.tau_tilde[2].abs() <= lat.a + lat.b + lat.c + lat.d + 1e-12,
+        out.tau_tilde[2].abs() <= (lat.a + lat.b + lat.c + lat.d).max(hold) + 1e-12,
         "τ̃φ {out:?}"
     );
     prop_assert!(
-        out.tau_tilde[1].abs() <= lon.a + lon.b + lon.c + lon.d + 1e-12,
+        out.tau_tilde[1].abs() <= (lon.a + lon.b + lon.c + lon.d).max(hold) + 1e-12,
         "τ̃θ {out:?}"
     );
     prop_assert!(out.torque_body_nm.iter().all(|v| v.is_finite()), "{out:?}");
@@ -402,7 +407,7 @@ proptest! {
     })]
 
     /// With the torques and rotor speeds `update` commands (nothing saturated), Euler's
-    /// equation yields η̈ = Γ̃ to 1e-9, in every mode and both models.
+    /// equation yields η̈ = Γ̃ to 1e-9 relative, in every mode and both models.
     #[test]
     fn update_makes_eta_ddot_equal_tau_tilde(
         mode in any_mode(),
@@ -449,7 +454,13 @@ proptest! {
                 &(out.torque_body_nm + aero),
                 act.rotor_speed_rad_s,
             );
-            prop_assert!((edd - out.tau_tilde).norm() < 1e-9, "{model:?}: {edd} vs {}", out.tau_tilde);
+            // Relative: the hover hold's budgets reach 36 rad/s², where the fixed point of
+            // [I19] settles to a few 1e-11 of the value.
+            prop_assert!(
+                (edd - out.tau_tilde).norm() < 1e-9 * (1.0 + out.tau_tilde.norm()),
+                "{model:?}: {edd} vs {}",
+                out.tau_tilde
+            );
             // And the commanded actuators really produce Γc and f_z (§5 force model).
             let (fz, tq, _) = forces_from_actuators(&a, act);
             prop_assume!([act.elevator_rad, act.aileron_left_rad].iter().all(|d| d.abs() < a.surface_limit_rad));

@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 
 use super::*;
+use crate::model::control::position::HoverLaw;
 
 fn run(v: &mut Vehicle, seconds: f64) {
     for _ in 0..(seconds / PHYSICS_DT_S).round() as u64 {
@@ -181,30 +182,42 @@ fn rc_loss_in_qstabilize_is_critical() {
 }
 
 /// `physical` mode feels the wind through the air-relative velocity. The paper's chains have no
-/// integrator, so QLOITER settles downwind of its point, tilted into the wind, and stays there:
-/// 0.5 m/s on the plate's face (broadside, the slipstream's crossflow force) and along its
-/// span (edgewise). The telemetry's airspeed is the wind's, not the (zero) ground speed.
+/// integrator, so with `HOV_POS_LAW` = 0 QLOITER settles downwind of its point, tilted into the
+/// wind, and stays there: 0.5 m/s on the plate's face (broadside, the slipstream's crossflow
+/// force) and along its span (edgewise). The hover hold (the default) learns the wind and comes
+/// back onto its point. The telemetry's airspeed is the wind's, not the (zero) ground speed.
 #[test]
-fn qloiter_in_steady_wind_settles_downwind() {
-    for (wind, edge) in [
-        (Vector3::new(0.5, 0.0, 0.0), "broadside"),
-        (Vector3::new(0.0, 0.5, 0.0), "edgewise"),
-    ] {
-        let cfg = flying(1.0, FlightMode::QLoiter);
-        let mut v = Vehicle::new(cfg);
-        v.set_wind(wind, 0.0);
-        run(&mut v, 90.0);
-        let before = v.telemetry().pos_m;
-        run(&mut v, 10.0);
-        let t = v.telemetry();
-        assert_eq!(t.state, SystemState::Active, "{edge}");
-        let downwind = (t.pos_m - Vector3::new(0.0, 0.0, 1.0)).dot(&wind.normalize());
-        assert!(
-            (0.1..8.0).contains(&downwind),
-            "{edge}: {downwind} m downwind"
-        );
-        assert!((t.pos_m - before).norm() < 0.05, "{edge}: still moving");
-        assert!((t.airspeed_m_s() - wind.norm()).abs() < 0.05, "{edge}");
+fn qloiter_in_steady_wind_settles_downwind_with_the_chains_and_on_its_point_with_the_hold() {
+    for law in [HoverLaw::PaperChains, HoverLaw::Cascade] {
+        for (wind, edge) in [
+            (Vector3::new(0.5, 0.0, 0.0), "broadside"),
+            (Vector3::new(0.0, 0.5, 0.0), "edgewise"),
+        ] {
+            let mut gains = crate::model::control::Gains::default();
+            gains.hover.law = law;
+            let cfg = VehicleConfig {
+                gains,
+                ..flying(1.0, FlightMode::QLoiter)
+            };
+            let mut v = Vehicle::new(cfg);
+            v.set_wind(wind, 0.0);
+            run(&mut v, 90.0);
+            let before = v.telemetry().pos_m;
+            run(&mut v, 10.0);
+            let t = v.telemetry();
+            assert_eq!(t.state, SystemState::Active, "{edge}");
+            let downwind = (t.pos_m - Vector3::new(0.0, 0.0, 1.0)).dot(&wind.normalize());
+            let expect = match law {
+                HoverLaw::PaperChains => 0.1..8.0,
+                HoverLaw::Cascade => -0.01..0.01,
+            };
+            assert!(
+                expect.contains(&downwind),
+                "{law:?} {edge}: {downwind} m downwind"
+            );
+            assert!((t.pos_m - before).norm() < 0.05, "{edge}: still moving");
+            assert!((t.airspeed_m_s() - wind.norm()).abs() < 0.05, "{edge}");
+        }
     }
 }
 
