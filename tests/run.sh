@@ -113,6 +113,12 @@ fi
 stage "cargo test"
 cargo test --workspace
 
+# --- the fleet soak (docs/fleet.md): 100 vehicles over four ground daemons on one Zenoh router
+# for 60 s, vehicles leaving and joining; fails unless memory, descriptors and Zenoh sessions stay
+# flat and no frame that reached a daemon is lost. The hour-long one runs off CI.
+stage "fleet soak (60 s)"
+cargo test --bench zenoh_fleet -- --soak
+
 # --- pymavlink / MAVProxy against the real binaries ------------------------------------------
 BIN_DIR="$TARGET/debug"
 export FIRMWARE_SIM_BIN="$BIN_DIR/firmware-sim"

@@ -15,7 +15,8 @@
 //! Environment: `ZENOH_FLEET_VEHICLES=N`, `ZENOH_FLEET_DAEMONS=D` (at most 250 vehicles each),
 //! `ZENOH_FLEET_SECONDS=S` (the measured window), `ZENOH_FLEET_CHURN=P` (the chance that a
 //! vehicle leaves in a given second; default 0.01, 0 for UDP), `ZENOH_FLEET_SEED=N` (default 38),
-//! `ZENOH_FLEET_TRANSPORT=udp`.
+//! `ZENOH_FLEET_TRANSPORT=udp`, `ZENOH_FLEET_DAEMON_RUNTIME=R` (the daemons' `ZENOH_RUNTIME`,
+//! e.g. `(rx: (worker_threads: 1))`).
 //!
 //! MAVLink system ids stop at 255, so a fleet larger than that is served by several daemons,
 //! each selecting its part by key expression: daemon K runs `--vehicle 'zenoh:bench-dK/*'`

@@ -127,6 +127,10 @@ fn start_ground(
         if !setup.udp {
             dcmd.args(["--zenoh-mode", "client", "--zenoh-connect", endpoint]);
         }
+        // Zenoh's runtime (its threads) in the daemons alone, for comparisons.
+        if let Ok(r) = std::env::var("ZENOH_FLEET_DAEMON_RUNTIME") {
+            dcmd.env("ZENOH_RUNTIME", r);
+        }
         dcmd.args([
             "--serve",
             &format!("udpout:{sink_addr}"),
