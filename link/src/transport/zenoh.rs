@@ -250,7 +250,7 @@ async fn spawn_vehicle_end(
 pub(crate) fn vehicle_of(key: &str, chunks: usize) -> Option<&str> {
     let mut it = key.split('/');
     let v = it.nth(2)?;
-    (key.split('/').count() == chunks + 1).then_some(v)
+    (it.count() + 3 == chunks + 1).then_some(v)
 }
 
 #[cfg(test)]

@@ -18,8 +18,9 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
-use zenoh::Session;
+use zenoh::key_expr::KeyExpr;
 use zenoh::sample::{Sample, SampleKind};
+use zenoh::{Session, Wait};
 
 use super::{
     SUBSCRIBER_DEPTH, decode_sample, from_vehicle_key, liveliness_key, publish_loop,
@@ -42,6 +43,9 @@ struct GroundLink {
     stop: CancellationToken,
     /// Its token went away: the link goes down at this time.
     leaving: Option<Instant>,
+    /// Its data key, declared in the session: a sample on a declared key takes the session's
+    /// cached route to the subscriber instead of matching the key against every subscription.
+    key: Option<KeyExpr<'static>>,
 }
 
 /// The ground end's vehicles, shared by the sample handler and the liveliness task.
@@ -73,6 +77,11 @@ impl Ground {
             rx,
             stats.clone(),
         );
+        let key = self
+            .session
+            .declare_keyexpr(from_vehicle_key(&self.fleet, vehicle))
+            .wait()
+            .ok();
         let s = stop.clone();
         self.runtime.spawn(async move {
             tokio::select! {
@@ -88,6 +97,7 @@ impl Ground {
                 decoder: crate::decoder::FrameDecoder::new(),
                 stop,
                 leaving: None,
+                key,
             },
         );
         LinkEvent::Up {
@@ -155,6 +165,9 @@ impl Ground {
         for v in over {
             if let Some(l) = self.links.remove(&v) {
                 l.stop.cancel();
+                if let Some(k) = l.key {
+                    let _ = self.session.undeclare(k).wait();
+                }
                 let reason = format!(
                     "{}/{v} left the fleet (its liveliness token is gone)",
                     self.fleet
