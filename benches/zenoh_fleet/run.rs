@@ -31,6 +31,9 @@ pub struct Setup {
     pub udp: bool,
     /// Footprint samples this often during the window (the soak's), seconds.
     pub sample_every: f64,
+    /// Seconds of traffic between the warm-up and the window: the soak's, long enough for the
+    /// daemons' chart history (120 s, bounded) to fill, so that their memory is at its level.
+    pub fill: f64,
 }
 
 /// One ground daemon's figures over the window.
@@ -371,7 +374,7 @@ async fn schedule(
                 .map(|s| s.1.lock().unwrap().vehicles_heard.len())
                 .sum();
             if heard == setup.vehicles {
-                warm_until = Some(t + 1_000_000_000);
+                warm_until = Some(t + ((1.0 + setup.fill) * 1e9) as u64);
             } else if Instant::now() > warm_deadline {
                 panic!(
                     "warm-up: the clients heard {heard} of {} vehicles in 120 s",
@@ -401,7 +404,7 @@ async fn schedule(
                 break;
             }
         }
-        let leave = (window.is_some() && setup.churn > 0.0 && ticks.is_multiple_of(50))
+        let leave = (warm_until.is_some() && setup.churn > 0.0 && ticks.is_multiple_of(50))
             .then_some((setup.churn, &mut rng));
         churn(&mut vs, &sessions, ticks, leave, &mut counts).await;
         for slot in 0..slots {
