@@ -153,6 +153,8 @@ fn main() {
     }
 }
 
+/// Prints the run's tables (Markdown, as docs/benchmarks/zenoh_fleet.md keeps them).
+// Over 80 lines: a one-pass formatter, one statement per row of the tables.
 fn report(s: &Setup, results: &[RunResult]) {
     let m = |f: &dyn Fn(&RunResult) -> f64| median(results.iter().map(f).collect());
     let sum =

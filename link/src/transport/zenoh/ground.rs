@@ -218,6 +218,9 @@ async fn deliver(
     emit_frames(events, frames, cancel).await
 }
 
+/// Subscribes to the fleet's data and liveliness and starts the ground task.
+// Over 80 lines: the subscriptions' set-up (the data's two forms, inline and queued) and the one
+// task that owns them; split, the task would take seven handles from the set-up.
 pub(crate) async fn spawn_ground_end(
     session: Session,
     fleet: &str,
