@@ -18,7 +18,8 @@
 //!
 //! One Zenoh session per process and set of [`ZenohOptions`] carries every endpoint.
 
-use std::collections::{HashMap, HashSet};
+mod ground;
+
 use std::sync::{Arc, OnceLock};
 
 use tokio::sync::{Mutex, mpsc};
@@ -26,7 +27,7 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 use zenoh::Session;
 use zenoh::qos::CongestionControl;
-use zenoh::sample::{Sample, SampleKind};
+use zenoh::sample::Sample;
 
 use super::{
     Events, LinkError, LinkEvent, LinkId, LinkOptions, LinkSender, LinkStats, ZenohMode,
@@ -38,7 +39,7 @@ use crate::frame::Frame;
 /// Upper bound of one publication: queued frames beyond it wait for the next one.
 const MAX_BATCH_BYTES: usize = 16 * 1024;
 /// Samples a subscriber holds for its task before Zenoh waits (backpressure, not loss).
-const SUBSCRIBER_DEPTH: usize = 4096;
+pub(crate) const SUBSCRIBER_DEPTH: usize = 4096;
 
 /// The key of what a vehicle sends.
 pub fn from_vehicle_key(fleet: &str, vehicle: &str) -> String {
@@ -55,7 +56,7 @@ pub fn liveliness_key(fleet: &str, vehicle: &str) -> String {
     format!("vtol/{fleet}/{vehicle}")
 }
 
-fn zerr(what: &str, e: impl std::fmt::Display) -> LinkError {
+pub(crate) fn zerr(what: &str, e: impl std::fmt::Display) -> LinkError {
     LinkError::Zenoh(format!("{what}: {e}"))
 }
 
@@ -132,7 +133,7 @@ pub(crate) async fn spawn_zenoh(
             Ok((Some(id), task))
         }
         (ZenohRole::Ground, v) => {
-            let task = spawn_ground_end(session, fleet, v, events, opts, cancel).await?;
+            let task = ground::spawn_ground_end(session, fleet, v, events, opts, cancel).await?;
             Ok((None, task))
         }
     }
@@ -140,7 +141,7 @@ pub(crate) async fn spawn_zenoh(
 
 /// Publishes what its queue receives on `key`, several whole frames per publication when
 /// several are queued.
-async fn publish_loop(
+pub(crate) async fn publish_loop(
     session: Session,
     key: String,
     mut rx: mpsc::Receiver<Frame>,
@@ -170,7 +171,7 @@ async fn publish_loop(
 }
 
 /// Decodes one sample's frames (whole frames, one or more) for `id`.
-fn decode_sample(
+pub(crate) fn decode_sample(
     id: LinkId,
     sample: &Sample,
     decoder: &mut FrameDecoder,
@@ -245,150 +246,11 @@ async fn spawn_vehicle_end(
     }))
 }
 
-/// One vehicle as the ground end sees it.
-struct GroundLink {
-    id: LinkId,
-    stats: Arc<LinkStats>,
-    decoder: FrameDecoder,
-    stop: CancellationToken,
-}
-
-async fn spawn_ground_end(
-    session: Session,
-    fleet: &str,
-    vehicle: Option<&str>,
-    events: Events,
-    opts: LinkOptions,
-    cancel: CancellationToken,
-) -> Result<JoinHandle<()>, LinkError> {
-    let name = vehicle.unwrap_or("*");
-    let data_key = from_vehicle_key(fleet, name);
-    let live_key = liveliness_key(fleet, name);
-    let data = session
-        .declare_subscriber(data_key.clone())
-        .with(zenoh::handlers::FifoChannel::new(SUBSCRIBER_DEPTH))
-        .await
-        .map_err(|e| zerr(&format!("cannot subscribe to {data_key}"), e))?;
-    let live = session
-        .liveliness()
-        .declare_subscriber(live_key.clone())
-        .history(true)
-        .await
-        .map_err(|e| zerr(&format!("cannot watch the liveliness of {live_key}"), e))?;
-    let fleet = fleet.to_string();
-    Ok(tokio::spawn(async move {
-        let mut links: HashMap<String, GroundLink> = HashMap::new();
-        // Vehicles whose token went away: their last samples, still queued behind the token's
-        // removal, must not bring the link back. A new token does.
-        let mut gone: HashSet<String> = HashSet::new();
-        let mut frames = Vec::new();
-        loop {
-            tokio::select! {
-                biased;
-                _ = cancel.cancelled() => break,
-                s = live.recv_async() => {
-                    let Ok(sample) = s else { break };
-                    let Some(v) = vehicle_of(sample.key_expr().as_str(), 2) else { continue };
-                    match sample.kind() {
-                        SampleKind::Put => {
-                            gone.remove(v);
-                            if !links.contains_key(v)
-                                && !ground_link_up(&session, &fleet, v, &mut links, &events, &opts, &cancel).await
-                            {
-                                break;
-                            }
-                        }
-                        SampleKind::Delete => {
-                            gone.insert(v.to_string());
-                            if let Some(l) = links.remove(v) {
-                                l.stop.cancel();
-                                let why = format!(
-                                    "{fleet}/{v} left the fleet (its liveliness token is gone)"
-                                );
-                                emit_down(&events, l.id, why, &cancel).await;
-                            }
-                        }
-                    }
-                }
-                s = data.recv_async() => {
-                    let Ok(sample) = s else { break };
-                    let Some(v) = vehicle_of(sample.key_expr().as_str(), 3) else { continue };
-                    if gone.contains(v) {
-                        continue;
-                    }
-                    if !links.contains_key(v)
-                        && !ground_link_up(&session, &fleet, v, &mut links, &events, &opts, &cancel).await
-                    {
-                        break;
-                    }
-                    let Some(l) = links.get_mut(v) else { continue };
-                    decode_sample(l.id, &sample, &mut l.decoder, &l.stats, &mut frames);
-                    if !emit_frames(&events, &mut frames, &cancel).await {
-                        break;
-                    }
-                }
-            }
-        }
-        for (_, l) in links.drain() {
-            l.stop.cancel();
-            emit_down(&events, l.id, "shutdown".to_string(), &cancel).await;
-        }
-    }))
-}
-
 /// The vehicle name in `vtol/FLEET/VEHICLE[/...]`, when the key has `chunks` chunks.
-fn vehicle_of(key: &str, chunks: usize) -> Option<&str> {
+pub(crate) fn vehicle_of(key: &str, chunks: usize) -> Option<&str> {
     let mut it = key.split('/');
     let v = it.nth(2)?;
-    (key.split('/').count() == chunks + 1).then_some(v)
-}
-
-/// Announces a new vehicle's link and starts its publisher; false when the owner is gone.
-async fn ground_link_up(
-    session: &Session,
-    fleet: &str,
-    vehicle: &str,
-    links: &mut HashMap<String, GroundLink>,
-    events: &Events,
-    opts: &LinkOptions,
-    cancel: &CancellationToken,
-) -> bool {
-    let id = LinkId::next();
-    let stats = Arc::new(LinkStats::default());
-    let (tx, rx) = mpsc::channel(opts.queue_len.max(1));
-    let up = LinkEvent::Up {
-        id,
-        peer: format!("zenoh {fleet}/{vehicle}"),
-        tx: LinkSender::new(tx, stats.clone(), opts.accept.clone()),
-    };
-    tracing::debug!(%id, %fleet, %vehicle, "fleet vehicle up");
-    if !emit(events, up, cancel).await {
-        return false;
-    }
-    let stop = cancel.child_token();
-    let writer = publish_loop(
-        session.clone(),
-        to_vehicle_key(fleet, vehicle),
-        rx,
-        stats.clone(),
-    );
-    let s = stop.clone();
-    tokio::spawn(async move {
-        tokio::select! {
-            _ = s.cancelled() => {}
-            _ = writer => {}
-        }
-    });
-    links.insert(
-        vehicle.to_string(),
-        GroundLink {
-            id,
-            stats,
-            decoder: FrameDecoder::new(),
-            stop,
-        },
-    );
-    true
+    (it.count() + 3 == chunks + 1).then_some(v)
 }
 
 #[cfg(test)]
