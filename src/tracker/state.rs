@@ -10,6 +10,7 @@ use vtol_link::dialect::{
 };
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
+use super::seq::Seen;
 use super::window::{Stamp, Window};
 use crate::tap::Side;
 
@@ -317,13 +318,28 @@ impl VehicleState {
             return None;
         }
         let (now, stamp) = (stamp.at(), *stamp);
-        let lost = self.account(link, side, frame, &stamp);
+        let seen = self.account(link, side, frame, &stamp);
         let key = frame.sender();
         if let Some(v) = self.vehicles.get_mut(&key) {
             v.link = link;
-            v.frames += 1;
-            v.lost += u64::from(lost);
-            v.window.add_stamped(&stamp, 1, lost);
+            match seen {
+                Seen::Next { lost } => {
+                    v.frames += 1;
+                    v.lost += u64::from(lost);
+                    v.window.add_stamped(&stamp, 1, lost);
+                }
+                Seen::Late => {
+                    v.frames += 1;
+                    v.lost = v.lost.saturating_sub(1);
+                    v.window.add_stamped(&stamp, 1, 0);
+                    v.window.take_back_lost();
+                }
+                Seen::Repeat => {}
+            }
+        }
+        if seen == Seen::Repeat {
+            // A repeated datagram: counted and applied once already.
+            return None;
         }
         self.count_message(key, frame, &stamp);
         // Decode only what the view uses, and only from known vehicles (or their heartbeat):
@@ -476,9 +492,9 @@ fn apply_telemetry(
 }
 
 impl VehicleState {
-    /// Counts a frame in its link's health; returns the frames its sender's sequence says
-    /// were lost just before it.
-    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> u32 {
+    /// Counts a frame in its link's health; returns what its sender's sequence says it is: the
+    /// next frame (with the frames lost just before it), a late one, or a repeat (not counted).
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> Seen {
         let (epoch, now) = (self.epoch, stamp.at());
         let h = self.links.entry(link).or_insert_with(|| LinkHealth {
             side,
@@ -487,20 +503,32 @@ impl VehicleState {
             last_heard: now,
             window: Window::new(epoch),
         });
-        h.frames += 1;
         h.last_heard = now;
         // A new session of the sender (a restart, a second process under its identity) is
-        // no loss: see [`super::seq`].
+        // no loss; a late frame takes its loss back, a repeated one counts nothing: see
+        // [`super::seq`].
         let at_us =
             u64::try_from(now.saturating_duration_since(epoch).as_micros()).unwrap_or(u64::MAX);
-        let lost = self
+        let seen = self
             .last_seq
             .entry((link, frame.sender().0, frame.sender().1))
             .or_default()
-            .observe(frame.seq(), at_us);
-        h.lost += u64::from(lost);
-        h.window.add_stamped(stamp, 1, lost);
-        lost
+            .see(frame.seq(), Some(frame.crc()), at_us);
+        match seen {
+            Seen::Next { lost } => {
+                h.frames += 1;
+                h.lost += u64::from(lost);
+                h.window.add_stamped(stamp, 1, lost);
+            }
+            Seen::Late => {
+                h.frames += 1;
+                h.lost = h.lost.saturating_sub(1);
+                h.window.add_stamped(stamp, 1, 0);
+                h.window.take_back_lost();
+            }
+            Seen::Repeat => {}
+        }
+        seen
     }
 
     /// Forgets a link that went down: its health and its sequence history (a link that comes
@@ -656,16 +684,53 @@ mod tests {
             (vehicle, 1),
         ];
         let client_frames = [(client, 0u8), (client, 0), (client, 1)];
-        for ((sys, comp), seq) in frames.into_iter().chain(client_frames) {
+        let other = hb(
+            MavType::MAV_TYPE_GCS,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+            false,
+        );
+        // The restart comes a second later, and the client's two frames differ: identical
+        // frames under one number within moments of each other are one datagram repeated.
+        for (k, ((sys, comp), seq)) in frames.into_iter().chain(client_frames).enumerate() {
+            let at = now + Duration::from_secs(u64::from(k >= 3));
+            let msg = if k == 6 { &other } else { &v };
             s.apply(
                 LinkId(1),
                 Side::Vehicle,
-                &Frame::encode_v2(sys, comp, seq, &v),
-                now,
+                &Frame::encode_v2(sys, comp, seq, msg),
+                at,
             );
         }
         assert_eq!(s.links[&LinkId(1)].lost, 0);
         assert_eq!(s.links[&LinkId(1)].frames, 8);
+    }
+
+    #[test]
+    fn late_frames_are_no_loss_and_repeated_ones_count_once() {
+        let mut s = VehicleState::default();
+        let now = Instant::now();
+        let v = hb(
+            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+            MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            false,
+        );
+        let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
+        // 1 overtaken by 2, 2 and 4 repeated, 5 lost.
+        for (k, seq) in [0u8, 2, 1, 2, 3, 4, 4, 6].into_iter().enumerate() {
+            let applied = s.apply(
+                LinkId(1),
+                Side::Vehicle,
+                &Frame::encode_v2(vehicle.0, vehicle.1, seq, &v),
+                now,
+            );
+            assert_eq!(applied.is_none(), k == 3 || k == 6, "frame {k}");
+        }
+        let h = &s.links[&LinkId(1)];
+        assert_eq!((h.frames, h.lost), (6, 1));
+        assert!((h.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
+        let view = &s.vehicles[&vehicle];
+        assert_eq!((view.frames, view.lost), (6, 1));
+        assert!((view.window.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
     }
 
     #[test]
