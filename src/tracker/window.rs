@@ -168,6 +168,18 @@ impl Window {
         if rx == 0 { 0.0 } else { rx as f64 / span }
     }
 
+    /// Lost frames in percent of those sent over the last 2 s (the rate's span): what a change
+    /// of the traffic did, seconds after it; 0 when nothing arrived.
+    #[must_use]
+    pub fn recent_loss_pct(&self, now: Instant) -> f64 {
+        let (rx, lost, _) = self.sum(now, RATE_BUCKETS);
+        if rx + lost == 0 {
+            0.0
+        } else {
+            100.0 * lost as f64 / (rx + lost) as f64
+        }
+    }
+
     /// Lost frames in percent of those sent over the last 10 s; 0 when nothing arrived.
     #[must_use]
     pub fn loss_pct(&self, now: Instant) -> f64 {
