@@ -241,9 +241,11 @@ class Bed:
         run(["ip", "route", "add", "10.99.2.0/24", "via", LINK_VEHICLE_SIDE], self.vehicle)
         run(["ip", "route", "add", "10.99.1.0/24", "via", LINK_GROUND_SIDE], self.ground)
 
-    def partition_routed(self, on: bool = True) -> None:
-        """Drops every packet routed across the link (on) or none (off)."""
-        self._impair(["counter name dropped_routed drop"] if on else [], chain="impair_routed")
+    def partition_routed(self, on: bool = True, reject: bool = False) -> None:
+        """Drops every packet routed across the link (on) or none (off); with `reject`, answers
+        each with ICMP host-unreachable, as a router that knows its route is gone does."""
+        verdict = "reject with icmp type host-unreachable" if reject else "drop"
+        self._impair([f"counter name dropped_routed {verdict}"] if on else [], chain="impair_routed")
 
     def partition(self, on: bool = True) -> None:
         """Drops every datagram across the link (on) or none (off: no impairment at all)."""
