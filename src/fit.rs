@@ -14,9 +14,11 @@
 //! sends per second. A vehicle that does not tell its interval gets one from the frames seen.
 //!
 //! Loss that is not congestion (a lossy link with room to spare) does not stop when the rates
-//! fall: if the loss is still there [`SETTLE`] after the fit, the streams go back to the
-//! vehicle's defaults (interval 0) and the link is left alone for [`RANDOM_LOSS_HOLD`]. If it
-//! stopped, the capacity stands, and a later loss fits again from the rates then flowing.
+//! fall: if the loss is still there [`SETTLE`] after the fit, not halved, and no radio says its
+//! buffer is full, the streams go back to the vehicle's defaults (interval 0) and the link is
+//! left alone for [`RANDOM_LOSS_HOLD`]. If it halved, or the radio's buffer is still full, the
+//! link carries less than the first estimate: the fit goes again from the rates then flowing.
+//! If the loss stopped, the capacity stands, and a later loss fits again the same way.
 //!
 //! The fit follows the daemon client's vehicle (the first one heard).
 
@@ -91,10 +93,11 @@ pub struct LinkFit {
 enum Phase {
     /// Default rates, watching for loss.
     Watching,
-    /// Rates fitted, being asked for (one command after another, each with its retries).
-    Asking,
+    /// Rates fitted, being asked for (one command after another, each with its retries); the
+    /// loss when they were fitted.
+    Asking { loss_before: f64 },
     /// Rates fitted and asked for; judged at `until`.
-    Settling { until: Instant },
+    Settling { until: Instant, loss_before: f64 },
     /// Rates fitted, the loss stopped.
     Fitted,
     /// The loss did not stop with the rates: defaults again, left alone until `until`.
@@ -193,27 +196,20 @@ impl Fitter {
         let loss = h.window.recent_loss_pct(now);
         let delivered = h.bytes_per_s(now);
         let full = loss >= CONGESTED_PCT || txbuf.is_some_and(|t| t < RADIO_TXBUF_LOW);
+        let radio_full = txbuf.is_some_and(|t| t < RADIO_TXBUF_LOW);
         match self.phase {
             Phase::Watching | Phase::Fitted if full => {
-                let streams = streams(state, vehicle, loss, now);
-                let offered = delivered / (1.0 - loss / 100.0).max(0.05);
-                let out = fit(&streams, offered, delivered * HEADROOM);
-                if out.is_empty() {
-                    // Nothing to scale down: the loss is not the streams' doing.
-                    self.phase = Phase::RandomLoss {
-                        until: now + RANDOM_LOSS_HOLD,
-                    };
-                    return Vec::new();
-                }
-                self.changed.extend(out.iter().map(|(m, _)| *m));
-                self.report_mut().capacity = Some(delivered);
-                self.phase = Phase::Asking;
-                out
+                self.fit_now(state, vehicle, loss, delivered, now)
             }
-            Phase::Settling { until } if now >= until => {
-                if loss < CLEAR_PCT {
+            Phase::Settling { until, loss_before } if now >= until => {
+                if loss < CLEAR_PCT && !radio_full {
                     self.phase = Phase::Fitted;
                     return Vec::new();
+                }
+                // Still full, but the fit helped (or the radio says its buffer is full): the
+                // first estimate of what the link carries was high. Fit again from here.
+                if radio_full || loss < loss_before / 2.0 {
+                    return self.fit_now(state, vehicle, loss, delivered, now);
                 }
                 self.phase = Phase::RandomLoss {
                     until: now + RANDOM_LOSS_HOLD,
@@ -233,12 +229,38 @@ impl Fitter {
         }
     }
 
+    /// Fits the streams to `delivered` bytes/s, seen at `loss` %.
+    fn fit_now(
+        &mut self,
+        state: &VehicleState,
+        vehicle: (SystemId, ComponentId),
+        loss: f64,
+        delivered: f64,
+        now: Instant,
+    ) -> Vec<(u32, Change)> {
+        let streams = streams(state, vehicle, loss, now);
+        let offered = delivered / (1.0 - loss / 100.0).max(0.05);
+        let out = fit(&streams, offered, delivered * HEADROOM);
+        if out.is_empty() {
+            // Nothing to scale down: the loss is not the streams' doing.
+            self.phase = Phase::RandomLoss {
+                until: now + RANDOM_LOSS_HOLD,
+            };
+            return Vec::new();
+        }
+        self.changed.extend(out.iter().map(|(m, _)| *m));
+        self.report_mut().capacity = Some(delivered);
+        self.phase = Phase::Asking { loss_before: loss };
+        out
+    }
+
     /// The intervals the last [`Fitter::tick`] returned have all been asked for (or given up):
     /// their effect is judged [`SETTLE`] from `now`.
     pub fn asked(&mut self, now: Instant) {
-        if self.phase == Phase::Asking {
+        if let Phase::Asking { loss_before } = self.phase {
             self.phase = Phase::Settling {
                 until: now + SETTLE,
+                loss_before,
             };
             if let Some(r) = self.report.as_mut() {
                 r.fitted = true;

@@ -217,3 +217,28 @@ fn a_radio_reporting_its_buffer_filling_is_a_full_link_before_any_loss() {
     assert!(att < 80.0, "{att}");
     assert_eq!(fit.report().expect("a report").radio_txbuf, Some(30));
 }
+
+#[test]
+fn a_fit_that_halves_the_loss_goes_again_from_the_rates_then_flowing() {
+    let t0 = Instant::now();
+    let mut feed = Feed::new(t0);
+    feed.lose_every = 3;
+    feed.run(t0, 3, 100, 50);
+    let mut fit = Fitter::default();
+    let now = t0 + Duration::from_secs(3);
+    assert!(!fit.tick(&feed.state, V, now).is_empty());
+    fit.asked(now);
+    // A third lost before, a tenth after: the link carries less than first thought.
+    feed.lose_every = 10;
+    feed.run(now, 4, 50, 25);
+    let later = now + Duration::from_secs(4);
+    let again = fit.tick(&feed.state, V, later);
+    assert!(
+        again
+            .iter()
+            .all(|(_, c)| matches!(c, Change::Scale { ratio, .. } if *ratio < 1.0)),
+        "{again:?}"
+    );
+    let att = hz(&again, id::ATTITUDE).expect("ATTITUDE re-rated");
+    assert!(att < 50.0, "{att}");
+}

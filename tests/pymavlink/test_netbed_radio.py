@@ -96,3 +96,28 @@ def test_the_daemon_fits_the_stream_rates_to_the_radio_by_itself_and_shows_its_c
     assert capacity, lines[-1:]
     assert CAPACITY_KB_S[0] <= capacity[-1] <= CAPACITY_KB_S[1], (capacity[-1], CAPACITY_KB_S)
     print(f"capacity shown {capacity[-1]} kB/s; {figures[-1].group(0)}")
+
+
+TXBUF_RE = re.compile(r"\| radio txbuf (?P<free>\d+)%")
+
+
+def test_a_radio_that_reports_its_buffer_filling_gets_streams_it_can_carry(tmp_path):
+    """The twin behind a SiK radio of its own (`--radio-baud`: a 2 KiB buffer draining at 1920
+    bytes a second, RADIO_STATUS from system 51 once a second): the daemon reads the radio's
+    free buffer, fits the streams, and the radio's buffer empties and stays so."""
+    s = Scene(tmp_path, twin_extra=("--radio-baud", "19200"))
+    try:
+        g = s.client()
+        g.wait_vehicle_heartbeat(timeout=20)
+        mark = s.daemon.mark()
+        s.status(r"\| radio txbuf [0-4]?\d%", timeout=10, since=mark)
+        s.status(r"streams fitted", timeout=30, since=mark)
+        # The fit may take a second round (the radio's buffer still filling after the first).
+        s.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.0%.*\| radio txbuf (100|[5-9]\d)%", timeout=40, since=mark)
+        figures = listen(s, g, 3.0)
+        lines = s.daemon.lines_since(mark)
+        free = [int(m["free"]) for line in lines[-3:] if (m := TXBUF_RE.search(line))]
+        print(f"radio txbuf {free} %; {figures[-1].group(0)}")
+        assert free and min(free) >= 50, lines[-3:]
+    finally:
+        s.close()
