@@ -217,7 +217,13 @@ impl PullMachine {
 
     fn list(&mut self, now: Instant) -> Vec<MavMessage> {
         self.list_sends = self.list_sends.saturating_add(1);
-        let first_wait = self.srtt().mul_f64(LIST_RTO_FACTOR).min(self.rto);
+        // Never below the floor: on loopback the round trip is well under the vehicle's own
+        // tick, which paces the start of its stream.
+        let first_wait = self
+            .srtt()
+            .mul_f64(LIST_RTO_FACTOR)
+            .min(self.rto)
+            .max(Rtt::MIN_RTO);
         self.list_due = now + retry_wait(first_wait, self.list_sends);
         let copies = LIST_COPIES + usize::from(self.list_sends - 1).min(2);
         let m = MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {

@@ -183,6 +183,15 @@ fn a_request_waits_a_quarter_more_than_the_round_trip_not_the_first_samples_spre
 }
 
 #[test]
+fn on_loopback_the_list_request_waits_at_least_the_floor() {
+    let t0 = Instant::now();
+    let mut m = PullMachine::new(V, rtt(0));
+    m.start(t0);
+    assert!(m.deadline() >= t0 + Rtt::MIN_RTO, "{:?}", m.deadline() - t0);
+    assert!(m.on_time(t0 + Rtt::MIN_RTO / 2).is_empty());
+}
+
+#[test]
 fn pull_gives_up_when_nothing_answers() {
     let t0 = Instant::now();
     let mut m = PullMachine::new(V, rtt(10));
