@@ -101,6 +101,8 @@ pub struct Running {
     pub history: SharedHistory,
     /// The daemon's parameter downloads (`fetch_params`: at first contact and after reboots).
     pub param_fetches: std::sync::Arc<crate::reboot::ParamFetches>,
+    /// The vehicle link as the stream fit measured it ([`crate::fit`]).
+    pub link_fit: watch::Receiver<Option<crate::fit::LinkFit>>,
 }
 
 /// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
@@ -167,7 +169,19 @@ pub async fn start(
         cancel.clone(),
     ));
 
+    // A replayed log takes no requests: nothing to fit.
+    let (fit_tx, link_fit) = watch::channel(None);
+    if !matches!(config.vehicle, VehicleSource::Replay(_)) {
+        tasks.spawn(crate::fit::run(
+            state_rx.clone(),
+            client.clone(),
+            fit_tx,
+            cancel.clone(),
+        ));
+    }
+
     Ok(Running {
+        link_fit,
         client,
         param_fetches,
         tlog_stats,

@@ -6,6 +6,7 @@
 pub mod client;
 pub mod config;
 pub mod daemon;
+pub mod fit;
 pub mod gcs;
 pub mod log;
 pub mod params;

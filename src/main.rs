@@ -409,6 +409,9 @@ async fn print_status_lines(
                     unroutable,
                     vtol_gcs::tracker::now(),
                 );
+                line.push_str(&vtol_gcs::status::fit_part(
+                    running.link_fit.borrow().as_ref(),
+                ));
                 line.push_str(&vtol_gcs::status::policy_part(&links, signing.as_ref()));
                 line.push_str(&vtol_gcs::status::fleet_part(
                     &state,

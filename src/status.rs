@@ -158,6 +158,28 @@ pub fn vitals_part(v: &Vitals, state: vtol_link::dialect::MavState) -> String {
     s
 }
 
+/// The vehicle link as the stream fit measured it: its capacity in frame bytes per second
+/// once it was full, whether the streams run at fitted rates, and the radio's free transmit
+/// buffer when the link reports RADIO_STATUS. Empty when there is nothing to say.
+#[must_use]
+pub fn fit_part(fit: Option<&crate::fit::LinkFit>) -> String {
+    let mut s = String::new();
+    let Some(f) = fit else { return s };
+    if let Some(c) = f.capacity {
+        let _ = write!(
+            s,
+            " | link {} capacity {:.1} kB/s{}",
+            f.link,
+            c / 1000.0,
+            if f.fitted { ", streams fitted" } else { "" }
+        );
+    }
+    if let Some(t) = f.radio_txbuf {
+        let _ = write!(s, " | radio txbuf {t}%");
+    }
+    s
+}
+
 /// The status line's signing and policy part: with a key, what the daemon signed and what it
 /// refused from the vehicle; per client link with a policy, its trust, its rate-limit drops and
 /// refused frames. Empty when there is nothing to say.

@@ -33,6 +33,7 @@ async fn rig(loss: f64, seed: u64, speed: f64) -> Rig {
             loss,
             latency: Duration::ZERO,
             seed,
+            radio_baud: None,
         },
         ..ServeConfig::default()
     };

@@ -232,6 +232,11 @@ struct ServeArgs {
     /// Delay of every frame in each direction, milliseconds.
     #[arg(long, default_value_t = 0, value_name = "MS")]
     latency: u64,
+    /// A SiK telemetry radio at this baud on each link: a 2 KiB transmit buffer that drains at
+    /// BAUD / 10 bytes a second and loses what does not fit, and RADIO_STATUS once a second
+    /// (system 51, component 68) with the buffer's free percentage in `txbuf`.
+    #[arg(long, value_name = "BAUD")]
+    radio_baud: Option<u32>,
     /// MAVLink 2 signing with the key SHA-256(TEXT), as MAVProxy's `signing setup TEXT`: the
     /// twin signs what it sends and ignores unsigned (except RADIO_STATUS), wrongly signed and
     /// replayed frames. Key and timestamp are kept beside --param-file (NAME.signing); without
@@ -312,6 +317,7 @@ impl ServeArgs {
                 loss: self.loss,
                 latency: std::time::Duration::from_millis(self.latency),
                 seed: self.seed,
+                radio_baud: self.radio_baud,
             },
             control: self.control.clone(),
             tlog: self.tlog.clone(),

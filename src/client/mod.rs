@@ -11,6 +11,7 @@
 //! vehicle that an operator is watching when none is.
 
 pub mod command;
+pub mod interval;
 pub mod machine;
 pub mod param;
 pub mod probe;
@@ -446,6 +447,18 @@ impl ClientHandle {
     pub async fn probe_rtt(&self) -> Result<Option<Duration>, ClientError> {
         let target = self.vehicle().await?;
         let mut m = probe::ProbeMachine::new(target);
+        self.drive(&mut m, |_| {}).await
+    }
+
+    /// The interval at which the vehicle sends `msgid` (GET_MESSAGE_INTERVAL, asked again until
+    /// MESSAGE_INTERVAL answers): `Some(µs)` as the vehicle reports it (0 not sent or unknown,
+    /// −1 disabled), `None` when it does not answer.
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn message_interval(&self, msgid: u32) -> Result<Option<i32>, ClientError> {
+        let target = self.vehicle().await?;
+        let mut m = interval::IntervalMachine::new(target, msgid, self.rto());
         self.drive(&mut m, |_| {}).await
     }
 

@@ -1,32 +1,25 @@
 //! The parameter protocol as state machines: the whole-table download, one read, and one
 //! verified write.
 //!
-//! Download: PARAM_REQUEST_LIST, then, once the stream has ended (its last index arrived, or it
-//! has been silent for a round-trip timeout), the missing indices by PARAM_REQUEST_READ(index), at most [`PULL_WINDOW`]
-//! outstanding: each answer lets the next request go, so the pace follows what the link
-//! carries. A request unanswered for a timeout is sent again. Echoes with index 65535 (a by-name
-//! answer or another client's write) update values by name.
+//! Download ([`PullMachine`], in `param/pull.rs`): PARAM_REQUEST_LIST, then the holes in the
+//! stream by PARAM_REQUEST_READ(index), asked for as soon as a later index shows them, in
+//! several copies once the link has shown loss.
 //!
 //! Write: PARAM_SET, confirmed only by a PARAM_VALUE echo equal to the value after the vehicle's
 //! type conversion (bit-exact for floats). A PARAM_ERROR is a definite refusal; the reason is
 //! the vehicle's STATUSTEXT about that name when one arrives, otherwise the error code.
 
-use std::collections::{BTreeMap, HashMap};
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
 use vtol_link::{ComponentId, SystemId};
 
-use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Rtt, retry_wait};
-use crate::params::{Param, ParamSet, stored_value};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
+use crate::params::{Param, stored_value};
 
-/// Index re-requests outstanding at once during a download.
-pub const PULL_WINDOW: usize = 16;
-/// Consecutive timeouts without any new value before a download gives up…
-pub const PULL_STALLS: u32 = 12;
-/// …and at least this long without one: a busy machine can pause a fast link for longer than
-/// twelve short timeouts.
-pub const PULL_GIVE_UP: Duration = Duration::from_secs(3);
+mod pull;
+pub use pull::{PULL_WINDOW, PullMachine, PullStalled};
+
 /// Sends of one write or read before giving up. At 30 % loss each way one exchange fails about
 /// half the time, so twelve sends leave a 0.03 % chance of a false "no answer"; with the
 /// timeout at a few round trips that is still well under a second on a fast link.
@@ -34,234 +27,6 @@ pub const PARAM_TRIES: u8 = 12;
 
 fn name_of(id: &mavlink::types::CharArray<16>) -> String {
     id.to_str().unwrap_or("").trim_end_matches('\0').to_owned()
-}
-
-/// Why a download did not complete.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PullStalled {
-    /// Values received.
-    pub received: usize,
-    /// Values announced (0 if no value ever came).
-    pub total: usize,
-}
-
-/// The whole-table download.
-#[derive(Debug)]
-pub struct PullMachine {
-    target: (SystemId, ComponentId),
-    /// The client's estimate, refined by this download's own samples.
-    rtt: Rtt,
-    rto: Duration,
-    count: Option<u16>,
-    values: BTreeMap<u16, (String, Param)>,
-    by_name: HashMap<String, u16>,
-    /// Re-requested index -> (answer due, sent at, first send?).
-    outstanding: BTreeMap<u16, (Instant, Instant, bool)>,
-    /// Indices already asked once: a later answer may be to any send (Karn's rule).
-    asked: std::collections::HashSet<u16>,
-    samples: Vec<Duration>,
-    started: Instant,
-    last_rx: Instant,
-    deadline: Instant,
-    stalls: u32,
-    list_sends: u32,
-    /// PARAM_REQUEST_READs sent (for the benchmark's report).
-    pub rerequests: usize,
-    done: Option<Result<ParamSet, PullStalled>>,
-}
-
-impl PullMachine {
-    /// A download from `target`, starting from the client's round-trip estimate.
-    #[must_use]
-    pub fn new(target: (SystemId, ComponentId), rtt: Rtt) -> Self {
-        let now = Instant::now();
-        Self {
-            target,
-            rtt,
-            rto: rtt.rto(),
-            count: None,
-            values: BTreeMap::new(),
-            by_name: HashMap::new(),
-            outstanding: BTreeMap::new(),
-            asked: std::collections::HashSet::new(),
-            samples: Vec::new(),
-            started: now,
-            last_rx: now,
-            deadline: now,
-            stalls: 0,
-            list_sends: 0,
-            rerequests: 0,
-            done: None,
-        }
-    }
-
-    /// (received, total) for a progress bar; total is 0 until the first value.
-    #[must_use]
-    pub fn progress(&self) -> (usize, usize) {
-        (self.values.len(), self.count.map_or(0, usize::from))
-    }
-
-    fn list(&mut self, now: Instant) -> MavMessage {
-        self.list_sends += 1;
-        self.deadline = now + self.rto;
-        MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
-            target_system: self.target.0.0,
-            target_component: self.target.1.0,
-        })
-    }
-
-    fn read(&mut self, index: u16, now: Instant) -> MavMessage {
-        self.rerequests += 1;
-        let first = self.asked.insert(index);
-        self.outstanding.insert(index, (now + self.rto, now, first));
-        MavMessage::PARAM_REQUEST_READ(apm::PARAM_REQUEST_READ_DATA {
-            param_index: index as i16,
-            target_system: self.target.0.0,
-            target_component: self.target.1.0,
-            param_id: "".into(),
-        })
-    }
-
-    /// Fill the window with requests for missing indices not already asked for.
-    fn refill(&mut self, now: Instant) -> Vec<MavMessage> {
-        let Some(count) = self.count else {
-            return Vec::new();
-        };
-        let mut out = Vec::new();
-        let mut next = 0u16;
-        while self.outstanding.len() < PULL_WINDOW && next < count {
-            if !self.values.contains_key(&next) && !self.outstanding.contains_key(&next) {
-                out.push(self.read(next, now));
-            }
-            next += 1;
-        }
-        out
-    }
-
-    fn complete(&mut self) {
-        if let Some(count) = self.count
-            && self.values.len() >= usize::from(count)
-        {
-            let set = self.values.values().map(|(n, p)| (n.clone(), *p)).collect();
-            self.done = Some(Ok(set));
-        }
-    }
-}
-
-impl Machine for PullMachine {
-    type Output = Result<ParamSet, PullStalled>;
-
-    fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        self.last_rx = now;
-        self.started = now;
-        vec![self.list(now)]
-    }
-
-    fn on_message(&mut self, now: Instant, m: &Inbound) -> Vec<MavMessage> {
-        if self.done.is_some() || (m.sys, m.comp) != self.target {
-            return Vec::new();
-        }
-        let MavMessage::PARAM_VALUE(v) = &m.msg else {
-            return Vec::new();
-        };
-        let name = name_of(&v.param_id);
-        let param = Param {
-            value: v.param_value,
-            ty: v.param_type,
-        };
-        self.count.get_or_insert(v.param_count);
-        let index = if v.param_index == u16::MAX {
-            match self.by_name.get(&name) {
-                Some(&i) => i,
-                None => return Vec::new(),
-            }
-        } else {
-            v.param_index
-        };
-        if self.count.is_some_and(|c| index >= c) {
-            return Vec::new();
-        }
-        self.last_rx = now;
-        self.stalls = 0;
-        self.by_name.insert(name.clone(), index);
-        self.values.insert(index, (name, param));
-        let mut sample = None;
-        if self.values.len() == 1 && self.list_sends == 1 {
-            sample = Some(now.duration_since(self.started));
-        }
-        let asked = self.outstanding.remove(&index);
-        if let Some((_, sent, true)) = asked {
-            sample = Some(now.duration_since(sent));
-        }
-        if let Some(s) = sample {
-            self.samples.push(s);
-            self.rtt.sample(s);
-            self.rto = self.rtt.rto();
-        }
-        let was_asked = asked.is_some();
-        self.deadline = now + self.rto;
-        self.complete();
-        if self.done.is_some() {
-            return Vec::new();
-        }
-        // While re-requesting, each answer frees a window slot for the next request. The last
-        // index of the list stream (sent in index order) means the stream is over: ask for the
-        // holes now rather than after a silence.
-        let stream_end = !was_asked && self.count == Some(index + 1);
-        if was_asked || stream_end {
-            self.refill(now)
-        } else {
-            Vec::new()
-        }
-    }
-
-    fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
-        if self.done.is_some() || now < self.deadline() {
-            return Vec::new();
-        }
-        if now.duration_since(self.last_rx) >= self.rto {
-            self.stalls += 1;
-            if self.stalls > PULL_STALLS && now.duration_since(self.last_rx) >= PULL_GIVE_UP {
-                let (received, total) = self.progress();
-                self.done = Some(Err(PullStalled { received, total }));
-                return Vec::new();
-            }
-        }
-        if self.count.is_none() {
-            return vec![self.list(now)];
-        }
-        // Requests whose answer is overdue are asked again.
-        let overdue: Vec<u16> = self
-            .outstanding
-            .iter()
-            .filter(|(_, (due, ..))| *due <= now)
-            .map(|(i, _)| *i)
-            .collect();
-        let mut out: Vec<MavMessage> = overdue.into_iter().map(|i| self.read(i, now)).collect();
-        if self.outstanding.is_empty() && now.duration_since(self.last_rx) >= self.rto {
-            // The list stream went quiet: start asking for the holes.
-            out.extend(self.refill(now));
-        }
-        self.deadline = now + self.rto;
-        out
-    }
-
-    fn deadline(&self) -> Instant {
-        let stream_quiet = self.last_rx + self.rto;
-        let next_due = self.outstanding.values().map(|(due, ..)| *due).min();
-        match next_due {
-            Some(d) => d.min(self.deadline.max(stream_quiet)),
-            None => self.deadline.max(stream_quiet),
-        }
-    }
-
-    fn result(&mut self) -> Option<Self::Output> {
-        self.done.take()
-    }
-
-    fn take_rtt_samples(&mut self) -> Vec<Duration> {
-        std::mem::take(&mut self.samples)
-    }
 }
 
 /// Why one write or read did not confirm.
@@ -484,80 +249,6 @@ mod tests {
                 param_type: ty,
             }),
         }
-    }
-
-    fn rtt(ms: u64) -> Rtt {
-        let mut r = Rtt::default();
-        r.sample(Duration::from_millis(ms));
-        r
-    }
-
-    fn read_indices(out: &[MavMessage]) -> Vec<i16> {
-        out.iter()
-            .filter_map(|m| match m {
-                MavMessage::PARAM_REQUEST_READ(r) => Some(r.param_index),
-                _ => None,
-            })
-            .collect()
-    }
-
-    #[test]
-    fn pull_rerequests_holes_after_a_silence_and_completes() {
-        let t0 = Instant::now();
-        let mut m = PullMachine::new(V, rtt(10));
-        let first = m.start(t0);
-        assert!(matches!(first[..], [MavMessage::PARAM_REQUEST_LIST(_)]));
-        // 5 parameters; 1 and 3 are lost, and the stream is still going.
-        for i in [0u16, 2] {
-            assert!(
-                m.on_message(t0, &value(&format!("P{i}"), f32::from(i), i, 5, F32))
-                    .is_empty()
-            );
-        }
-        assert!(m.result().is_none());
-        assert_eq!(m.progress(), (2, 5));
-        // The last index ends the stream: the holes are asked for at once.
-        let asks = m.on_message(t0, &value("P4", 4.0, 4, 5, F32));
-        assert_eq!(read_indices(&asks), [1, 3]);
-        assert!(
-            m.on_time(t0 + Duration::from_millis(5)).is_empty(),
-            "nothing overdue yet"
-        );
-        // An echo by name (index 65535) of a known parameter updates it.
-        m.on_message(t0, &value("P2", 7.0, u16::MAX, 5, F32));
-        m.on_message(t0, &value("P1", 1.0, 1, 5, F32));
-        // 3 was lost again: asked again once overdue.
-        let again = m.on_time(m.deadline());
-        assert_eq!(read_indices(&again), [3]);
-        m.on_message(t0, &value("P3", 3.0, 3, 5, F32));
-        let set = m.result().expect("done").expect("complete");
-        assert_eq!(set.len(), 5);
-        assert_eq!(set["P2"].value, 7.0);
-    }
-
-    #[test]
-    fn pull_gives_up_when_nothing_answers() {
-        let t0 = Instant::now();
-        let mut m = PullMachine::new(V, rtt(10));
-        m.start(t0);
-        let mut lists = 0;
-        for _ in 0..1000 {
-            let d = m.deadline();
-            lists += m.on_time(d).len();
-            if let Some(r) = m.result() {
-                assert_eq!(
-                    r,
-                    Err(PullStalled {
-                        received: 0,
-                        total: 0
-                    })
-                );
-                assert!(lists >= 3, "the list request is repeated before giving up");
-                assert!(d.duration_since(t0) >= PULL_GIVE_UP, "gave up too soon");
-                return;
-            }
-        }
-        panic!("never gave up");
     }
 
     #[test]

@@ -24,11 +24,12 @@ use super::machine::Inbound;
 use crate::trust::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 6] = [
+const WANTED: [u32; 7] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
     77,  // COMMAND_ACK
     111, // TIMESYNC
+    244, // MESSAGE_INTERVAL
     253, // STATUSTEXT
     345, // PARAM_ERROR
 ];

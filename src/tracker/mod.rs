@@ -362,18 +362,19 @@ mod tests {
         t.task.await.unwrap();
     }
 
+    /// `n` heartbeats numbered in sequence (the same frame repeated would be one datagram
+    /// repeated, counted once).
     fn heartbeat_run(link: LinkId, n: usize) -> Vec<Tapped> {
-        let hb = Frame::encode_v2(
-            vtol_link::SystemId(1),
-            vtol_link::ComponentId(1),
-            0,
-            &vtol_link::gcs_heartbeat(),
-        );
         (0..n)
-            .map(|_| Tapped {
+            .map(|i| Tapped {
                 link,
                 side: Side::Vehicle,
-                frame: hb.clone(),
+                frame: Frame::encode_v2(
+                    vtol_link::SystemId(1),
+                    vtol_link::ComponentId(1),
+                    (i % 256) as u8,
+                    &vtol_link::gcs_heartbeat(),
+                ),
                 at: now(),
             })
             .collect()

@@ -10,6 +10,7 @@ use vtol_link::dialect::{
 };
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
+use super::seq::Seen;
 use super::window::{Stamp, Window};
 use crate::tap::Side;
 
@@ -192,9 +193,17 @@ pub struct LinkHealth {
     pub last_heard: Instant,
     /// Received and lost over the last seconds.
     pub window: Window,
+    /// Bytes of the frames received over the last seconds (as `received`).
+    pub bytes: Window,
 }
 
 impl LinkHealth {
+    /// Bytes of frames per second over the last 2 s: what the link delivers.
+    #[must_use]
+    pub fn bytes_per_s(&self, now: Instant) -> f64 {
+        self.bytes.rate_hz(now)
+    }
+
     /// Frames per second over the last 2 s (0 when the link is silent).
     #[must_use]
     pub fn rate_hz(&self, now: Instant) -> f64 {
@@ -317,13 +326,28 @@ impl VehicleState {
             return None;
         }
         let (now, stamp) = (stamp.at(), *stamp);
-        let lost = self.account(link, side, frame, &stamp);
+        let seen = self.account(link, side, frame, &stamp);
         let key = frame.sender();
         if let Some(v) = self.vehicles.get_mut(&key) {
             v.link = link;
-            v.frames += 1;
-            v.lost += u64::from(lost);
-            v.window.add_stamped(&stamp, 1, lost);
+            match seen {
+                Seen::Next { lost } => {
+                    v.frames += 1;
+                    v.lost += u64::from(lost);
+                    v.window.add_stamped(&stamp, 1, lost);
+                }
+                Seen::Late => {
+                    v.frames += 1;
+                    v.lost = v.lost.saturating_sub(1);
+                    v.window.add_stamped(&stamp, 1, 0);
+                    v.window.take_back_lost();
+                }
+                Seen::Repeat => {}
+            }
+        }
+        if seen == Seen::Repeat {
+            // A repeated datagram: counted and applied once already.
+            return None;
         }
         self.count_message(key, frame, &stamp);
         // Decode only what the view uses, and only from known vehicles (or their heartbeat):
@@ -475,10 +499,14 @@ fn apply_telemetry(
     }
 }
 
+fn frame_bytes(frame: &Frame) -> u32 {
+    u32::try_from(frame.as_bytes().len()).unwrap_or(u32::MAX)
+}
+
 impl VehicleState {
-    /// Counts a frame in its link's health; returns the frames its sender's sequence says
-    /// were lost just before it.
-    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> u32 {
+    /// Counts a frame in its link's health; returns what its sender's sequence says it is: the
+    /// next frame (with the frames lost just before it), a late one, or a repeat (not counted).
+    fn account(&mut self, link: LinkId, side: Side, frame: &Frame, stamp: &Stamp) -> Seen {
         let (epoch, now) = (self.epoch, stamp.at());
         let h = self.links.entry(link).or_insert_with(|| LinkHealth {
             side,
@@ -486,21 +514,36 @@ impl VehicleState {
             lost: 0,
             last_heard: now,
             window: Window::new(epoch),
+            bytes: Window::new(epoch),
         });
-        h.frames += 1;
         h.last_heard = now;
         // A new session of the sender (a restart, a second process under its identity) is
-        // no loss: see [`super::seq`].
+        // no loss; a late frame takes its loss back, a repeated one counts nothing: see
+        // [`super::seq`].
         let at_us =
             u64::try_from(now.saturating_duration_since(epoch).as_micros()).unwrap_or(u64::MAX);
-        let lost = self
+        let seen = self
             .last_seq
             .entry((link, frame.sender().0, frame.sender().1))
             .or_default()
-            .observe(frame.seq(), at_us);
-        h.lost += u64::from(lost);
-        h.window.add_stamped(stamp, 1, lost);
-        lost
+            .see(frame.seq(), Some(frame.crc()), at_us);
+        match seen {
+            Seen::Next { lost } => {
+                h.frames += 1;
+                h.lost += u64::from(lost);
+                h.window.add_stamped(stamp, 1, lost);
+                h.bytes.add_stamped(stamp, frame_bytes(frame), 0);
+            }
+            Seen::Late => {
+                h.frames += 1;
+                h.bytes.add_stamped(stamp, frame_bytes(frame), 0);
+                h.lost = h.lost.saturating_sub(1);
+                h.window.add_stamped(stamp, 1, 0);
+                h.window.take_back_lost();
+            }
+            Seen::Repeat => {}
+        }
+        seen
     }
 
     /// Forgets a link that went down: its health and its sequence history (a link that comes
@@ -540,204 +583,5 @@ impl VehicleState {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use vtol_link::dialect;
-
-    fn hb(mavtype: MavType, autopilot: MavAutopilot, armed: bool) -> MavMessage {
-        let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
-        if armed {
-            base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-        }
-        MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-            custom_mode: 18,
-            mavtype,
-            autopilot,
-            base_mode,
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        })
-    }
-
-    #[test]
-    fn a_boot_clock_going_back_is_a_reboot() {
-        let mut s = VehicleState::default();
-        let now = Instant::now();
-        let beat = hb(
-            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            false,
-        );
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &beat),
-            now,
-        );
-        let attitude = |ms: u32, seq: u8| {
-            let m = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
-                time_boot_ms: ms,
-                ..Default::default()
-            });
-            Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &m)
-        };
-        for (seq, ms) in [10_000, 10_050, 10_050, 10_100].into_iter().enumerate() {
-            s.apply(LinkId(1), Side::Vehicle, &attitude(ms, seq as u8), now);
-        }
-        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
-        assert_eq!(
-            (v.reboots, v.last_reboot),
-            (0, None),
-            "equal or rising times"
-        );
-        s.apply(LinkId(1), Side::Vehicle, &attitude(1_520, 9), now);
-        s.apply(LinkId(1), Side::Vehicle, &attitude(1_570, 10), now);
-        let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
-        assert_eq!(v.reboots, 1);
-        let r = v.last_reboot.unwrap();
-        assert_eq!((r.before_ms, r.after_ms), (10_100, 1_520));
-    }
-
-    #[test]
-    fn vehicle_found_by_heartbeat_and_gcs_ignored() {
-        let mut s = VehicleState::default();
-        let now = Instant::now();
-        let gcs = hb(
-            MavType::MAV_TYPE_GCS,
-            MavAutopilot::MAV_AUTOPILOT_INVALID,
-            false,
-        );
-        s.apply(
-            LinkId(1),
-            Side::Client,
-            &Frame::encode_v2(
-                vtol_link::SystemId(255),
-                vtol_link::ComponentId(190),
-                0,
-                &gcs,
-            ),
-            now,
-        );
-        assert!(s.vehicles.is_empty());
-        let v = hb(
-            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            true,
-        );
-        s.apply(
-            LinkId(2),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &v),
-            now,
-        );
-        let view = &s.vehicles[&(SystemId(1), ComponentId(1))];
-        assert!(view.armed);
-        assert_eq!(view.mode_name(), "QHOVER");
-    }
-
-    #[test]
-    fn a_restart_on_a_link_that_stays_up_is_no_loss() {
-        // A twin restarted behind a UDP link (which never goes down): its sequence starts at 0
-        // again, and a client's first two frames both carry 0. Neither is a wrap of 255 lost.
-        let mut s = VehicleState::default();
-        let now = Instant::now();
-        let v = hb(
-            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            false,
-        );
-        let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
-        let client = (vtol_link::SystemId(255), vtol_link::ComponentId(190));
-        let frames = [
-            (vehicle, 0u8),
-            (vehicle, 1),
-            (vehicle, 2),
-            (vehicle, 0),
-            (vehicle, 1),
-        ];
-        let client_frames = [(client, 0u8), (client, 0), (client, 1)];
-        for ((sys, comp), seq) in frames.into_iter().chain(client_frames) {
-            s.apply(
-                LinkId(1),
-                Side::Vehicle,
-                &Frame::encode_v2(sys, comp, seq, &v),
-                now,
-            );
-        }
-        assert_eq!(s.links[&LinkId(1)].lost, 0);
-        assert_eq!(s.links[&LinkId(1)].frames, 8);
-    }
-
-    #[test]
-    fn sequence_gaps_count_as_loss() {
-        let mut s = VehicleState::default();
-        let now = Instant::now();
-        let v = hb(
-            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            false,
-        );
-        for seq in [250u8, 251, 253, 254, 255, 0, 3] {
-            s.apply(
-                LinkId(1),
-                Side::Vehicle,
-                &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &v),
-                now,
-            );
-        }
-        let h = &s.links[&LinkId(1)];
-        assert_eq!(h.frames, 7);
-        assert_eq!(h.lost, 3);
-        assert!((h.loss_pct(now) - 30.0).abs() < 1e-9);
-        // Once the link goes down and comes back (a reconnect keeps its id), the gap is not
-        // loss.
-        s.retain_links(&[]);
-        s.retain_links(&[LinkId(1)]);
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 100, &v),
-            now,
-        );
-        assert_eq!(s.links[&LinkId(1)].lost, 0);
-    }
-
-    #[test]
-    fn a_vehicle_whose_link_goes_down_is_lost_at_once_and_back_with_its_next_heartbeat() {
-        let mut s = VehicleState::default();
-        let now = Instant::now();
-        let v = hb(
-            MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-            MavAutopilot::MAV_AUTOPILOT_GENERIC,
-            false,
-        );
-        for (link, sys) in [(1, 1), (2, 2)] {
-            s.apply(
-                LinkId(link),
-                Side::Vehicle,
-                &Frame::encode_v2(vtol_link::SystemId(sys), vtol_link::ComponentId(1), 0, &v),
-                now,
-            );
-        }
-        s.forget_link(LinkId(2));
-        // A heartbeat of link 2 still on its way to the tracker is stale: 2 stays lost.
-        s.apply(
-            LinkId(2),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 1, &v),
-            now,
-        );
-        let lost =
-            |s: &VehicleState, sys: u8| s.vehicles[&(SystemId(sys), ComponentId(1))].is_lost(now);
-        assert!(!lost(&s, 1));
-        assert!(lost(&s, 2));
-        assert!(!s.vehicle_lost(now));
-        s.apply(
-            LinkId(3),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 2, &v),
-            now,
-        );
-        assert!(!lost(&s, 2));
-    }
-}
+#[path = "state_tests.rs"]
+mod tests;

@@ -125,6 +125,20 @@ impl Window {
         self.first.get_or_insert(b);
     }
 
+    /// Takes back one lost frame (a late frame arrived): from the newest bucket that counts one.
+    pub fn take_back_lost(&mut self) {
+        for k in 0..BUCKETS as u64 {
+            let Some(b) = self.newest.checked_sub(k) else {
+                break;
+            };
+            let slot = &mut self.counts[(b % BUCKETS as u64) as usize];
+            if slot.1 > 0 {
+                slot.1 -= 1;
+                return;
+            }
+        }
+    }
+
     /// Sums over the newest `n` buckets as seen at `now`, and the span they cover in seconds.
     fn sum(&self, now: Instant, n: u64) -> (u64, u64, f64) {
         let now_b = self.bucket_of(now).max(self.newest);
@@ -152,6 +166,18 @@ impl Window {
     pub fn rate_hz(&self, now: Instant) -> f64 {
         let (rx, _, span) = self.sum(now, RATE_BUCKETS);
         if rx == 0 { 0.0 } else { rx as f64 / span }
+    }
+
+    /// Lost frames in percent of those sent over the last 2 s (the rate's span): what a change
+    /// of the traffic did, seconds after it; 0 when nothing arrived.
+    #[must_use]
+    pub fn recent_loss_pct(&self, now: Instant) -> f64 {
+        let (rx, lost, _) = self.sum(now, RATE_BUCKETS);
+        if rx + lost == 0 {
+            0.0
+        } else {
+            100.0 * lost as f64 / (rx + lost) as f64
+        }
     }
 
     /// Lost frames in percent of those sent over the last 10 s; 0 when nothing arrived.
@@ -212,6 +238,17 @@ mod tests {
         assert_eq!(own, plain);
         assert_eq!(foreign, plain);
         assert_eq!(plain.newest, 4, "1.1 s is bucket 4 of 250 ms");
+    }
+
+    #[test]
+    fn a_late_frame_takes_back_a_loss_counted_earlier() {
+        let t0 = Instant::now();
+        let mut w = Window::new(t0);
+        w.add(t0, 9, 1);
+        w.add(t0 + Duration::from_millis(600), 1, 0);
+        w.take_back_lost();
+        w.take_back_lost();
+        assert_eq!(w.loss_pct(t0 + Duration::from_secs(1)), 0.0);
     }
 
     #[test]

@@ -19,6 +19,7 @@ import contextlib
 import ctypes
 import itertools
 import json
+import math
 import os
 import re
 import shutil
@@ -51,6 +52,7 @@ table ip bed {
     counter dropped_from_vehicle {}
     counter dropped_from_ground {}
     counter duplicated_to_ground {}
+    counter dropped_routed {}
     chain input {
         type filter hook input priority 0; policy accept;
         iifname "mv" meta l4proto udp counter name from_vehicle
@@ -64,6 +66,12 @@ table ip bed {
         jump duplicate
     }
     chain duplicate {
+    }
+    chain forward {
+        type filter hook forward priority 0; policy accept;
+        jump impair_routed
+    }
+    chain impair_routed {
     }
 }
 """
@@ -210,15 +218,34 @@ class Bed:
 
     def loss(self, percent: int, deterministic: bool = False, only_from_vehicle: bool = False) -> None:
         """Drops `percent` % of the UDP datagrams entering the link (each direction); random
-        (`numgen random`), or exactly every n-th ones (`numgen inc`) when `deterministic`."""
+        (`numgen random`), or exactly so many of every cycle (`numgen inc`) when `deterministic`,
+        the cycle as short as the share allows (10 %: one of every 10), so that any stretch of
+        traffic loses the share."""
         gen = "inc" if deterministic else "random"
+        cycle, share = 100, percent
+        if deterministic and percent > 0:
+            g = math.gcd(percent, 100)
+            cycle, share = 100 // g, percent // g
         rules = []
         sides = [("mv", "dropped_from_vehicle")] + ([] if only_from_vehicle else [("mg", "dropped_from_ground")])
         if percent > 0:
             for dev, counter in sides:
-                rules.append(f'iifname "{dev}" meta l4proto udp numgen {gen} mod 100 < {percent} '
+                rules.append(f'iifname "{dev}" meta l4proto udp numgen {gen} mod {cycle} < {share} '
                              f"counter name {counter} drop")
         self._impair(rules)
+
+    def route(self) -> None:
+        """Routes between the vehicle and the ground namespaces through the link namespace, for
+        links that do not go through the delay stage (a Zenoh session over TCP)."""
+        run(["sysctl", "-qw", "net.ipv4.ip_forward=1"], self.link)
+        run(["ip", "route", "add", "10.99.2.0/24", "via", LINK_VEHICLE_SIDE], self.vehicle)
+        run(["ip", "route", "add", "10.99.1.0/24", "via", LINK_GROUND_SIDE], self.ground)
+
+    def partition_routed(self, on: bool = True, reject: bool = False) -> None:
+        """Drops every packet routed across the link (on) or none (off); with `reject`, answers
+        each with ICMP host-unreachable, as a router that knows its route is gone does."""
+        verdict = "reject with icmp type host-unreachable" if reject else "drop"
+        self._impair([f"counter name dropped_routed {verdict}"] if on else [], chain="impair_routed")
 
     def partition(self, on: bool = True) -> None:
         """Drops every datagram across the link (on) or none (off: no impairment at all)."""

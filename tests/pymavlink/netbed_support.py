@@ -118,18 +118,7 @@ class Scene:
     def status(self, pattern: str, timeout: float, since: int = 0) -> re.Match:
         """The first status line printed after `since` (a `daemon.mark()`) that matches `pattern`
         (a regex), waiting with `timeout` as the upper bound."""
-        rx = re.compile(pattern)
-        deadline = time.monotonic() + timeout
-        d = self.daemon
-        with d._new_lines:
-            while True:
-                for line in d.stdout_lines[max(0, len(d.stdout_lines) - (d.total - since)):]:
-                    if m := rx.search(line):
-                        return m
-                left = deadline - time.monotonic()
-                if left <= 0 or not d.alive():
-                    raise AssertionError(f"no status line matching {pattern!r} in {timeout} s\n{d.tail()}")
-                d._new_lines.wait(left)
+        return wait_status(self.daemon, pattern, timeout, since)
 
     def close(self, check: bool = True) -> None:
         errors = []
@@ -167,6 +156,22 @@ class Scene:
         """Every vehicle frame in the daemon's tlog (after the daemon stopped)."""
         records, _ = raw_records(self.daemon.tlog.read_bytes())
         return [f for _, f in records if frame_ids(f)[1:3] == (VEHICLE_SYSID, VEHICLE_COMPID)]
+
+
+def wait_status(d: NetDaemon, pattern: str, timeout: float, since: int = 0) -> re.Match:
+    """The first status line `d` printed after `since` (a `d.mark()`) that matches `pattern` (a
+    regex), waiting on its new lines with `timeout` as the upper bound."""
+    rx = re.compile(pattern)
+    deadline = time.monotonic() + timeout
+    with d._new_lines:
+        while True:
+            for line in d.stdout_lines[max(0, len(d.stdout_lines) - (d.total - since)):]:
+                if m := rx.search(line):
+                    return m
+            left = deadline - time.monotonic()
+            if left <= 0 or not d.alive():
+                raise AssertionError(f"no status line matching {pattern!r} in {timeout} s\n{d.tail()}")
+            d._new_lines.wait(left)
 
 
 def split_frames(datagram: bytes) -> list[bytes]:

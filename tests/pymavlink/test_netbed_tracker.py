@@ -101,10 +101,6 @@ def test_loss_and_rate_equal_what_the_bed_did(tmp_path):
         s.close()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the tracker counts a frame lost when a later one overtakes it and does not take that back "
-    "when it arrives, and counts a duplicate as a received frame (src/tracker/seq.rs, "
-    "src/tracker/state.rs account)"))
 def test_loss_and_rate_equal_what_the_bed_did_with_reordering_and_duplicates(tmp_path):
     # 20 ± 15 ms each way: frames 9 ms apart (the twin's ~110 Hz) often swap places.
     s = Scene(tmp_path, delay_ms=20, jitter_ms=15)

@@ -6,6 +6,7 @@ pub mod fleet;
 pub mod harness;
 pub mod serve;
 pub mod signing;
+pub mod sik;
 pub mod simulate;
 pub mod tlog;
 pub(crate) mod vehicle_loop;

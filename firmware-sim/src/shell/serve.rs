@@ -132,6 +132,8 @@ pub struct Impairment {
     pub latency: std::time::Duration,
     /// Seed of the loss draws.
     pub seed: u64,
+    /// A SiK radio at this baud on each link, reporting RADIO_STATUS ([`crate::shell::sik`]).
+    pub radio_baud: Option<u32>,
 }
 
 impl Default for Impairment {
@@ -140,6 +142,7 @@ impl Default for Impairment {
             loss: 0.0,
             latency: std::time::Duration::ZERO,
             seed: 1,
+            radio_baud: None,
         }
     }
 }

@@ -242,6 +242,13 @@ impl Shell {
         let stream_us = self.clock.stream_us(now);
         let out = self.endpoint.tick_at(sim_us, stream_us);
         self.dispatch(out).await;
+        let reports = match &mut self.radio.sik {
+            Some(sik) => sik.reports(now, self.links.keys().copied()),
+            None => Vec::new(),
+        };
+        for (id, f) in reports {
+            self.deliver(id, f, false).await;
+        }
     }
 
     async fn on_request(&mut self, request: Request) -> Reply {
@@ -305,6 +312,11 @@ impl Shell {
             if let Some(t) = &mut self.tlog {
                 t.record(stamp, true, f.as_bytes());
             }
+            if let Some(sik) = &mut self.radio.sik
+                && !sik.admit(id, f.as_bytes().len(), Instant::now())
+            {
+                continue;
+            }
             if let Some(f) = self.radio.pass(Way::Out, id, f, o.telemetry) {
                 self.deliver(id, f, o.telemetry).await;
             }
@@ -360,6 +372,8 @@ pub(crate) struct Radio {
     imp: Impairment,
     rng: rand_chacha::ChaCha8Rng,
     delayed: std::collections::VecDeque<(Instant, Way, LinkId, Frame, bool)>,
+    /// A SiK radio's buffer and reports, with `--radio-baud`.
+    pub(crate) sik: Option<crate::shell::sik::Sik>,
 }
 
 impl Radio {
@@ -369,6 +383,7 @@ impl Radio {
             imp,
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(imp.seed),
             delayed: std::collections::VecDeque::new(),
+            sik: imp.radio_baud.map(crate::shell::sik::Sik::new),
         }
     }
 

@@ -1,0 +1,472 @@
+//! The whole-table download, built for a lossy link with a long round trip.
+//!
+//! PARAM_REQUEST_LIST goes out twice (its loss would cost a whole timeout, a copy costs a few
+//! dozen bytes; a vehicle restarts its stream on each, so the copies arriving together cost
+//! nothing more). The vehicle streams the table in index order, so an index arriving past a
+//! missing one shows a hole: it is asked for by PARAM_REQUEST_READ(index) while the rest of the
+//! stream still comes, once it has stayed missing for a reorder allowance (a quarter of a round
+//! trip: a link with jitter delivers a burst out of order, and each false hole would cost its
+//! copies); the indices after the last one heard are asked for once the stream has been quiet
+//! for as long. At most [`PULL_WINDOW`] indices are outstanding; each answer lets the next
+//! request go.
+//!
+//! Once the link has shown loss (holes in the stream, or requests unanswered), each request
+//! goes out in several copies: one exchange fails with probability `f = 1 - (1 - p)²` at a loss
+//! `p` each way, `k` independent copies with `f^k`, so the copies are chosen to leave about
+//! [`HOLES_LEFT`] of the holes asked for unanswered after one round. On a clean link `k` is 1.
+//! A request unanswered for its timeout (1.25 × the round trip, or the slowest recent answer
+//! to a request if that is longer; doubling after a few tries) is asked again.
+//!
+//! Echoes with index 65535 (a by-name answer or another client's write) update values by name.
+
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
+use std::time::{Duration, Instant};
+
+use vtol_link::dialect::{self as apm, MavMessage};
+use vtol_link::{ComponentId, SystemId};
+
+use super::name_of;
+use crate::client::machine::{Inbound, Machine, Rtt, retry_wait};
+use crate::params::{Param, ParamSet};
+
+/// Indices re-requested at once during a download: about the holes of a 100-value table at
+/// 30 % loss, in one round.
+pub const PULL_WINDOW: usize = 32;
+/// Consecutive timeouts without any new value before a download gives up…
+pub const PULL_STALLS: u32 = 12;
+/// …and at least this long without one: a busy machine can pause a fast link for longer than
+/// twelve short timeouts.
+pub const PULL_GIVE_UP: Duration = Duration::from_secs(3);
+/// Copies of PARAM_REQUEST_LIST.
+pub const LIST_COPIES: usize = 2;
+/// The most copies of one PARAM_REQUEST_READ.
+pub const MAX_COPIES: u32 = 8;
+/// Holes expected to be left unanswered after one round of requests: what the copies aim at.
+pub const HOLES_LEFT: f64 = 0.2;
+/// A request's timeout as a multiple of the smoothed round trip (before the answers' spread is
+/// known): the round trip is measured before the download, and the requests' own round trips
+/// then set it.
+const HOLE_RTO_FACTOR: f64 = 1.25;
+/// The list request's first answer also waits for the vehicle to start its stream.
+const LIST_RTO_FACTOR: f64 = 1.5;
+/// The stream counts as over after this share of a round trip without a value, and a hole is
+/// asked for once it has been missing for as long (the reorder allowance)…
+const QUIET_SHARE: f64 = 0.25;
+/// …and at least this long: a vehicle paces its stream over a few ticks.
+const MIN_QUIET: Duration = Duration::from_millis(20);
+/// Values added to those heard when the stream's holes give the loss.
+const LOSS_PRIOR: f64 = 4.0;
+/// Recent request round trips kept for the timeout.
+const RECENT: usize = 16;
+
+/// Why a download did not complete.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PullStalled {
+    /// Values received.
+    pub received: usize,
+    /// Values announced (0 if no value ever came).
+    pub total: usize,
+}
+
+/// One index asked for.
+#[derive(Debug, Clone, Copy)]
+struct Ask {
+    due: Instant,
+    sent: Instant,
+    tries: u8,
+    copies: u32,
+}
+
+/// The whole-table download.
+#[derive(Debug)]
+pub struct PullMachine {
+    target: (SystemId, ComponentId),
+    /// The client's estimate, refined by this download's own samples.
+    rtt: Rtt,
+    rto: Duration,
+    count: Option<u16>,
+    values: BTreeMap<u16, (String, Param)>,
+    by_name: HashMap<String, u16>,
+    outstanding: BTreeMap<u16, Ask>,
+    /// Indices asked at least once.
+    asked: HashSet<u16>,
+    /// The highest index the list stream delivered; `stream_over` once it has been quiet.
+    highest: Option<u16>,
+    stream_over: bool,
+    /// Holes the stream showed and not yet asked for, with when.
+    shown: BTreeMap<u16, Instant>,
+    /// Holes the stream showed: the loss one way.
+    holes_seen: u32,
+    /// Requests answered and timed out, and their copies in all: the loss of an exchange.
+    answered: u32,
+    timed_out: u32,
+    copies_resolved: u32,
+    /// Round trips of requests answered (newest last).
+    recent: VecDeque<Duration>,
+    samples: Vec<Duration>,
+    started: Instant,
+    last_rx: Instant,
+    list_due: Instant,
+    /// The next check for a stall (a timeout without any value).
+    check: Instant,
+    stalls: u32,
+    list_sends: u8,
+    /// PARAM_REQUEST_READs sent, copies included (for the benchmark's report).
+    pub rerequests: usize,
+    done: Option<Result<ParamSet, PullStalled>>,
+}
+
+impl PullMachine {
+    /// A download from `target`, starting from the client's round-trip estimate.
+    #[must_use]
+    pub fn new(target: (SystemId, ComponentId), rtt: Rtt) -> Self {
+        let now = Instant::now();
+        Self {
+            target,
+            rtt,
+            rto: rtt.rto(),
+            count: None,
+            values: BTreeMap::new(),
+            by_name: HashMap::new(),
+            outstanding: BTreeMap::new(),
+            asked: HashSet::new(),
+            highest: None,
+            stream_over: false,
+            shown: BTreeMap::new(),
+            holes_seen: 0,
+            answered: 0,
+            timed_out: 0,
+            copies_resolved: 0,
+            recent: VecDeque::new(),
+            samples: Vec::new(),
+            started: now,
+            last_rx: now,
+            list_due: now,
+            check: now,
+            stalls: 0,
+            list_sends: 0,
+            rerequests: 0,
+            done: None,
+        }
+    }
+
+    /// (received, total) for a progress bar; total is 0 until the first value.
+    #[must_use]
+    pub fn progress(&self) -> (usize, usize) {
+        (self.values.len(), self.count.map_or(0, usize::from))
+    }
+
+    /// The smoothed round trip, or the initial timeout before any is known.
+    fn srtt(&self) -> Duration {
+        self.rtt.srtt().unwrap_or(Rtt::INITIAL_RTO)
+    }
+
+    /// A request's timeout before backing off: 1.25 round trips, or longer if a recent answer
+    /// took longer; never beyond the plain retransmission timeout.
+    fn hole_rto(&self) -> Duration {
+        let slowest = self
+            .recent
+            .iter()
+            .max()
+            .map_or(Duration::ZERO, |s| *s * 11 / 10);
+        self.srtt()
+            .mul_f64(HOLE_RTO_FACTOR)
+            .max(slowest)
+            .min(self.rto)
+            .max(Rtt::MIN_RTO)
+    }
+
+    fn quiet(&self) -> Duration {
+        self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET)
+    }
+
+    /// One exchange's chance of failing, from what the download has seen so far: the stream's
+    /// holes give the loss one way (`p`, taken for both ways), and the requests that timed out
+    /// give it as well: a request of `k` copies fails with `f^k`.
+    fn exchange_loss(&self) -> f64 {
+        let stream = match self.highest {
+            Some(h) if self.holes_seen > 0 => {
+                // A few values more than heard: one hole in the first two is no 50 % loss.
+                let p = f64::from(self.holes_seen) / (f64::from(h) + 1.0 + LOSS_PRIOR);
+                1.0 - (1.0 - p.min(1.0)).powi(2)
+            }
+            _ => 0.0,
+        };
+        let asks = self.answered + self.timed_out;
+        let requests = if self.timed_out == 0 {
+            0.0
+        } else {
+            let per_request = f64::from(self.timed_out) / f64::from(asks);
+            per_request.powf(f64::from(asks) / f64::from(self.copies_resolved.max(1)))
+        };
+        stream.max(requests)
+    }
+
+    /// Copies for each request of a round of `holes`.
+    fn copies(&self, holes: usize) -> u32 {
+        let f = self.exchange_loss();
+        if f <= 0.0 {
+            return 1;
+        }
+        if f >= 1.0 {
+            return MAX_COPIES;
+        }
+        let k = (HOLES_LEFT / holes.max(1) as f64).ln() / f.ln();
+        (k.ceil() as u32).clamp(1, MAX_COPIES)
+    }
+
+    fn list(&mut self, now: Instant) -> Vec<MavMessage> {
+        self.list_sends = self.list_sends.saturating_add(1);
+        // Never below the floor: on loopback the round trip is well under the vehicle's own
+        // tick, which paces the start of its stream.
+        let first_wait = self
+            .srtt()
+            .mul_f64(LIST_RTO_FACTOR)
+            .min(self.rto)
+            .max(Rtt::MIN_RTO);
+        self.list_due = now + retry_wait(first_wait, self.list_sends);
+        let copies = LIST_COPIES + usize::from(self.list_sends - 1).min(2);
+        let m = MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
+        });
+        vec![m; copies]
+    }
+
+    /// PARAM_REQUEST_READ of each index in `indices`, in `copies` copies.
+    fn read(&mut self, indices: &[u16], copies: u32, now: Instant) -> Vec<MavMessage> {
+        let rto = self.hole_rto();
+        let mut out = Vec::new();
+        for &index in indices {
+            self.asked.insert(index);
+            self.shown.remove(&index);
+            let tries = self
+                .outstanding
+                .get(&index)
+                .map_or(1, |a| a.tries.saturating_add(1));
+            let ask = Ask {
+                due: now + retry_wait(rto, tries),
+                sent: now,
+                tries,
+                copies,
+            };
+            self.outstanding.insert(index, ask);
+            for _ in 0..copies {
+                self.rerequests += 1;
+                out.push(MavMessage::PARAM_REQUEST_READ(
+                    apm::PARAM_REQUEST_READ_DATA {
+                        param_index: index as i16,
+                        target_system: self.target.0.0,
+                        target_component: self.target.1.0,
+                        param_id: "".into(),
+                    },
+                ));
+            }
+        }
+        out
+    }
+
+    /// Asks for missing indices not already asked for, up to the window: the holes the stream
+    /// showed a reorder allowance ago while it runs, every one once it is over.
+    fn refill(&mut self, now: Instant) -> Vec<MavMessage> {
+        let Some(count) = self.count else {
+            return Vec::new();
+        };
+        let room = PULL_WINDOW.saturating_sub(self.outstanding.len());
+        let holes: Vec<u16> = if self.stream_over {
+            (0..count)
+                .filter(|i| !self.values.contains_key(i) && !self.outstanding.contains_key(i))
+                .take(room)
+                .collect()
+        } else {
+            let allowance = self.quiet();
+            self.shown
+                .iter()
+                .filter(|(_, at)| now.duration_since(**at) >= allowance)
+                .map(|(i, _)| *i)
+                .take(room)
+                .collect()
+        };
+        if holes.is_empty() {
+            return Vec::new();
+        }
+        let missing = usize::from(count) - self.values.len();
+        let copies = self.copies(missing);
+        self.read(&holes, copies, now)
+    }
+
+    fn complete(&mut self) {
+        if let Some(count) = self.count
+            && self.values.len() >= usize::from(count)
+        {
+            let set = self.values.values().map(|(n, p)| (n.clone(), *p)).collect();
+            self.done = Some(Ok(set));
+        }
+    }
+
+    fn sample(&mut self, s: Duration) {
+        self.samples.push(s);
+        self.rtt.sample(s);
+        self.rto = self.rtt.rto();
+    }
+
+    /// A value from the list stream (not an answer to a request): the indices it passed over
+    /// are holes; one that fills a hole shown before was late, not lost.
+    fn streamed(&mut self, index: u16, now: Instant) {
+        let from = self.highest.map_or(0, |h| h + 1);
+        if index >= from {
+            self.holes_seen += u32::from(index - from);
+            for i in from..index {
+                self.shown.insert(i, now);
+            }
+            self.highest = Some(index);
+        } else if self.shown.remove(&index).is_some() {
+            self.holes_seen = self.holes_seen.saturating_sub(1);
+        }
+    }
+}
+
+impl Machine for PullMachine {
+    type Output = Result<ParamSet, PullStalled>;
+
+    fn start(&mut self, now: Instant) -> Vec<MavMessage> {
+        self.last_rx = now;
+        self.started = now;
+        self.check = now + self.rto;
+        self.list(now)
+    }
+
+    fn on_message(&mut self, now: Instant, m: &Inbound) -> Vec<MavMessage> {
+        if self.done.is_some() || (m.sys, m.comp) != self.target {
+            return Vec::new();
+        }
+        let MavMessage::PARAM_VALUE(v) = &m.msg else {
+            return Vec::new();
+        };
+        let name = name_of(&v.param_id);
+        let param = Param {
+            value: v.param_value,
+            ty: v.param_type,
+        };
+        let count = *self.count.get_or_insert(v.param_count);
+        let index = if v.param_index == u16::MAX {
+            match self.by_name.get(&name) {
+                Some(&i) => i,
+                None => return Vec::new(),
+            }
+        } else {
+            v.param_index
+        };
+        if index >= count {
+            return Vec::new();
+        }
+        self.last_rx = now;
+        self.check = now + self.rto;
+        self.stalls = 0;
+        self.by_name.insert(name.clone(), index);
+        let new = self.values.insert(index, (name, param)).is_none();
+        if self.values.len() == 1 && self.list_sends == 1 {
+            self.sample(now.duration_since(self.started));
+        }
+        match self.outstanding.remove(&index) {
+            // Sooner than half a round trip after the first request it cannot be the answer:
+            // the stream's own value, late (reordered), and the hole was none.
+            Some(ask) if ask.tries == 1 && now.duration_since(ask.sent) < self.srtt() / 2 => {
+                self.holes_seen = self.holes_seen.saturating_sub(1);
+            }
+            Some(ask) => {
+                self.answered += 1;
+                self.copies_resolved += ask.copies;
+                if ask.tries == 1 {
+                    let s = now.duration_since(ask.sent);
+                    self.recent.push_back(s);
+                    if self.recent.len() > RECENT {
+                        self.recent.pop_front();
+                    }
+                    self.sample(s);
+                }
+            }
+            None if new && !self.asked.contains(&index) && v.param_index != u16::MAX => {
+                self.streamed(index, now);
+            }
+            None => {}
+        }
+        self.shown.remove(&index);
+        self.complete();
+        if self.done.is_some() {
+            return Vec::new();
+        }
+        self.refill(now)
+    }
+
+    fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
+        if self.done.is_some() || now < self.deadline() {
+            return Vec::new();
+        }
+        let silent = now.duration_since(self.last_rx);
+        if now >= self.check {
+            self.check = now + self.rto;
+            self.stalls += 1;
+            if self.stalls > PULL_STALLS && silent >= PULL_GIVE_UP {
+                let (received, total) = self.progress();
+                self.done = Some(Err(PullStalled { received, total }));
+                return Vec::new();
+            }
+        }
+        if self.count.is_none() {
+            return if now >= self.list_due {
+                self.list(now)
+            } else {
+                Vec::new()
+            };
+        }
+        if !self.stream_over && silent >= self.quiet() {
+            self.stream_over = true;
+        }
+        // Requests whose answer is overdue are asked again.
+        let overdue: Vec<u16> = self
+            .outstanding
+            .iter()
+            .filter(|(_, a)| a.due <= now)
+            .map(|(i, _)| *i)
+            .collect();
+        for i in &overdue {
+            self.timed_out += 1;
+            self.copies_resolved += self.outstanding.get(i).map_or(1, |a| a.copies);
+        }
+        let missing = self.count.map_or(0, usize::from) - self.values.len();
+        let copies = self.copies(missing);
+        let mut out = self.read(&overdue, copies, now);
+        out.extend(self.refill(now));
+        out
+    }
+
+    fn deadline(&self) -> Instant {
+        // The next stall check, at the latest.
+        let mut d = self.check;
+        if self.count.is_none() {
+            d = d.min(self.list_due);
+        } else if !self.stream_over {
+            d = d.min(self.last_rx + self.quiet());
+            if let Some(at) = self.shown.values().min() {
+                d = d.min(*at + self.quiet());
+            }
+        }
+        if let Some(due) = self.outstanding.values().map(|a| a.due).min() {
+            d = d.min(due);
+        }
+        d
+    }
+
+    fn result(&mut self) -> Option<Self::Output> {
+        self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        std::mem::take(&mut self.samples)
+    }
+}
+
+#[cfg(test)]
+#[path = "pull_tests.rs"]
+mod tests;
