@@ -76,6 +76,9 @@ fn check_view(app: &mut App, rec: &Recording, view: View, size: (u16, u16)) -> S
             "REFUSED:",
             "LAT_SAT_B         0.6",
         ],
+        View::Fleet => &[
+            "sys", "state", "mode", "status", "Hz", "loss%", "heard", "battery", "QHOVER",
+        ],
     };
     for w in want {
         assert!(frame.contains(w), "{view:?} at {size:?}: no {w:?}\n{frame}");
@@ -99,6 +102,7 @@ fn every_view_whole_at_80_by_24() {
         (View::Links, "links_80x24"),
         (View::Messages, "messages_80x24"),
         (View::Params, "params_80x24"),
+        (View::Fleet, "fleet_80x24"),
     ] {
         let frame = check_view(&mut app, &rec, view, (80, 24));
         // Every chart keeps a legend: in its title when ratatui's would not fit.
@@ -120,6 +124,7 @@ fn every_view_uses_the_space_at_200_by_50() {
         (View::Links, "links_200x50"),
         (View::Messages, "messages_200x50"),
         (View::Params, "params_200x50"),
+        (View::Fleet, "fleet_200x50"),
     ] {
         let frame = check_view(&mut app, &rec, view, (200, 50));
         let wide: &[&str] = match view {
@@ -133,6 +138,7 @@ fn every_view_uses_the_space_at_200_by_50() {
             View::Messages => &["Fields"],
             // The editor beside the table, with the selected row's whole status.
             View::Params => &["refused: LAT_SAT_B", "idle"],
+            View::Fleet => &["Fleet: 1 vehicle, 0 lost"],
         };
         for w in wide {
             assert!(frame.contains(w), "{view:?}: no {w:?}\n{frame}");

@@ -113,7 +113,7 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         tabs.push(Span::raw(" "));
     }
     tabs.push(Span::styled(
-        "  Tab: next view  ?: help  q: quit",
+        "  ?: help  q: quit",
         Style::new().fg(Color::DarkGray),
     ));
     let mut lines = vec![Line::from(spans)];

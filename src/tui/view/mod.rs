@@ -17,6 +17,7 @@ use crate::tracker::history::{History, TimedFrame};
 use crate::tracker::state::{VehicleState, VehicleView};
 
 mod charts;
+mod fleet;
 mod flight;
 mod header;
 mod links;
@@ -25,6 +26,7 @@ mod overlay;
 mod params;
 
 use charts::draw_charts;
+use fleet::draw_fleet;
 use flight::draw_flight;
 pub use flight::heading_tape;
 use header::{draw_footer, draw_header, vehicle_list_lines, vitals_lines};
@@ -202,6 +204,12 @@ fn servo_names(app: &App) -> Vec<String> {
     output_names(&f)
 }
 
+/// A MAV_STATE as the header shows it (`ACTIVE`, `CRITICAL` …).
+#[must_use]
+pub fn status_word(s: MavState) -> &'static str {
+    status_name(s)
+}
+
 fn status_name(s: MavState) -> &'static str {
     match s {
         MavState::MAV_STATE_UNINIT => "UNINIT",
@@ -233,7 +241,8 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         return;
     }
     app.observe(snap.state);
-    let fleet = if snap.state.vehicles.len() > 1 {
+    // The Fleet view is the list: the header does not repeat it there.
+    let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
     } else {
         Vec::new()
@@ -263,6 +272,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Links => draw_links(f, snap, body),
         View::Messages => draw_messages(f, app, snap, cache, body),
         View::Params => draw_params(f, app, body),
+        View::Fleet => draw_fleet(f, app, snap, body),
     }
     draw_footer(f, app, footer);
     if let Some(c) = &app.confirm {
