@@ -35,6 +35,46 @@ fn battery(snap: &Snapshot<'_>, v: &VehicleView) -> String {
     t
 }
 
+/// One vehicle's row: a lost one in red with no live figure, `▶` on the one shown.
+fn fleet_row(snap: &Snapshot<'_>, v: &VehicleView, shown: bool) -> Row<'static> {
+    let now = snap.now;
+    let grey = Style::new().fg(Color::DarkGray);
+    let is_lost = v.is_lost(now);
+    let mark = if shown { "▶" } else { " " };
+    let (state_style, live) = if is_lost {
+        (
+            Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+            grey,
+        )
+    } else if v.armed {
+        (Style::new().fg(Color::Yellow), Style::new())
+    } else {
+        (Style::new().fg(Color::Green), Style::new())
+    };
+    let heard = now
+        .saturating_duration_since(v.last_heartbeat)
+        .as_secs_f64();
+    let (rate, loss, bat) = if is_lost {
+        ("-".to_owned(), "-".to_owned(), "-".to_owned())
+    } else {
+        (
+            format!("{:.0}", v.rate_hz(now)),
+            format!("{:.1}", v.loss_pct(now)),
+            battery(snap, v),
+        )
+    };
+    Row::new(vec![
+        Cell::from(format!("{mark}{}", v.system_id.0)),
+        Cell::from(state_word(v, now)).style(state_style),
+        Cell::from(v.mode_name()).style(live),
+        Cell::from(status_name(v.system_status)).style(live),
+        Cell::from(rate),
+        Cell::from(loss),
+        Cell::from(format!("{heard:.0} s")).style(if is_lost { state_style } else { Style::new() }),
+        Cell::from(bat),
+    ])
+}
+
 pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, area: Rect) {
     let now = snap.now;
     let listed = listing(snap.state, now, &app.fleet.filter);
@@ -69,7 +109,6 @@ pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, 
     }
     app.fleet.first = app.fleet.first.min(listed.len().saturating_sub(visible));
     let first = app.fleet.first;
-    let grey = Style::new().fg(Color::DarkGray);
     let rows: Vec<Row> = listed
         .iter()
         .enumerate()
@@ -77,44 +116,7 @@ pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, 
         .take(visible)
         .filter_map(|(i, k)| {
             let v = snap.state.vehicles.get(k)?;
-            let is_lost = v.is_lost(now);
-            let mark = if Some(*k) == shown { "▶" } else { " " };
-            let (state_style, live) = if is_lost {
-                (
-                    Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
-                    grey,
-                )
-            } else if v.armed {
-                (Style::new().fg(Color::Yellow), Style::new())
-            } else {
-                (Style::new().fg(Color::Green), Style::new())
-            };
-            let heard = now
-                .saturating_duration_since(v.last_heartbeat)
-                .as_secs_f64();
-            let (rate, loss, bat) = if is_lost {
-                ("-".to_owned(), "-".to_owned(), "-".to_owned())
-            } else {
-                (
-                    format!("{:.0}", v.rate_hz(now)),
-                    format!("{:.1}", v.loss_pct(now)),
-                    battery(snap, v),
-                )
-            };
-            let row = Row::new(vec![
-                Cell::from(format!("{mark}{}", v.system_id.0)),
-                Cell::from(state_word(v, now)).style(state_style),
-                Cell::from(v.mode_name()).style(live),
-                Cell::from(status_name(v.system_status)).style(live),
-                Cell::from(rate),
-                Cell::from(loss),
-                Cell::from(format!("{heard:.0} s")).style(if is_lost {
-                    state_style
-                } else {
-                    Style::new()
-                }),
-                Cell::from(bat),
-            ]);
+            let row = fleet_row(snap, v, Some(*k) == shown);
             Some(if i == at {
                 row.style(Style::new().add_modifier(Modifier::REVERSED))
             } else {

@@ -213,6 +213,33 @@ fn numbers(app: &App, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>) -> Vec
     if let Some(s) = stale {
         lines.push(Line::styled(s, Style::new().fg(Color::Yellow)));
     }
+    lines.extend(position_lines(app, snap, v));
+    if lost {
+        lines = lines
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == 0 {
+                    l
+                } else {
+                    l.style(Style::new().fg(Color::DarkGray))
+                }
+            })
+            .collect();
+        lines.push(Line::styled(
+            "Air       - m/s  AoA      -  SSA      -",
+            Style::new().fg(Color::DarkGray),
+        ));
+        lines.push(Line::styled("VTOL  -", Style::new().fg(Color::DarkGray)));
+    } else {
+        lines.extend(air_lines(app, snap, v));
+    }
+    lines
+}
+
+/// Altitude, north and east against the setpoint, where the setpoint comes from, the velocity.
+fn position_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'static>> {
+    let mut lines = Vec::new();
     let sp = setpoint_ned(app, snap, v);
     match v.position {
         Some(p) => {
@@ -247,26 +274,6 @@ fn numbers(app: &App, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>) -> Vec
             )));
         }
         None => lines.push(Line::raw("no position yet")),
-    }
-    if lost {
-        lines = lines
-            .into_iter()
-            .enumerate()
-            .map(|(i, l)| {
-                if i == 0 {
-                    l
-                } else {
-                    l.style(Style::new().fg(Color::DarkGray))
-                }
-            })
-            .collect();
-        lines.push(Line::styled(
-            "Air       - m/s  AoA      -  SSA      -",
-            Style::new().fg(Color::DarkGray),
-        ));
-        lines.push(Line::styled("VTOL  -", Style::new().fg(Color::DarkGray)));
-    } else {
-        lines.extend(air_lines(app, snap, v));
     }
     lines
 }

@@ -53,41 +53,7 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
         first -= 1;
         used += heights[first];
     }
-    let rows: Vec<Row> = rows_data
-        .iter()
-        .enumerate()
-        .skip(first)
-        .map(|(i, (_, (name, value)))| {
-            let (status, style) = p
-                .status
-                .get(name)
-                .map_or((String::new(), Style::new()), status_text);
-            let status = wrap(&status, status_w);
-            let value = if i == p.selected
-                && let Some(e) = &p.edit
-            {
-                format!("{e}▏")
-            } else {
-                value.to_string()
-            };
-            let row_style = if i == p.selected {
-                Style::new().add_modifier(Modifier::REVERSED)
-            } else {
-                Style::new()
-            };
-            let h = u16::try_from(status.len()).unwrap_or(1);
-            Row::new(vec![
-                Cell::from(name.clone()),
-                Cell::from(value),
-                Cell::from(Text::from(
-                    status.into_iter().map(Line::raw).collect::<Vec<_>>(),
-                ))
-                .style(style),
-            ])
-            .height(h)
-            .style(row_style)
-        })
-        .collect();
+    let rows = table_rows(app, &rows_data, first, status_w);
     let title = if app.typing && p.edit.is_none() && p.file_prompt.is_none() {
         format!(" Parameters /{}▏ ", p.filter)
     } else if p.table.is_empty() {
@@ -135,6 +101,51 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
             strip,
         );
     }
+}
+
+/// The table's rows from `first` on, each as tall as its wrapped status.
+fn table_rows(
+    app: &App,
+    rows_data: &[(usize, &(String, f32))],
+    first: usize,
+    status_w: usize,
+) -> Vec<Row<'static>> {
+    let p = &app.params;
+    rows_data
+        .iter()
+        .enumerate()
+        .skip(first)
+        .map(|(i, (_, (name, value)))| {
+            let (status, style) = p
+                .status
+                .get(name)
+                .map_or((String::new(), Style::new()), status_text);
+            let status = wrap(&status, status_w);
+            let value = if i == p.selected
+                && let Some(e) = &p.edit
+            {
+                format!("{e}▏")
+            } else {
+                value.to_string()
+            };
+            let row_style = if i == p.selected {
+                Style::new().add_modifier(Modifier::REVERSED)
+            } else {
+                Style::new()
+            };
+            let h = u16::try_from(status.len()).unwrap_or(1);
+            Row::new(vec![
+                Cell::from(name.clone()),
+                Cell::from(value),
+                Cell::from(Text::from(
+                    status.into_iter().map(Line::raw).collect::<Vec<_>>(),
+                ))
+                .style(style),
+            ])
+            .height(h)
+            .style(row_style)
+        })
+        .collect()
 }
 
 fn draw_progress(f: &mut Frame<'_>, app: &App, area: Rect) {
