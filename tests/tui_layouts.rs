@@ -208,3 +208,25 @@ fn a_lost_fleet_vehicle_shows_no_live_numbers() {
     assert!(frame.contains(" 2 LOST 9 s"), "{frame}");
     insta::assert_snapshot!(frame);
 }
+
+/// The last progress step of a download can arrive after the table (it has a task of its own):
+/// a finished download leaves no "download 57/57" over the Params view.
+#[test]
+fn a_finished_download_leaves_no_progress_shown() {
+    let rec = hover();
+    let mut app = app_with_params();
+    app.view = View::Params;
+    let step = |done| Outcome::Progress {
+        what: "download".into(),
+        done,
+        total: 57,
+    };
+    app.on_outcome(step(30));
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(frame.contains("download 30/57"), "{frame}");
+    app.on_outcome(Outcome::Params(ui_support::recording::params()));
+    app.on_outcome(step(57));
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(!frame.contains("57/57"), "{frame}");
+    assert!(app.params.progress.is_none());
+}

@@ -604,7 +604,9 @@ impl App {
                 self.note(Level::Ok, format!("{n} parameters"));
             }
             Outcome::Progress { what, done, total } => {
-                self.params.progress = Some((what, done, total));
+                // The last step of a transfer may come after its result (the progress has a
+                // task of its own): a finished one shows nothing.
+                self.params.progress = (total == 0 || done < total).then_some((what, done, total));
             }
             Outcome::ParamSet { name, result } => match result {
                 Ok(v) => {
