@@ -114,6 +114,24 @@ fn the_live_target_is_the_setpoint_in_every_mode_that_sends_one() {
     }
 }
 
+/// A target in body axes or as an offset is no point in the local frame: not shown.
+#[test]
+fn a_target_relative_to_the_vehicle_is_not_a_setpoint() {
+    let mut rec = flight(15);
+    rec.feed(
+        4_950,
+        &MavMessage::POSITION_TARGET_LOCAL_NED(dialect::POSITION_TARGET_LOCAL_NED_DATA {
+            x: 7.0,
+            coordinate_frame: MavFrame::MAV_FRAME_BODY_FRD,
+            ..Default::default()
+        }),
+    );
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(!frame.contains("the vehicle's live target"), "{frame}");
+    assert!(!frame.contains("+7.00"), "{frame}");
+}
+
 fn ext_state(s: MavVtolState) -> MavMessage {
     MavMessage::EXTENDED_SYS_STATE(dialect::EXTENDED_SYS_STATE_DATA {
         vtol_state: s,

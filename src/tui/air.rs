@@ -133,6 +133,10 @@ pub fn live_target(state: &VehicleState, v: &VehicleView, now: Instant) -> Optio
         _ => false,
     };
     if newer_local && let Some((MavMessage::POSITION_TARGET_LOCAL_NED(t), _)) = local {
+        // Offsets from the vehicle or in its body axes are no point in the local frame.
+        if t.coordinate_frame != MavFrame::MAV_FRAME_LOCAL_NED {
+            return None;
+        }
         let ignore = t.type_mask.bits();
         let axis = |bit: u16, x: f32| if ignore & bit == 0 { x } else { f32::NAN };
         return Some([axis(1, t.x), axis(2, t.y), axis(4, t.z)]);
