@@ -7,6 +7,7 @@
 //!    core, and the rest of the process (twin, router, tracker) separately.
 //! 3. Keypress to redrawn screen while 5 000 frames/s arrive on a client link: `?` is sent,
 //!    the time until a frame with the help overlay is flushed; p50/p99/max.
+//! 4. The Fleet view with 250 vehicles: CPU time per frame at 120×40 and 200×50.
 //!
 //! CPU times come from `/proc` (thread: `schedstat`, ns; process: `stat`, clock ticks), so they
 //! are less disturbed by other load than wall time. Run: `cargo bench --bench tui`. Under
@@ -212,6 +213,76 @@ fn render_cost(frames: usize) {
     }
 }
 
+/// The Fleet view with 250 vehicles (each heard at 1 Hz for 10 s, a battery report each, every
+/// 25th silent for the last 6 s): CPU per frame, 120×40 and 200×50.
+fn fleet_render_cost(frames: usize) {
+    let t0 = Instant::now();
+    let mut state = VehicleState::new(t0);
+    let history = History::new(t0);
+    for s in 0..10u64 {
+        for sys in 1..=250u8 {
+            if sys % 25 == 0 && s >= 4 {
+                continue;
+            }
+            let hb = MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
+                custom_mode: 19,
+                mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                system_status: MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            });
+            let bat = MavMessage::SYS_STATUS(dialect::SYS_STATUS_DATA {
+                voltage_battery: 11_100,
+                battery_remaining: 64,
+                ..Default::default()
+            });
+            for (k, m) in [hb, bat].iter().enumerate() {
+                let f = Frame::encode_v2(
+                    vtol_link::SystemId(sys),
+                    vtol_link::ComponentId(1),
+                    (s * 2 + k as u64) as u8,
+                    m,
+                );
+                state.apply(LinkId(1), Side::Vehicle, &f, t0 + Duration::from_secs(s));
+            }
+        }
+    }
+    println!("Fleet view, 250 vehicles, {frames} frames");
+    for (w, h) in [(W, H), (200, 50)] {
+        let mut app = App {
+            view: View::Fleet,
+            ..App::default()
+        };
+        let bytes = Arc::new(Mutex::new(0usize));
+        let mut term = Terminal::with_options(
+            CrosstermBackend::new(CountingSink(Arc::clone(&bytes))),
+            TerminalOptions {
+                viewport: Viewport::Fixed(Rect::new(0, 0, w, h)),
+            },
+        )
+        .expect("terminal");
+        let mut cache = SeriesCache::default();
+        let cpu0 = thread_cpu_ns();
+        for i in 0..frames {
+            let snap = Snapshot {
+                now: t0 + Duration::from_millis(9_500 + (i as u64 * 33) % 400),
+                state: &state,
+                history: &history,
+                links: Vec::new(),
+                router: RouterCounters::default(),
+                tlog: None,
+                serving: Vec::new(),
+            };
+            term.draw(|f| view::draw(f, &mut app, &snap, &mut cache))
+                .expect("draw");
+        }
+        let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;
+        let b = *bytes.lock().unwrap() / frames;
+        println!("{:<10} {cpu:>12.0} {b:>12}", format!("{w}x{h}"));
+    }
+}
+
 struct CountingSink(Arc<Mutex<usize>>);
 
 impl Write for CountingSink {
@@ -390,9 +461,11 @@ fn main() {
     let bench = std::env::args().any(|a| a == "--bench");
     if bench {
         render_cost(2000);
+        fleet_render_cost(2000);
         live(10.0, 300);
     } else {
         render_cost(20);
+        fleet_render_cost(20);
         live(1.0, 10);
     }
 }

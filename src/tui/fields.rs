@@ -83,9 +83,59 @@ fn walk(path: &str, value: &str, out: &mut Vec<Field>) {
     }
     out.push(Field {
         path: path.to_owned(),
-        text: flag_words(value).unwrap_or_else(|| value.to_owned()),
+        text: flag_words(value)
+            .or_else(|| enum_words(value))
+            .unwrap_or_else(|| value.to_owned()),
         value: number(value),
     });
+}
+
+/// Prefixes of the dialect's enums, longest first: what an enum value's name starts with.
+const ENUM_PREFIXES: &[&str] = &[
+    "MAV_BATTERY_CHARGE_STATE_",
+    "MAV_BATTERY_FUNCTION_",
+    "MAV_SYS_STATUS_SENSOR_",
+    "MAV_DISTANCE_SENSOR_",
+    "MAV_ESTIMATOR_TYPE_",
+    "MAV_LANDED_STATE_",
+    "MAV_MISSION_TYPE_",
+    "MAV_BATTERY_TYPE_",
+    "MAV_PARAM_TYPE_",
+    "MAV_VTOL_STATE_",
+    "MAV_AUTOPILOT_",
+    "MAV_MODE_FLAG_",
+    "MAV_SEVERITY_",
+    "MAV_MISSION_",
+    "GPS_FIX_TYPE_",
+    "MAV_RESULT_",
+    "MAV_SYS_STATUS_",
+    "MAV_FRAME_",
+    "MAV_STATE_",
+    "MAV_TYPE_",
+    "MAV_CMD_",
+    "MAV_COMP_ID_",
+    "EKF_",
+    "MAV_",
+];
+
+/// An enum value's or a flag's name in words: `MAV_TYPE_VTOL_TAILSITTER_DUOROTOR` →
+/// `vtol tailsitter duorotor`, `MAV_MODE_FLAG_SAFETY_ARMED` → `safety armed`; `None` for
+/// anything that is not such a name.
+fn enum_words(value: &str) -> Option<String> {
+    let is_name = value.len() > 2
+        && value.contains('_')
+        && value
+            .chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_');
+    if !is_name {
+        return None;
+    }
+    let rest = ENUM_PREFIXES
+        .iter()
+        .find_map(|p| value.strip_prefix(p))
+        .filter(|r| !r.is_empty())
+        .unwrap_or(value);
+    Some(rest.replace('_', " ").to_ascii_lowercase())
 }
 
 /// A bitmask's `Debug` text (`MavModeFlag(A | B)`, `MavModeFlag(0x0)`) in words: `A | B`,
@@ -99,7 +149,11 @@ fn flag_words(value: &str) -> Option<String> {
     }
     Some(match inner.trim() {
         "0x0" | "" => "none".to_owned(),
-        words => words.to_owned(),
+        words => words
+            .split('|')
+            .map(|w| enum_words(w.trim()).unwrap_or_else(|| w.trim().to_owned()))
+            .collect::<Vec<_>>()
+            .join(", "),
     })
 }
 
@@ -167,6 +221,7 @@ mod tests {
         let f = fields(&msg);
         let t = f.iter().find(|f| f.path == "mavtype").expect("mavtype");
         assert!(t.value.is_none(), "{t:?}");
+        assert_eq!(t.text, "generic", "{t:?}");
         assert_eq!(
             f.iter()
                 .find(|f| f.path == "custom_mode")
@@ -189,7 +244,7 @@ mod tests {
             .expect("base_mode")
             .text;
         assert!(!t.contains("MavModeFlag"), "{t}");
-        assert!(t.contains("MAV_MODE_FLAG_SAFETY_ARMED"), "{t}");
+        assert_eq!(t, "safety armed, custom mode enabled");
         hb.base_mode = dialect::MavModeFlag::empty();
         let f = fields(&MavMessage::HEARTBEAT(hb));
         let t = &f

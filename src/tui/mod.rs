@@ -6,6 +6,7 @@
 //! The terminal is restored on every way out: a normal return, an error, a panic (ratatui's
 //! hook), and SIGTERM/Ctrl-C (the caller's cancellation token ends the loop).
 
+pub mod air;
 pub mod app;
 pub mod exec;
 pub mod fields;

@@ -3,6 +3,8 @@
 // Each test crate uses some of these.
 #![allow(dead_code)]
 
+pub mod recording;
+
 use std::time::{Duration, Instant};
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};

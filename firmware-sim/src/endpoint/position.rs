@@ -19,6 +19,10 @@ pub use vtol_link::protocol::id::{
     NAV_CONTROLLER_OUTPUT, VFR_HUD,
 };
 
+/// POSITION_TARGET_GLOBAL_INT: where the navigator flies to, sent only while it has a target.
+pub const POSITION_TARGET_GLOBAL_INT: u32 =
+    <apm::POSITION_TARGET_GLOBAL_INT_DATA as mavlink::MessageData>::ID;
+
 /// Satellites a good fix reports (the motion capture has none; scripts check for "enough").
 pub const GPS_SATELLITES: u8 = 16;
 /// Horizontal and vertical accuracy reported with the fix, mm (a few σ of the sensor's noise).
@@ -82,6 +86,7 @@ impl GlobeView<'_> {
             VFR_HUD => self.vfr_hud(),
             BATTERY_STATUS => battery_status(&self.t.battery, self.capacity_mah),
             NAV_CONTROLLER_OUTPUT => self.nav_controller_output(),
+            POSITION_TARGET_GLOBAL_INT => self.position_target()?,
             _ => return None,
         })
     }
@@ -151,6 +156,28 @@ impl GlobeView<'_> {
             heading: clamp_i16(heading_deg(t)) % 360,
             throttle: clamp_u16(((esc - 1000.0) / 10.0).clamp(0.0, 100.0)),
         })
+    }
+
+    /// The navigator's target as ArduPlane sends `next_WP_loc`: latitude, longitude and the
+    /// altitude above mean sea level (MAV_FRAME_GLOBAL), everything but the position ignored;
+    /// none while the navigator has no target.
+    fn position_target(&self) -> Option<apm::MavMessage> {
+        use apm::PositionTargetTypemask as M;
+        let p = self.origin.to_global(&self.target_ned_m?);
+        Some(apm::MavMessage::POSITION_TARGET_GLOBAL_INT(
+            apm::POSITION_TARGET_GLOBAL_INT_DATA {
+                time_boot_ms: (self.t.t_us / 1000) as u32,
+                lat_int: p.lat_e7,
+                lon_int: p.lon_e7,
+                alt: p.alt_amsl_m as f32,
+                type_mask: M::all()
+                    - (M::POSITION_TARGET_TYPEMASK_X_IGNORE
+                        | M::POSITION_TARGET_TYPEMASK_Y_IGNORE
+                        | M::POSITION_TARGET_TYPEMASK_Z_IGNORE),
+                coordinate_frame: apm::MavFrame::MAV_FRAME_GLOBAL,
+                ..Default::default()
+            },
+        ))
     }
 
     fn nav_controller_output(&self) -> apm::MavMessage {
@@ -255,6 +282,7 @@ pub fn builds(msgid: u32) -> bool {
             | BATTERY_STATUS
             | NAV_CONTROLLER_OUTPUT
             | MISSION_CURRENT
+            | POSITION_TARGET_GLOBAL_INT
     )
 }
 
@@ -301,6 +329,37 @@ mod tests {
         assert_eq!((g.vx, g.vy, g.vz), (100, 50, -25));
         assert_eq!(g.hdg, 9000, "ψ = −π/2 is NED yaw +90°: east");
         assert_eq!(g.time_boot_ms, 12_345);
+    }
+
+    #[test]
+    fn position_target_only_with_a_target_and_above_sea_level() {
+        let t = Telemetry::default();
+        let mut v = view(&t);
+        assert!(v.build(POSITION_TARGET_GLOBAL_INT).is_none());
+        v.target_ned_m = Some(Vector3::new(20.0, -10.0, -15.0));
+        let Some(apm::MavMessage::POSITION_TARGET_GLOBAL_INT(p)) =
+            v.build(POSITION_TARGET_GLOBAL_INT)
+        else {
+            panic!()
+        };
+        assert_eq!(p.coordinate_frame, apm::MavFrame::MAV_FRAME_GLOBAL);
+        assert!((p.alt - 599.0).abs() < 1e-3, "{}", p.alt);
+        let back = v.origin.to_local_ned(&crate::nav::globe::GeoPoint {
+            lat_e7: p.lat_int,
+            lon_e7: p.lon_int,
+            alt_amsl_m: f64::from(p.alt),
+        });
+        assert!(
+            (back - Vector3::new(20.0, -10.0, -15.0)).norm() < 0.02,
+            "{back}"
+        );
+        use apm::PositionTargetTypemask as M;
+        assert!(!p.type_mask.intersects(
+            M::POSITION_TARGET_TYPEMASK_X_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_Y_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_Z_IGNORE
+        ));
+        assert!(p.type_mask.contains(M::POSITION_TARGET_TYPEMASK_VX_IGNORE));
     }
 
     #[test]

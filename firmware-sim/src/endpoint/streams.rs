@@ -109,7 +109,7 @@ pub struct StreamDef {
 }
 
 /// Every message the twin streams, with its default rate.
-pub const STREAMABLE: [StreamDef; 21] = [
+pub const STREAMABLE: [StreamDef; 22] = [
     StreamDef {
         msgid: id::HEARTBEAT,
         default_hz: 1.0,
@@ -205,6 +205,13 @@ pub const STREAMABLE: [StreamDef; 21] = [
     },
     StreamDef {
         msgid: id::NAV_CONTROLLER_OUTPUT,
+        default_hz: 2.0,
+        group: Some(Group::ExtendedStatus),
+    },
+    // While the navigator flies to a target (GUIDED, AUTO, QRTL), as ArduPlane's extended
+    // status does.
+    StreamDef {
+        msgid: super::position::POSITION_TARGET_GLOBAL_INT,
         default_hz: 2.0,
         group: Some(Group::ExtendedStatus),
     },

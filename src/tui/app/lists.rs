@@ -16,6 +16,8 @@ impl App {
             p
         } else if view == View::Params {
             &mut self.params.filter
+        } else if view == View::Fleet {
+            &mut self.fleet.filter
         } else {
             &mut self.messages.filter
         };
@@ -26,6 +28,7 @@ impl App {
                 if is_filter {
                     match view {
                         View::Params => self.params.selected = 0,
+                        View::Fleet => self.fleet.cursor = None,
                         _ => self.messages.selected = 0,
                     }
                 }

@@ -13,6 +13,7 @@ use vtol_link::{ComponentId, SystemId};
 use crate::tracker::{VehicleState, VehicleView};
 use crate::tui::vitals::with_recovery;
 
+pub mod fleet;
 mod guard;
 mod lists;
 
@@ -43,15 +44,18 @@ pub enum View {
     Messages,
     /// The parameter table.
     Params,
+    /// Every vehicle, the lost ones first, searchable.
+    Fleet,
 }
 
 impl View {
-    const ALL: [View; 5] = [
+    const ALL: [View; 6] = [
         View::Flight,
         View::Charts,
         View::Links,
         View::Messages,
         View::Params,
+        View::Fleet,
     ];
 
     /// Tab title.
@@ -63,6 +67,7 @@ impl View {
             View::Links => "Links",
             View::Messages => "Messages",
             View::Params => "Params",
+            View::Fleet => "Fleet",
         }
     }
 
@@ -289,6 +294,8 @@ pub struct App {
     pub params: ParamsState,
     /// Message inspector.
     pub messages: MessagesState,
+    /// The vehicle list.
+    pub fleet: fleet::FleetState,
     /// QLOITER position target (north, east, down), once one was sent.
     pub target_ned: Option<[f32; 3]>,
     /// What the operator did and what came of it, newest last.
@@ -311,6 +318,7 @@ impl Default for App {
             window_s: WINDOW_DEFAULT_S,
             params: ParamsState::default(),
             messages: MessagesState::default(),
+            fleet: fleet::FleetState::default(),
             target_ned: None,
             last_mode: None,
             log: VecDeque::new(),
@@ -485,6 +493,7 @@ impl App {
         if let Some(reqs) = match self.view {
             View::Messages => self.on_messages_key(key),
             View::Params => self.on_params_key(key),
+            View::Fleet => self.on_fleet_key(key),
             View::Flight | View::Charts | View::Links => None,
         } {
             return reqs;
@@ -595,7 +604,9 @@ impl App {
                 self.note(Level::Ok, format!("{n} parameters"));
             }
             Outcome::Progress { what, done, total } => {
-                self.params.progress = Some((what, done, total));
+                // The last step of a transfer may come after its result (the progress has a
+                // task of its own): a finished one shows nothing.
+                self.params.progress = (total == 0 || done < total).then_some((what, done, total));
             }
             Outcome::ParamSet { name, result } => match result {
                 Ok(v) => {

@@ -2,7 +2,7 @@
 
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
-use ratatui::style::{Color, Style};
+use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::canvas::{Canvas, Line as CLine};
@@ -12,36 +12,114 @@ use super::{STALE_S, Snapshot, age_s, level_style, servo_names, severity_style};
 use crate::tracker::state::VehicleView;
 use crate::tui::app::App;
 
-pub(super) fn setpoint_ned(app: &App, v: &VehicleView) -> Option<[f32; 3]> {
+/// Where a setpoint shown comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum SetpointSource {
+    /// The vehicle's own live target (POSITION_TARGET_*).
+    Vehicle,
+    /// Where QLOITER was entered, moved by the arrows.
+    Loiter,
+    /// `HOVER_ALT` in QHOVER (altitude only).
+    HoverAlt,
+}
+
+impl SetpointSource {
+    fn words(self) -> &'static str {
+        match self {
+            SetpointSource::Vehicle => "setpoint: the vehicle's live target",
+            SetpointSource::Loiter => "setpoint: where QLOITER was entered",
+            SetpointSource::HoverAlt => "setpoint: HOVER_ALT",
+        }
+    }
+}
+
+/// The setpoint (north, east, down; NaN where none) the view shows: the vehicle's live target
+/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point, else
+/// `HOVER_ALT` in QHOVER.
+pub(super) fn setpoint_ned(
+    app: &App,
+    snap: &Snapshot<'_>,
+    v: &VehicleView,
+) -> Option<([f32; 3], SetpointSource)> {
+    if let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now) {
+        return Some((t, SetpointSource::Vehicle));
+    }
     let hover = app.params.value("HOVER_ALT");
     match v.mode_name().as_str() {
         "QLOITER" => app
             .target_ned
-            .or_else(|| hover.map(|h| [f32::NAN, f32::NAN, -h])),
-        "QHOVER" => hover.map(|h| [f32::NAN, f32::NAN, -h]),
+            .map(|t| (t, SetpointSource::Loiter))
+            .or_else(|| hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt))),
+        "QHOVER" => hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt)),
         _ => None,
     }
 }
 
+/// Width from which the Flight view adds a column of charts.
+const WIDE: u16 = 160;
+
+/// Rows of the message panes under the instruments: none on a crowded screen, more on a tall one.
+fn bottom_rows(height: u16) -> u16 {
+    let rows = if height >= 40 {
+        height / 4
+    } else {
+        height.saturating_sub(14).min(8)
+    };
+    if rows < 3 { 0 } else { rows }
+}
+
 pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
-    // On a small terminal the message panes give way to the instruments.
-    let bottom_rows = if area.height < 26 { 5 } else { 8 };
-    let [top, bottom] =
-        Layout::vertical([Constraint::Min(12), Constraint::Length(bottom_rows)]).areas(area);
-    let [left, right] =
-        Layout::horizontal([Constraint::Percentage(45), Constraint::Percentage(55)]).areas(top);
+    let [top, bottom] = Layout::vertical([
+        Constraint::Min(12),
+        Constraint::Length(bottom_rows(area.height)),
+    ])
+    .areas(area);
     let vehicle = app.vehicle(snap.state);
+    let outputs: Vec<usize> = vehicle
+        .map(|v| (0..8).filter(|i| v.servo_us[*i] != 0).collect())
+        .unwrap_or_default();
+    let (left, right, charts) = if area.width >= WIDE {
+        let [l, r, c] = Layout::horizontal([
+            Constraint::Percentage(28),
+            Constraint::Percentage(30),
+            Constraint::Percentage(42),
+        ])
+        .areas(top);
+        (l, r, Some(c))
+    } else {
+        let [l, r] =
+            Layout::horizontal([Constraint::Percentage(45), Constraint::Percentage(55)]).areas(top);
+        (l, r, None)
+    };
+    // The outputs under the horizon, every one on its row; the numbers take the other column.
+    let out_rows = u16::try_from(outputs.len().max(1)).unwrap_or(8) + 2;
+    let [horizon_area, pwm] =
+        Layout::vertical([Constraint::Min(5), Constraint::Length(out_rows)]).areas(left);
+    draw_horizon(f, snap, vehicle, horizon_area);
+    f.render_widget(
+        Paragraph::new(numbers(app, snap, vehicle))
+            .block(Block::bordered().title(" Attitude and position ")),
+        right,
+    );
+    draw_outputs(f, app, vehicle, &outputs, pwm);
+    if let (Some(c), Some(v)) = (charts, vehicle) {
+        super::charts::draw_flight_charts(f, app, snap, v, c);
+    }
+    if bottom.height > 0 {
+        draw_texts(f, app, vehicle, bottom);
+    }
+}
+
+fn draw_horizon(f: &mut Frame<'_>, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>, area: Rect) {
     let att = vehicle.and_then(|v| v.attitude);
     let stale_att = vehicle
         .and_then(|v| age_s(snap, v, 30))
         .filter(|a| *a > STALE_S);
-
-    // Horizon with a heading tape.
     let block = Block::bordered().title(" Horizon ");
-    let inner = block.inner(left);
-    f.render_widget(block, left);
+    let inner = block.inner(area);
+    f.render_widget(block, area);
     let [tape, horizon] =
-        Layout::vertical([Constraint::Length(2), Constraint::Min(4)]).areas(inner);
+        Layout::vertical([Constraint::Length(2), Constraint::Min(2)]).areas(inner);
     let yaw_deg = att.map_or(0.0, |a| f64::from(a.rpy_rad[2]).to_degrees());
     f.render_widget(Paragraph::new(heading_tape(yaw_deg, tape.width)), tape);
     let (roll, pitch) = att.map_or((0.0, 0.0), |a| {
@@ -93,97 +171,176 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
             }
         });
     f.render_widget(canvas, horizon);
+}
 
-    // Numbers.
-    let [nums, pwm] = Layout::vertical([Constraint::Length(9), Constraint::Min(4)]).areas(right);
+/// The attitude, position against the setpoint, air data and VTOL state, one line each.
+fn numbers(app: &App, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
-    match (vehicle, att) {
-        (Some(v), Some(a)) => {
-            let d = |x: f32| f64::from(x).to_degrees();
-            for (i, name) in ["Roll", "Pitch", "Yaw"].iter().enumerate() {
-                lines.push(Line::raw(format!(
-                    "{name:<6}{:+8.1}°   rate {:+7.1}°/s",
-                    d(a.rpy_rad[i]),
-                    d(a.rates_rad_s[i])
-                )));
-            }
-            let stale_pos = age_s(snap, v, 32).filter(|a| *a > STALE_S);
-            match (stale_att, stale_pos) {
-                (Some(a), Some(p)) => lines.push(Line::styled(
-                    format!("STALE: attitude {a:.1} s, position {p:.1} s old"),
-                    Style::new().fg(Color::Yellow),
-                )),
-                (Some(a), None) => lines.push(Line::styled(
-                    format!("attitude stale: last {a:.1} s ago"),
-                    Style::new().fg(Color::Yellow),
-                )),
-                (None, Some(p)) => lines.push(Line::styled(
-                    format!("position stale: last {p:.1} s ago"),
-                    Style::new().fg(Color::Yellow),
-                )),
-                (None, None) => {}
-            }
-            let sp = setpoint_ned(app, v);
-            match v.position {
-                Some(p) => {
-                    let [n, e, dn] = p.pos_ned_m;
-                    let fmt_sp = |x: Option<f32>| {
-                        x.filter(|x| x.is_finite())
-                            .map_or_else(|| "      -".to_owned(), |x| format!("{x:+7.2}"))
-                    };
-                    lines.push(Line::raw(format!(
-                        "Alt   {:+7.2} m  setpoint {} m",
-                        -dn,
-                        fmt_sp(sp.map(|s| -s[2]))
-                    )));
-                    lines.push(Line::raw(format!(
-                        "North {n:+7.2} m  setpoint {} m",
-                        fmt_sp(sp.map(|s| s[0]))
-                    )));
-                    lines.push(Line::raw(format!(
-                        "East  {e:+7.2} m  setpoint {} m",
-                        fmt_sp(sp.map(|s| s[1]))
-                    )));
-                    lines.push(Line::raw(format!(
-                        "Vel   {:+5.2} {:+5.2} {:+5.2} m/s (N E D)",
-                        p.vel_ned_m_s[0], p.vel_ned_m_s[1], p.vel_ned_m_s[2]
-                    )));
+    let (v, a) = match (vehicle, vehicle.and_then(|v| v.attitude)) {
+        (Some(v), Some(a)) => (v, a),
+        (Some(_), None) => return vec![Line::raw("no attitude yet")],
+        (None, _) => return vec![Line::raw("no vehicle yet")],
+    };
+    // A lost vehicle's figures are history: said so first, greyed, and no air data.
+    let lost = v.is_lost(snap.now);
+    if lost {
+        lines.push(Line::styled(
+            format!(
+                "LINK LOST {:.0} s: last known values",
+                snap.now
+                    .saturating_duration_since(v.last_heartbeat)
+                    .as_secs_f64()
+            ),
+            Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+        ));
+    }
+    let d = |x: f32| f64::from(x).to_degrees();
+    for (i, name) in ["Roll", "Pitch", "Yaw"].iter().enumerate() {
+        lines.push(Line::raw(format!(
+            "{name:<6}{:+8.1}°   rate {:+7.1}°/s",
+            d(a.rpy_rad[i]),
+            d(a.rates_rad_s[i])
+        )));
+    }
+    let stale_att = age_s(snap, v, 30).filter(|a| *a > STALE_S);
+    let stale_pos = age_s(snap, v, 32).filter(|a| *a > STALE_S);
+    let stale = match (stale_att, stale_pos) {
+        (Some(a), Some(p)) => Some(format!("STALE: attitude {a:.1} s, position {p:.1} s old")),
+        (Some(a), None) => Some(format!("attitude stale: last {a:.1} s ago")),
+        (None, Some(p)) => Some(format!("position stale: last {p:.1} s ago")),
+        (None, None) => None,
+    };
+    if let Some(s) = stale {
+        lines.push(Line::styled(s, Style::new().fg(Color::Yellow)));
+    }
+    lines.extend(position_lines(app, snap, v));
+    if lost {
+        lines = lines
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == 0 {
+                    l
+                } else {
+                    l.style(Style::new().fg(Color::DarkGray))
                 }
-                None => lines.push(Line::raw("no position yet")),
+            })
+            .collect();
+        lines.push(Line::styled(
+            "Air       - m/s  AoA      -  SSA      -",
+            Style::new().fg(Color::DarkGray),
+        ));
+        lines.push(Line::styled("VTOL  -", Style::new().fg(Color::DarkGray)));
+    } else {
+        lines.extend(air_lines(app, snap, v));
+    }
+    lines
+}
+
+/// Altitude, north and east against the setpoint, where the setpoint comes from, the velocity.
+fn position_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'static>> {
+    let mut lines = Vec::new();
+    let sp = setpoint_ned(app, snap, v);
+    match v.position {
+        Some(p) => {
+            let [n, e, dn] = p.pos_ned_m;
+            let fmt_sp = |x: Option<f32>| {
+                x.filter(|x| x.is_finite())
+                    .map_or_else(|| "      -".to_owned(), |x| format!("{x:+7.2}"))
+            };
+            let t = sp.map(|(t, _)| t);
+            lines.push(Line::raw(format!(
+                "Alt   {:+7.2} m  setpoint {} m",
+                -dn,
+                fmt_sp(t.map(|s| -s[2]))
+            )));
+            lines.push(Line::raw(format!(
+                "North {n:+7.2} m  setpoint {} m",
+                fmt_sp(t.map(|s| s[0]))
+            )));
+            lines.push(Line::raw(format!(
+                "East  {e:+7.2} m  setpoint {} m",
+                fmt_sp(t.map(|s| s[1]))
+            )));
+            if let Some((_, src)) = sp {
+                lines.push(Line::styled(
+                    src.words().to_owned(),
+                    Style::new().fg(Color::DarkGray),
+                ));
             }
+            lines.push(Line::raw(format!(
+                "Vel   {:+5.2} {:+5.2} {:+5.2} m/s (N E D)",
+                p.vel_ned_m_s[0], p.vel_ned_m_s[1], p.vel_ned_m_s[2]
+            )));
         }
-        (Some(_), None) => lines.push(Line::raw("no attitude yet")),
-        (None, _) => lines.push(Line::raw("no vehicle yet")),
+        None => lines.push(Line::raw("no position yet")),
     }
-    f.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title(" Attitude and position ")),
-        nums,
+    lines
+}
+
+/// Airspeed, angle of attack and sideslip; the VTOL state and a transition's progress.
+fn air_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'static>> {
+    let min = app.params.value("ARSPD_FBW_MIN");
+    let air = crate::tui::air::air(snap.state, v, min);
+    let num = |x: Option<f32>, f: &dyn Fn(f32) -> String| x.map_or_else(|| "-".to_owned(), f);
+    let air_line = format!(
+        "Air   {:>5} m/s  AoA {:>6}  SSA {:>6}",
+        num(air.airspeed_m_s, &|a| format!("{a:.1}")),
+        num(air.aoa_deg, &|a| format!("{a:+.1}°")),
+        num(air.ssa_deg, &|a| format!("{a:+.1}°")),
     );
+    let vtol = match (air.vtol, air.progress) {
+        (None, _) => Line::raw("VTOL  -"),
+        (Some(s), Some(p)) => Line::styled(
+            format!(
+                "VTOL  {:<3}  transition {:>3.0}% {}",
+                s.label(),
+                p * 100.0,
+                match s {
+                    crate::tui::air::Vtol::ToFw => format!(
+                        "(of {:.0} m/s)",
+                        min.unwrap_or(crate::tui::air::ARSPD_FBW_MIN_DEFAULT)
+                    ),
+                    _ => "(nose up)".to_owned(),
+                }
+            ),
+            Style::new().fg(Color::Yellow),
+        ),
+        (Some(s), None) => Line::raw(format!("VTOL  {}", s.label())),
+    };
+    vec![Line::raw(air_line), vtol]
+}
 
-    // PWM bars.
+fn draw_outputs(
+    f: &mut Frame<'_>,
+    app: &App,
+    vehicle: Option<&VehicleView>,
+    used: &[usize],
+    area: Rect,
+) {
     let block = Block::bordered().title(" Outputs (PWM) ");
-    let inner = block.inner(pwm);
-    f.render_widget(block, pwm);
-    if let Some(v) = vehicle {
-        let names = servo_names(app);
-        let used: Vec<usize> = (0..8).filter(|i| v.servo_us[*i] != 0).collect();
-        // One row each, in output order, as many as fit.
-        let rows = (0..inner.height).map(|k| Rect {
-            y: inner.y + k,
-            height: 1,
-            ..inner
-        });
-        for (row, i) in rows.zip(&used) {
-            let us = v.servo_us[*i];
-            let label = format!("{:<13} {us:>4} µs ", names[*i]);
-            let width = usize::from(row.width).saturating_sub(label.chars().count());
-            f.render_widget(Paragraph::new(pwm_bar(label, us, width)), row);
-        }
+    let inner = block.inner(area);
+    f.render_widget(block, area);
+    let Some(v) = vehicle else { return };
+    let names = servo_names(app);
+    // One row each, in output order, as many as fit.
+    let rows = (0..inner.height).map(|k| Rect {
+        y: inner.y + k,
+        height: 1,
+        ..inner
+    });
+    for (row, i) in rows.zip(used) {
+        let us = v.servo_us[*i];
+        let label = format!("{:<13} {us:>4} µs ", names[*i]);
+        let width = usize::from(row.width).saturating_sub(label.chars().count());
+        f.render_widget(Paragraph::new(pwm_bar(label, us, width)), row);
     }
+}
 
-    // Messages from the vehicle and what the operator did.
+/// Messages from the vehicle and what the operator did.
+fn draw_texts(f: &mut Frame<'_>, app: &App, vehicle: Option<&VehicleView>, area: Rect) {
     let [texts, events] =
-        Layout::horizontal([Constraint::Percentage(55), Constraint::Percentage(45)]).areas(bottom);
+        Layout::horizontal([Constraint::Percentage(55), Constraint::Percentage(45)]).areas(area);
     let h = texts.height.saturating_sub(2) as usize;
     let lines: Vec<Line> = vehicle
         .map(|v| {

@@ -10,6 +10,8 @@ use vtol_link::dialect::MavState;
 
 use super::{Snapshot, level_style, status_name};
 use crate::tap::Side;
+use crate::tracker::state::VehicleView;
+use crate::tui::air::air;
 use crate::tui::app::{App, View};
 use crate::tui::vitals::{Severity, Vitals, vitals};
 
@@ -111,7 +113,7 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         tabs.push(Span::raw(" "));
     }
     tabs.push(Span::styled(
-        "  Tab: next view  ?: help  q: quit",
+        "  ?: help  q: quit",
         Style::new().fg(Color::DarkGray),
     ));
     let mut lines = vec![Line::from(spans)];
@@ -128,8 +130,39 @@ pub(super) fn vitals_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> Vec<Li
             " no live figures: the link is lost",
             Style::new().fg(Color::DarkGray),
         )],
-        Some(v) => pack(vitals_items(&vitals(snap.state, v)), width),
+        Some(v) => {
+            let mut items = vitals_items(&vitals(snap.state, v));
+            items.push(air_item(app, snap, v));
+            pack(items, width)
+        }
     }
+}
+
+/// The VTOL state (with a transition's progress), airspeed and angle of attack; `-` for what
+/// the vehicle does not report.
+fn air_item(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Span<'static>> {
+    let a = air(snap.state, v, app.params.value("ARSPD_FBW_MIN"));
+    let grey = Style::new().fg(Color::DarkGray);
+    let mut spans = Vec::new();
+    match (a.vtol, a.progress) {
+        (Some(s), Some(p)) => spans.push(Span::styled(
+            format!("{} {:.0}%", s.label(), p * 100.0),
+            Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD),
+        )),
+        (Some(s), None) => spans.push(Span::raw(s.label())),
+        (None, _) => spans.push(Span::styled("VTOL -", grey)),
+    }
+    spans.push(Span::raw(" "));
+    spans.push(match a.airspeed_m_s {
+        Some(x) => Span::raw(format!("air {x:.1} m/s")),
+        None => Span::styled("air -", grey),
+    });
+    spans.push(Span::raw(" "));
+    spans.push(match a.aoa_deg {
+        Some(x) => Span::raw(format!("AoA {x:+.1}°")),
+        None => Span::styled("AoA -", grey),
+    });
+    spans
 }
 
 /// Lays items out left to right with separators, starting a new row where the next would not

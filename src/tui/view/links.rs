@@ -5,9 +5,10 @@ use std::fmt::Write as _;
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
-use ratatui::widgets::{Block, Paragraph, Row, Table, Wrap};
+use ratatui::text::{Line, Text};
+use ratatui::widgets::{Block, Cell, Paragraph, Row, Table, Wrap};
 
-use super::Snapshot;
+use super::{Snapshot, wrap};
 use crate::tap::Side;
 use crate::tracker::state::LINK_TIMEOUT;
 
@@ -27,6 +28,11 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
         ]
     };
     let header = Row::new(titles).style(Style::new().add_modifier(Modifier::BOLD));
+    // What the narrow layout leaves the peer: the fixed columns and their spacing taken.
+    let peer_w = usize::from(
+        area.width
+            .saturating_sub(2 + 3 + 7 + 6 + 5 + 11 + 8 + 8 + 4 + 3 + 9),
+    );
     let rows: Vec<Row> = snap
         .links
         .iter()
@@ -59,31 +65,45 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
                 Some((p, c)) => (format!("{} [{}]", l.peer, p.trust), c.dropped_rate),
                 None => (l.peer.clone(), 0),
             };
+            // Narrow, the peer wraps in its column rather than lose its end (the port).
+            let peer = if narrow {
+                wrap(&peer, peer_w)
+            } else {
+                vec![peer]
+            };
+            let height = u16::try_from(peer.len()).unwrap_or(1);
             Row::new(vec![
-                l.id.to_string(),
-                side.to_owned(),
-                peer,
-                rate,
-                loss,
-                if lost { format!("LOST {heard}") } else { heard },
-                l.stats.rx_frames.to_string(),
-                l.stats.tx_frames.to_string(),
-                (l.stats.tx_dropped_queue_full + rate_dropped).to_string(),
-                l.stats.bad_crc.to_string(),
+                Cell::from(if narrow {
+                    l.id.0.to_string()
+                } else {
+                    l.id.to_string()
+                }),
+                Cell::from(side),
+                Cell::from(Text::from(
+                    peer.into_iter().map(Line::raw).collect::<Vec<_>>(),
+                )),
+                Cell::from(rate),
+                Cell::from(loss),
+                Cell::from(if lost { format!("LOST {heard}") } else { heard }),
+                Cell::from(l.stats.rx_frames.to_string()),
+                Cell::from(l.stats.tx_frames.to_string()),
+                Cell::from((l.stats.tx_dropped_queue_full + rate_dropped).to_string()),
+                Cell::from(l.stats.bad_crc.to_string()),
             ])
+            .height(height)
             .style(style)
         })
         .collect();
     let widths = if narrow {
         [
-            Constraint::Length(7),
+            Constraint::Length(3),
             Constraint::Length(7),
             Constraint::Min(9),
             Constraint::Length(6),
             Constraint::Length(5),
             Constraint::Length(11),
-            Constraint::Length(7),
-            Constraint::Length(7),
+            Constraint::Length(8),
+            Constraint::Length(8),
             Constraint::Length(4),
             Constraint::Length(3),
         ]

@@ -35,8 +35,17 @@ pub(super) fn draw_messages(
     } else {
         Layout::vertical([Constraint::Percentage(55), Constraint::Percentage(45)]).areas(area)
     };
+    // The list as wide as its longest name needs, the fields the rest.
+    let name_w = listed
+        .iter()
+        .filter_map(|k| snap.state.messages[k].last.message_name())
+        .map(str::len)
+        .max()
+        .unwrap_or(7)
+        .max(7);
+    let list_w = u16::try_from(2 + 7 + 1 + name_w + 1 + 5).unwrap_or(44);
     let [list_area, fields_area] =
-        Layout::horizontal([Constraint::Length(44), Constraint::Min(20)]).areas(top);
+        Layout::horizontal([Constraint::Length(list_w), Constraint::Min(20)]).areas(top);
     let visible = list_area.height.saturating_sub(3) as usize;
     let first = m.selected.saturating_sub(visible.saturating_sub(1));
     let rows: Vec<Row> = listed
@@ -72,8 +81,8 @@ pub(super) fn draw_messages(
             rows,
             [
                 Constraint::Length(7),
-                Constraint::Min(20),
-                Constraint::Length(7),
+                Constraint::Min(7),
+                Constraint::Length(5),
             ],
         )
         .header(
@@ -93,6 +102,11 @@ pub(super) fn draw_messages(
                 m.field = m.field.min(numeric_fields.len().saturating_sub(1));
                 let visible = fields_area.height.saturating_sub(2) as usize;
                 let selected_path = numeric_fields.get(m.field).map(|f| f.path.clone());
+                // Paths in a column as wide as the longest; a value that does not fit beside
+                // its path goes whole on the next line.
+                let inner_w = usize::from(fields_area.width.saturating_sub(2));
+                let path_w = fs.iter().map(|f| f.path.len()).max().unwrap_or(0).min(24);
+                let mut sel_line = 0;
                 for f in &fs {
                     let sel = m.in_fields && Some(&f.path) == selected_path.as_ref();
                     let style = if sel {
@@ -102,13 +116,18 @@ pub(super) fn draw_messages(
                     } else {
                         Style::new()
                     };
-                    lines.push(Line::styled(format!("{:<24} {}", f.path, f.text), style));
+                    if Some(&f.path) == selected_path.as_ref() {
+                        sel_line = lines.len();
+                    }
+                    let one = format!("{:<path_w$} {}", f.path, f.text);
+                    if one.chars().count() <= inner_w {
+                        lines.push(Line::styled(one, style));
+                    } else {
+                        lines.push(Line::styled(f.path.clone(), style));
+                        lines.push(Line::styled(format!("  {}", f.text), style));
+                    }
                 }
                 numeric = numeric_fields.into_iter().map(|f| f.path.clone()).collect();
-                // Keep the selected field in view.
-                let sel_line = selected_path
-                    .and_then(|p| fs.iter().position(|f| f.path == p))
-                    .unwrap_or(0);
                 let skip = sel_line.saturating_sub(visible.saturating_sub(1));
                 lines.drain(..skip.min(lines.len()));
             }
@@ -156,6 +175,9 @@ pub(super) fn draw_messages(
             })
             .collect();
         let title = format!(" Chart {} ({} series) ", ci + 1, series.len());
-        f.render_widget(chart(title, &series, app.window_s, ""), areas[ci]);
+        f.render_widget(
+            chart(title, &series, app.window_s, "", areas[ci].width),
+            areas[ci],
+        );
     }
 }

@@ -17,6 +17,7 @@ use crate::tracker::history::{History, TimedFrame};
 use crate::tracker::state::{VehicleState, VehicleView};
 
 mod charts;
+mod fleet;
 mod flight;
 mod header;
 mod links;
@@ -25,6 +26,7 @@ mod overlay;
 mod params;
 
 use charts::draw_charts;
+use fleet::draw_fleet;
 use flight::draw_flight;
 pub use flight::heading_tape;
 use header::{draw_footer, draw_header, vehicle_list_lines, vitals_lines};
@@ -202,6 +204,12 @@ fn servo_names(app: &App) -> Vec<String> {
     output_names(&f)
 }
 
+/// A MAV_STATE as the header shows it (`ACTIVE`, `CRITICAL` …).
+#[must_use]
+pub fn status_word(s: MavState) -> &'static str {
+    status_name(s)
+}
+
 fn status_name(s: MavState) -> &'static str {
     match s {
         MavState::MAV_STATE_UNINIT => "UNINIT",
@@ -233,7 +241,8 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         return;
     }
     app.observe(snap.state);
-    let fleet = if snap.state.vehicles.len() > 1 {
+    // The Fleet view is the list: the header does not repeat it there.
+    let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
     } else {
         Vec::new()
@@ -263,6 +272,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Links => draw_links(f, snap, body),
         View::Messages => draw_messages(f, app, snap, cache, body),
         View::Params => draw_params(f, app, body),
+        View::Fleet => draw_fleet(f, app, snap, body),
     }
     draw_footer(f, app, footer);
     if let Some(c) = &app.confirm {
@@ -273,9 +283,58 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
     }
 }
 
+/// Words of `text` in lines of at most `width` characters (a longer word is cut into pieces).
+pub(super) fn wrap(text: &str, width: usize) -> Vec<String> {
+    let width = width.max(1);
+    let mut lines = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        while word.len() > width {
+            if !line.is_empty() {
+                lines.push(std::mem::take(&mut line));
+            }
+            lines.push(word.drain(..width).collect());
+        }
+        let word: String = word.into_iter().collect();
+        let n = line.chars().count();
+        if n > 0 && n + 1 + word.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(&word);
+    }
+    if !line.is_empty() || lines.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
 fn age_s(snap: &Snapshot<'_>, v: &VehicleView, msg: u32) -> Option<f64> {
     snap.state
         .messages
         .get(&(v.system_id, v.component_id, msg))
         .map(|m| snap.now.saturating_duration_since(m.last_at).as_secs_f64())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap;
+
+    #[test]
+    fn wrap_keeps_every_word_within_the_width() {
+        let lines = wrap(
+            "REFUSED: LAT_SAT_B: saturation levels need a > b + c + d",
+            20,
+        );
+        assert!(lines.iter().all(|l| l.chars().count() <= 20), "{lines:?}");
+        assert_eq!(
+            lines.join(" "),
+            "REFUSED: LAT_SAT_B: saturation levels need a > b + c + d"
+        );
+        assert_eq!(wrap("abcdefgh", 3), ["abc", "def", "gh"]);
+        assert_eq!(wrap("", 5), [""]);
+    }
 }

@@ -89,6 +89,10 @@ pub(super) const HELP: &[(&str, &str)] = &[
         "Params: f / r",
         "load a gains file (diff, then upload) / download again",
     ),
+    (
+        "Fleet: / ↑↓ Enter",
+        "search; scroll (PgUp/PgDn); show and command it",
+    ),
     ("/ … Enter, Esc", "type a filter; Esc clears it"),
 ];
 

@@ -3,42 +3,124 @@
 use ratatui::Frame;
 use ratatui::layout::{Alignment, Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
-use ratatui::text::Line;
+use ratatui::text::{Line, Text};
 use ratatui::widgets::{Block, Borders, Cell, Gauge, Paragraph, Row, Table, Wrap};
 
+use super::wrap;
 use crate::tui::app::{App, ParamStatus};
+
+/// Width from which the editor is a side panel; below it, a strip under the table so the
+/// table keeps every column whole.
+const SIDE_PANEL_FROM: u16 = 120;
+/// Columns of the name and value.
+const NAME_W: u16 = 17;
+const VALUE_W: u16 = 14;
+
+fn status_text(s: &ParamStatus) -> (String, Style) {
+    match s {
+        ParamStatus::Pending(v) => (format!("sent {v}…"), Style::new().fg(Color::Yellow)),
+        ParamStatus::Confirmed => ("confirmed".to_owned(), Style::new().fg(Color::Green)),
+        ParamStatus::Refused(r) => (format!("REFUSED: {r}"), Style::new().fg(Color::Red)),
+        ParamStatus::NotSent(r) => (format!("not sent: {r}"), Style::new().fg(Color::Magenta)),
+    }
+}
 
 pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
     let p = &app.params;
-    let [list_area, side] = Layout::horizontal([
-        Constraint::Min(40),
-        Constraint::Length(side_width(area.width)),
-    ])
-    .areas(area);
+    let (list_area, side, strip) = if area.width >= SIDE_PANEL_FROM {
+        let [l, s] = Layout::horizontal([Constraint::Min(40), Constraint::Length(36)]).areas(area);
+        (l, Some(s), None)
+    } else {
+        let [l, s] = Layout::vertical([Constraint::Min(6), Constraint::Length(5)]).areas(area);
+        (l, None, Some(s))
+    };
     let rows_data = p.filtered();
+    // The status column takes the rest; a long status (a refusal's reason) wraps in it.
+    let status_w = usize::from(list_area.width.saturating_sub(2 + NAME_W + VALUE_W + 2));
+    let heights: Vec<usize> = rows_data
+        .iter()
+        .map(|(_, (name, _))| {
+            p.status
+                .get(name)
+                .map_or(1, |s| wrap(&status_text(s).0, status_w).len())
+        })
+        .collect();
     let visible = list_area.height.saturating_sub(3) as usize;
-    let first = p.selected.saturating_sub(visible.saturating_sub(1));
-    let rows: Vec<Row> = rows_data
+    // The first row such that the selected one fits whole below it.
+    let mut first = p.selected.min(rows_data.len().saturating_sub(1));
+    let mut used = heights.get(first).copied().unwrap_or(1);
+    while first > 0 && used + heights[first - 1] <= visible {
+        first -= 1;
+        used += heights[first];
+    }
+    let rows = table_rows(app, &rows_data, first, status_w);
+    let title = if app.typing && p.edit.is_none() && p.file_prompt.is_none() {
+        format!(" Parameters /{}▏ ", p.filter)
+    } else if p.table.is_empty() {
+        " Parameters (r: download) ".to_owned()
+    } else {
+        format!(" Parameters ({} of {}) ", rows_data.len(), p.table.len())
+    };
+    f.render_widget(
+        Table::new(
+            rows,
+            [
+                Constraint::Length(NAME_W),
+                Constraint::Length(VALUE_W),
+                Constraint::Min(10),
+            ],
+        )
+        .header(
+            Row::new(["name", "value", "status"]).style(Style::new().add_modifier(Modifier::BOLD)),
+        )
+        .block(Block::bordered().title(title)),
+        list_area,
+    );
+    if let Some(side) = side {
+        let [prog, info] =
+            Layout::vertical([Constraint::Length(3), Constraint::Min(3)]).areas(side);
+        draw_progress(f, app, prog);
+        f.render_widget(
+            Paragraph::new(editor_lines(app, &rows_data, true))
+                .alignment(Alignment::Left)
+                .wrap(Wrap { trim: false })
+                .block(Block::bordered().title(" Edit ").borders(Borders::ALL)),
+            info,
+        );
+    }
+    if let Some(strip) = strip {
+        // The progress as the strip's title; the keys or the editor's prompt inside.
+        let title = match &p.progress {
+            Some((what, done, total)) => format!(" {what} {done}/{total} "),
+            None => " Edit ".to_owned(),
+        };
+        f.render_widget(
+            Paragraph::new(editor_lines(app, &rows_data, false))
+                .wrap(Wrap { trim: false })
+                .block(Block::bordered().title(title)),
+            strip,
+        );
+    }
+}
+
+/// The table's rows from `first` on, each as tall as its wrapped status.
+fn table_rows(
+    app: &App,
+    rows_data: &[(usize, &(String, f32))],
+    first: usize,
+    status_w: usize,
+) -> Vec<Row<'static>> {
+    let p = &app.params;
+    rows_data
         .iter()
         .enumerate()
         .skip(first)
-        .take(visible)
         .map(|(i, (_, (name, value)))| {
-            let (status, style) = match p.status.get(name) {
-                Some(ParamStatus::Pending(v)) => {
-                    (format!("sent {v}…"), Style::new().fg(Color::Yellow))
-                }
-                Some(ParamStatus::Confirmed) => {
-                    ("confirmed".to_owned(), Style::new().fg(Color::Green))
-                }
-                Some(ParamStatus::Refused(r)) => {
-                    (format!("REFUSED: {r}"), Style::new().fg(Color::Red))
-                }
-                Some(ParamStatus::NotSent(r)) => {
-                    (format!("not sent: {r}"), Style::new().fg(Color::Magenta))
-                }
-                None => (String::new(), Style::new()),
-            };
+            let (status, style) = p
+                .status
+                .get(name)
+                .map_or((String::new(), Style::new()), status_text);
+            let status = wrap(&status, status_w);
             let value = if i == p.selected
                 && let Some(e) = &p.edit
             {
@@ -51,38 +133,23 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
             } else {
                 Style::new()
             };
+            let h = u16::try_from(status.len()).unwrap_or(1);
             Row::new(vec![
                 Cell::from(name.clone()),
                 Cell::from(value),
-                Cell::from(status).style(style),
+                Cell::from(Text::from(
+                    status.into_iter().map(Line::raw).collect::<Vec<_>>(),
+                ))
+                .style(style),
             ])
+            .height(h)
             .style(row_style)
         })
-        .collect();
-    let title = if app.typing && p.edit.is_none() && p.file_prompt.is_none() {
-        format!(" Parameters /{}▏ ", p.filter)
-    } else if p.table.is_empty() {
-        " Parameters (r: download) ".to_owned()
-    } else {
-        format!(" Parameters ({} of {}) ", rows_data.len(), p.table.len())
-    };
-    f.render_widget(
-        Table::new(
-            rows,
-            [
-                Constraint::Length(17),
-                Constraint::Length(14),
-                Constraint::Min(10),
-            ],
-        )
-        .header(
-            Row::new(["name", "value", "status"]).style(Style::new().add_modifier(Modifier::BOLD)),
-        )
-        .block(Block::bordered().title(title)),
-        list_area,
-    );
-    let [prog, info] = Layout::vertical([Constraint::Length(3), Constraint::Min(3)]).areas(side);
-    match &p.progress {
+        .collect()
+}
+
+fn draw_progress(f: &mut Frame<'_>, app: &App, area: Rect) {
+    match &app.params.progress {
         Some((what, done, total)) => {
             let ratio = if *total == 0 {
                 0.0
@@ -95,11 +162,21 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
                     .gauge_style(Style::new().fg(Color::Cyan))
                     .label(format!("{done}/{total}"))
                     .ratio(ratio.clamp(0.0, 1.0)),
-                prog,
+                area,
             );
         }
-        None => f.render_widget(Block::bordered().title(" idle "), prog),
+        None => f.render_widget(Block::bordered().title(" idle "), area),
     }
+}
+
+/// What the editor says: the prompt being typed, the loaded file's changes, or the keys and
+/// (in the side panel, where the table may be narrow) the selected row's whole status.
+fn editor_lines(
+    app: &App,
+    rows_data: &[(usize, &(String, f32))],
+    side: bool,
+) -> Vec<Line<'static>> {
+    let p = &app.params;
     let mut lines = Vec::new();
     if let Some(path) = &p.file_prompt {
         lines.push(Line::raw("Gains file (Enter reads it):"));
@@ -111,14 +188,16 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
             lines.push(Line::raw(format!("{n} {now} → {want}")));
         }
     } else if p.edit.is_some() {
-        lines.push(Line::raw("Type the value, Enter sends it,"));
-        lines.push(Line::raw("Esc cancels. Shown confirmed only"));
-        lines.push(Line::raw("when the vehicle echoes it."));
+        lines.push(Line::raw(
+            "Type the value, Enter sends it, Esc cancels. Shown confirmed only when the vehicle \
+             echoes it.",
+        ));
     } else {
-        lines.push(Line::raw("Enter: edit   /: filter"));
-        lines.push(Line::raw("f: gains file   r: download"));
-        // The selected row's whole status: the table's column may cut a refusal's reason.
-        if let Some((_, (name, _))) = rows_data.get(p.selected)
+        lines.push(Line::raw(
+            "Enter: edit   /: filter   f: gains file   r: download",
+        ));
+        if side
+            && let Some((_, (name, _))) = rows_data.get(p.selected)
             && let Some(s) = p.status.get(name)
         {
             lines.push(Line::raw(""));
@@ -131,16 +210,5 @@ pub(super) fn draw_params(f: &mut Frame<'_>, app: &App, area: Rect) {
             }));
         }
     }
-    f.render_widget(
-        Paragraph::new(lines)
-            .alignment(Alignment::Left)
-            .wrap(Wrap { trim: false })
-            .block(Block::bordered().title(" Edit ").borders(Borders::ALL)),
-        info,
-    );
-}
-
-/// The side panel's width: narrow on a small terminal so the table keeps its status column.
-fn side_width(width: u16) -> u16 {
-    if width >= 120 { 36 } else { 26 }
+    lines
 }

@@ -1,0 +1,235 @@
+//! What the vehicle flies through and to, from standard messages fed to the tracker: airspeed
+//! (VFR_HUD), angle of attack and sideslip (AOA_SSA), the VTOL state (EXTENDED_SYS_STATE) and a
+//! transition's progress in the header and the Flight view; the live target
+//! (POSITION_TARGET_GLOBAL_INT / _LOCAL_NED) as the setpoint in every mode that sends one.
+
+mod ui_support;
+
+use ui_support::recording::{Recording, app_with_params};
+use vtol_link::dialect::{self, MavFrame, MavMessage, MavVtolState, PositionTargetTypemask};
+
+/// 1e-7 degree of latitude in metres (ArduPilot's scaling).
+const M_PER_E7: f64 = 0.011_131_884_502_145_034;
+const HOME_LAT: i32 = 473_977_420;
+const HOME_LON: i32 = 85_455_940;
+const HOME_ALT_MM: i32 = 488_000;
+
+/// A flight in `mode` for 5 s at 1 m, home at the local origin.
+fn flight(mode: u32) -> Recording {
+    let mut rec = Recording::new();
+    rec.fly(0, 5_000, |_| (mode, true, 0.0, 0.0, 0.0, 1.0));
+    rec.feed(
+        4_900,
+        &MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
+            latitude: HOME_LAT,
+            longitude: HOME_LON,
+            altitude: HOME_ALT_MM,
+            ..Default::default()
+        }),
+    );
+    rec
+}
+
+fn global_target(north_m: f64, east_m: f64, alt: f32, frame: MavFrame) -> MavMessage {
+    use PositionTargetTypemask as M;
+    let lat = HOME_LAT + (north_m / M_PER_E7).round() as i32;
+    let scale = (f64::from(HOME_LAT) * 1e-7).to_radians().cos();
+    let lon = HOME_LON + (east_m / (M_PER_E7 * scale)).round() as i32;
+    MavMessage::POSITION_TARGET_GLOBAL_INT(dialect::POSITION_TARGET_GLOBAL_INT_DATA {
+        lat_int: lat,
+        lon_int: lon,
+        alt,
+        type_mask: M::all()
+            - (M::POSITION_TARGET_TYPEMASK_X_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_Y_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_Z_IGNORE),
+        coordinate_frame: frame,
+        ..Default::default()
+    })
+}
+
+/// AUTO, RTL and QRTL with ArduPlane's POSITION_TARGET_GLOBAL_INT (AMSL or relative to home),
+/// GUIDED with a POSITION_TARGET_LOCAL_NED: the setpoint is the vehicle's target, in metres
+/// north, east and up of the local origin.
+#[test]
+fn the_live_target_is_the_setpoint_in_every_mode_that_sends_one() {
+    let amsl = |up: f32| (f64::from(HOME_ALT_MM) / 1000.0) as f32 + up;
+    let cases: [(u32, &str, MavMessage, [&str; 3]); 4] = [
+        (
+            10,
+            "AUTO",
+            global_target(20.0, -10.0, amsl(15.0), MavFrame::MAV_FRAME_GLOBAL),
+            ["+15.00", "+20.00", "-10.00"],
+        ),
+        (
+            11,
+            "RTL",
+            global_target(0.0, 0.0, 25.0, MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT),
+            ["+25.00", "+0.00", "+0.00"],
+        ),
+        (
+            21,
+            "QRTL",
+            global_target(-3.5, 4.0, amsl(2.0), MavFrame::MAV_FRAME_GLOBAL),
+            ["+2.00", "-3.50", "+4.00"],
+        ),
+        (
+            15,
+            "GUIDED",
+            MavMessage::POSITION_TARGET_LOCAL_NED(dialect::POSITION_TARGET_LOCAL_NED_DATA {
+                x: 7.0,
+                y: 2.5,
+                z: -3.0,
+                coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+                type_mask: PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE,
+                ..Default::default()
+            }),
+            ["+3.00", "+7.00", "+2.50"],
+        ),
+    ];
+    for (mode, name, msg, [alt, north, east]) in cases {
+        let mut rec = flight(mode);
+        rec.feed(4_950, &msg);
+        let mut app = app_with_params();
+        let frame = rec.render(&mut app, 5_000, (80, 24));
+        assert!(frame.contains(name), "{frame}");
+        for (axis, want) in [("Alt  ", alt), ("North", north), ("East ", east)] {
+            let line = frame
+                .lines()
+                .find(|l| l.contains(axis) && l.contains("setpoint"))
+                .unwrap_or_default();
+            assert!(
+                line.contains(&format!("setpoint {want:>7} m")),
+                "{name} {axis}: {want}\n{frame}"
+            );
+        }
+        assert!(frame.contains("the vehicle's live target"), "{frame}");
+        if name == "AUTO" {
+            insta::assert_snapshot!("live_target_auto", frame);
+        }
+        // Three seconds after the last one the target is no longer the vehicle's.
+        rec.fly(5_000, 8_100, move |_| (mode, true, 0.0, 0.0, 0.0, 1.0));
+        let frame = rec.render(&mut app, 8_100, (80, 24));
+        assert!(!frame.contains("the vehicle's live target"), "{frame}");
+    }
+}
+
+/// A target in body axes or as an offset is no point in the local frame: not shown.
+#[test]
+fn a_target_relative_to_the_vehicle_is_not_a_setpoint() {
+    let mut rec = flight(15);
+    rec.feed(
+        4_950,
+        &MavMessage::POSITION_TARGET_LOCAL_NED(dialect::POSITION_TARGET_LOCAL_NED_DATA {
+            x: 7.0,
+            coordinate_frame: MavFrame::MAV_FRAME_BODY_FRD,
+            ..Default::default()
+        }),
+    );
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(!frame.contains("the vehicle's live target"), "{frame}");
+    assert!(!frame.contains("+7.00"), "{frame}");
+}
+
+fn ext_state(s: MavVtolState) -> MavMessage {
+    MavMessage::EXTENDED_SYS_STATE(dialect::EXTENDED_SYS_STATE_DATA {
+        vtol_state: s,
+        landed_state: dialect::MavLandedState::MAV_LANDED_STATE_IN_AIR,
+    })
+}
+
+fn hud(airspeed: f32) -> MavMessage {
+    MavMessage::VFR_HUD(dialect::VFR_HUD_DATA {
+        airspeed,
+        groundspeed: airspeed,
+        ..Default::default()
+    })
+}
+
+fn aoa(aoa: f32, ssa: f32) -> MavMessage {
+    MavMessage::AOA_SSA(dialect::AOA_SSA_DATA {
+        time_usec: 0,
+        AOA: aoa,
+        SSA: ssa,
+    })
+}
+
+/// A forward transition at 6 m/s of ARSPD_FBW_MIN's 10 is 60 % through; forward flight shows
+/// its airspeed and angle of attack; a back transition with the nose 45° from vertical is half
+/// way; with none of these messages every figure reads "-".
+#[test]
+fn airspeed_angle_of_attack_vtol_state_and_transition_progress() {
+    let mut rec = flight(10);
+    rec.feed(4_960, &hud(6.0));
+    rec.feed(4_960, &aoa(8.5, -1.2));
+    rec.feed(
+        4_960,
+        &ext_state(MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_FW),
+    );
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(
+        frame.contains("→FW 60% air 6.0 m/s AoA +8.5°"),
+        "header:\n{frame}"
+    );
+    assert!(
+        frame.contains("Air     6.0 m/s  AoA  +8.5°  SSA  -1.2°"),
+        "{frame}"
+    );
+    assert!(
+        frame.contains("VTOL  →FW  transition  60% (of 10 m/s)"),
+        "{frame}"
+    );
+    insta::assert_snapshot!("forward_transition", frame);
+
+    rec.feed(4_970, &hud(14.2));
+    rec.feed(4_970, &aoa(3.1, 0.4));
+    rec.feed(4_970, &ext_state(MavVtolState::MAV_VTOL_STATE_FW));
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(frame.contains("FW air 14.2 m/s AoA +3.1°"), "{frame}");
+    assert!(frame.contains("VTOL  FW"), "{frame}");
+    assert!(!frame.contains("transition"), "{frame}");
+
+    // Back transition: the nose 45° from vertical (pitch in the twin's hover frame).
+    rec.fly(5_000, 6_000, |_| {
+        (18, true, 0.0, std::f32::consts::FRAC_PI_4, 0.0, 1.0)
+    });
+    rec.feed(
+        5_990,
+        &ext_state(MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_MC),
+    );
+    let frame = rec.render(&mut app, 6_000, (80, 24));
+    assert!(frame.contains("→MC 50%"), "{frame}");
+    assert!(
+        frame.contains("VTOL  →MC  transition  50% (nose up)"),
+        "{frame}"
+    );
+    insta::assert_snapshot!("back_transition", frame);
+
+    // A transition past ARSPD_FBW_MIN reads 100 %, not more; another ARSPD_FBW_MIN counts.
+    let mut rec = flight(10);
+    rec.feed(4_960, &hud(12.0));
+    rec.feed(
+        4_960,
+        &ext_state(MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_FW),
+    );
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(frame.contains("→FW 100%"), "{frame}");
+    app.on_outcome(vtol_gcs::tui::app::Outcome::ParamSet {
+        name: "ARSPD_FBW_MIN".into(),
+        result: Ok(16.0),
+    });
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(frame.contains("→FW 75%"), "{frame}");
+
+    // Nothing reported: "-" everywhere.
+    let rec = flight(18);
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(frame.contains("VTOL - air - AoA -"), "{frame}");
+    assert!(
+        frame.contains("Air       - m/s  AoA      -  SSA      -"),
+        "{frame}"
+    );
+    assert!(frame.contains("VTOL  -"), "{frame}");
+}
