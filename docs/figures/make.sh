@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Regenerates every committed figure in docs/figures/ from the current code: the twin's
 # offline flights (`firmware-sim simulate`) drawn by `vtol-gcs log plot` in the paper's frame,
-# and the airframe's lift and drag polar. Deterministic: the flights are seeded, so an
-# unchanged model redraws the same pictures. Run from anywhere: docs/figures/make.sh
+# a transition flown in lockstep, and the airframe's lift and drag polar. Deterministic: the
+# flights are seeded, so an unchanged model redraws the same pictures. Run from anywhere: docs/figures/make.sh
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
@@ -37,6 +37,13 @@ for spec in "8 roll roll=0.1@2" "9 pitch pitch=0.1@2" "10 yaw yaw=0.05@2"; do
     plot "$work/$axis.csv" --frame paper --kind pwm -o "$figures/fig${n}_${axis}_pwm.png" \
         --size 640x700 --title "Fig. $n: $axis push, PWM"
 done
+
+# A forward transition, level flight on the wing and a back transition (README, docs/forward-flight.md):
+# the twin in lockstep flown with pymavlink (the venv tests/run.sh makes, or $PYTHON).
+FIRMWARE_SIM_BIN=$sim "${PYTHON:-$root/.venv/bin/python}" docs/figures/transition_flight.py \
+    "$work/transition.tlog"
+plot "$work/transition.tlog" --kind transition -o "$figures/transition.png" --size 760x1000 \
+    --title "A transition, 30 s on the wing, and back (twin, physical mode)"
 
 # The aerodynamic model's C_L, C_D and L/D over 0-90° (docs/model.md).
 cargo run --quiet -p firmware-sim --example aero_polar -- "$figures/aero_lift_drag.png"

@@ -16,7 +16,8 @@ embedded twin that this test starts on free ports, one per document:
 - VTOL_GCS_LINK: its tcp serve port, the default --link of `vtol-gcs params|arm|disarm|mode`,
   so an example can be written exactly as a user types it against a local daemon;
 - DAEMON_TCP, DAEMON_UDP: its serve ports as pymavlink URLs (tcp:H:P, udpout:H:P);
-- REPO: the repository; the scratch directory also holds a link `config` to its config/.
+- REPO: the repository; the scratch directory also holds links `config` and `docs` to its
+  config/ and docs/, and `python` is this test's Python (first on PATH).
 
 A document not written to the convention fails here with the list of its blocks that are
 neither run nor marked. The checker itself is tested on tests/docs_fixture.md and on broken
@@ -143,7 +144,8 @@ def environment(daemon) -> dict:
     env = {k: v for k, v in os.environ.items()
            if k not in ("VTOL_GCS_SIGNING_PASSPHRASE", "RUST_LOG", "VTOL_GCS_LINK")}
     bins = {str(DAEMON_BIN.resolve().parent), str(TWIN_BIN.resolve().parent)}
-    env["PATH"] = os.pathsep.join([*sorted(bins), env.get("PATH", "")])
+    env["PATH"] = os.pathsep.join([*sorted(bins), str(Path(sys.executable).parent),
+                                   env.get("PATH", "")])
     if daemon is not None:
         env["VTOL_GCS_LINK"] = daemon.tcp
         env["DAEMON_TCP"] = daemon.tcp
@@ -156,6 +158,7 @@ def scratch(tmp_path: Path) -> Path:
     work = tmp_path / "work"
     work.mkdir()
     (work / "config").symlink_to(ROOT / "config")
+    (work / "docs").symlink_to(ROOT / "docs")
     return work
 
 

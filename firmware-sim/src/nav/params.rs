@@ -163,6 +163,8 @@ pub static TABLE: &[ParamDef] = &[
     def("YAW_KP", F32, "1/s/s", (0.0, 100.0), 5.0, RW, "Yaw law (45) stiffness a_psi2"),
     def("HOVER_ALT", F32, "m", (0.0, 50.0), 1.0, RW, "Altitude setpoint z_d in QHOVER and QLOITER"),
     def("LAND_SPEED", F32, "m/s", (0.0, 5.0), 0.5, RW, "Descent speed in QLAND"),
+    def("Q_PILOT_SPEED_UP", F32, "cm/s", (50.0, 500.0), 250.0, RW, "Fastest climb of the Q modes' altitude hold (physical model)"),
+    def("Q_PILOT_SPEED_DN", F32, "cm/s", (0.0, 500.0), 0.0, RW, "Fastest descent of the Q modes' altitude hold; 0 = Q_PILOT_SPEED_UP (physical model)"),
     def("SR0_RAW_SENS", I16, "Hz", (-1.0, 50.0), -1.0, RW, "RAW_IMU, SCALED_IMU rate; -1 = per-message default"),
     def("SR0_EXT_STAT", I16, "Hz", (-1.0, 50.0), -1.0, RW, "SYS_STATUS, EXTENDED_SYS_STATE rate; -1 = default"),
     def("SR0_RC_CHAN", I16, "Hz", (-1.0, 50.0), -1.0, RW, "SERVO_OUTPUT_RAW, RC_CHANNELS rate; -1 = default"),
@@ -651,6 +653,11 @@ fn gains_of(values: &[f64]) -> Gains {
         yaw_kp: v("YAW_KP"),
         hover_alt_m: v("HOVER_ALT"),
         land_speed_m_s: v("LAND_SPEED"),
+        climb_max_m_s: v("Q_PILOT_SPEED_UP") / 100.0,
+        sink_max_m_s: match v("Q_PILOT_SPEED_DN") {
+            dn if dn > 0.0 => dn / 100.0,
+            _ => v("Q_PILOT_SPEED_UP") / 100.0,
+        },
         forward: ForwardGains {
             airspeed_min_m_s: v("ARSPD_FBW_MIN"),
             airspeed_max_m_s: v("ARSPD_FBW_MAX"),

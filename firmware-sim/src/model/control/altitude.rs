@@ -15,6 +15,30 @@ pub fn altitude_accel_m_s2(kd: f64, kp: f64, z_m: f64, z_dot_m_s: f64, z_setpoin
     -kd * z_dot_m_s - kp * (z_m - z_setpoint_m)
 }
 
+/// r_z of (37) with the climb and descent speeds bounded (`physical` mode): written as
+/// r_z = a_z1 (v_cmd − ż) with v_cmd = (a_z2/a_z1)(z_d − z), the law (37) is unchanged while
+/// v_cmd lies within [−`sink_m_s`, `climb_m_s`], and beyond it the vehicle climbs or sinks at
+/// that speed instead of accelerating on a large altitude error (a step of `HOVER_ALT` to 20 m
+/// would otherwise ask for 50 m/s and tumble the airframe in its own downwash), as ArduPlane's
+/// `Q_PILOT_SPEED_UP`/`_DN` bound the Q modes' climb.
+#[must_use]
+pub fn altitude_accel_bounded_m_s2(
+    kd: f64,
+    kp: f64,
+    z_m: f64,
+    z_dot_m_s: f64,
+    z_setpoint_m: f64,
+    climb_m_s: f64,
+    sink_m_s: f64,
+) -> f64 {
+    let v_cmd = kp / kd * (z_setpoint_m - z_m);
+    if v_cmd > climb_m_s || v_cmd < -sink_m_s {
+        kd * (v_cmd.clamp(-sink_m_s, climb_m_s) - z_dot_m_s)
+    } else {
+        altitude_accel_m_s2(kd, kp, z_m, z_dot_m_s, z_setpoint_m)
+    }
+}
+
 /// QLAND: the same derivative gain drives ż to −`land_speed_m_s`: r_z = −a_z1 (ż + v_land).
 /// The position term is dropped so the descent does not stop at any altitude; the vehicle
 /// detects touchdown and disarms.
@@ -47,6 +71,17 @@ mod tests {
         assert!((altitude_accel_m_s2(2.0, 5.0, 0.1, 0.0, 1.0) - 4.5).abs() < 1e-12);
         // Rising at 1 m/s at the setpoint: r_z = −2.
         assert!((altitude_accel_m_s2(2.0, 5.0, 1.0, 1.0, 1.0) + 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bounded_law_is_37_near_the_setpoint_and_a_speed_far_from_it() {
+        // Within the bounds: exactly (37).
+        let near = altitude_accel_bounded_m_s2(2.0, 5.0, 0.5, 0.3, 1.0, 2.5, 1.5);
+        assert_eq!(near, altitude_accel_m_s2(2.0, 5.0, 0.5, 0.3, 1.0));
+        // 19 m below: climb at 2.5 m/s, so r_z vanishes once ż = 2.5.
+        assert!(altitude_accel_bounded_m_s2(2.0, 5.0, 1.0, 2.5, 20.0, 2.5, 1.5).abs() < 1e-12);
+        // 19 m above: sink at 1.5 m/s.
+        assert!(altitude_accel_bounded_m_s2(2.0, 5.0, 20.0, -1.5, 1.0, 2.5, 1.5).abs() < 1e-12);
     }
 
     #[test]

@@ -169,6 +169,11 @@ pub struct Gains {
     pub hover_alt_m: f64,
     /// Descent speed in QLAND, m/s.
     pub land_speed_m_s: f64,
+    /// Fastest climb of the altitude hold in `physical` mode: `Q_PILOT_SPEED_UP`, m/s.
+    pub climb_max_m_s: f64,
+    /// Fastest descent of the altitude hold in `physical` mode: `Q_PILOT_SPEED_DN` (0 = the
+    /// climb's), m/s.
+    pub sink_max_m_s: f64,
     /// Forward flight and the transitions (`forward_gains`).
     pub forward: forward_gains::ForwardGains,
     /// The position modes' hold in `physical` mode (`position`).
@@ -186,6 +191,8 @@ impl Default for Gains {
             yaw_kp: 5.0,
             hover_alt_m: 1.0,
             land_speed_m_s: 0.5,
+            climb_max_m_s: 2.5,
+            sink_max_m_s: 2.5,
             forward: forward_gains::ForwardGains::default(),
             hover: HoverHoldGains::default(),
         }
@@ -207,6 +214,8 @@ impl Gains {
             ("YAW_KD", self.yaw_kd),
             ("YAW_KP", self.yaw_kp),
             ("LAND_SPEED", self.land_speed_m_s),
+            ("Q_PILOT_SPEED_UP", self.climb_max_m_s),
+            ("Q_PILOT_SPEED_DN", self.sink_max_m_s),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(GainError::NotPositive { name, value: v });
@@ -615,6 +624,22 @@ impl Controller {
 
         // 3. Thrust.
         let fz_max = 2.0 * a.k_thrust_n_per_rad2_s2 * a.rotor_speed_max_rad_s.powi(2);
+        // The paper's altitude law (37); in `physical` mode with the climb and descent speeds
+        // bounded, so a far altitude is flown to at a speed rather than with an acceleration.
+        let hold_altitude = |z_setpoint: f64| match model {
+            ModelMode::Paper => {
+                altitude::altitude_accel_m_s2(gains.alt_kd, gains.alt_kp, pos.z, vel.z, z_setpoint)
+            }
+            ModelMode::Physical => altitude::altitude_accel_bounded_m_s2(
+                gains.alt_kd,
+                gains.alt_kp,
+                pos.z,
+                vel.z,
+                z_setpoint,
+                gains.climb_max_m_s,
+                gains.sink_max_m_s,
+            ),
+        };
         let r_z = match mode {
             FlightMode::QLoiter
             | FlightMode::Guided
@@ -622,20 +647,8 @@ impl Controller {
             | FlightMode::QRtl
             | FlightMode::Rtl
             | FlightMode::Fbwa
-            | FlightMode::Cruise => Some(altitude::altitude_accel_m_s2(
-                gains.alt_kd,
-                gains.alt_kp,
-                pos.z,
-                vel.z,
-                setpoint.z,
-            )),
-            FlightMode::QHover => Some(altitude::altitude_accel_m_s2(
-                gains.alt_kd,
-                gains.alt_kp,
-                pos.z,
-                vel.z,
-                gains.hover_alt_m,
-            )),
+            | FlightMode::Cruise => Some(hold_altitude(setpoint.z)),
+            FlightMode::QHover => Some(hold_altitude(gains.hover_alt_m)),
             FlightMode::QLand => Some(altitude::land_accel_m_s2(
                 gains.alt_kd,
                 vel.z,

@@ -244,3 +244,28 @@ fn a_flat_pack_does_not_fly() {
         t.pos_m.z
     );
 }
+
+/// A take-off in QHOVER to a `HOVER_ALT` of 20 m climbs at `Q_PILOT_SPEED_UP` and holds it; with
+/// the paper's unbounded law (37) the 19 m step asked for 50 m/s and the airframe tumbled.
+#[test]
+fn qhover_climbs_to_a_high_hover_alt_at_the_climb_speed() {
+    let mut config = VehicleConfig {
+        calibrated: true,
+        ..on_ground()
+    };
+    config.gains.hover_alt_m = 20.0;
+    let climb = config.gains.climb_max_m_s;
+    let mut v = Vehicle::new(config);
+    v.arm(false).expect("arms");
+    let (mut fastest, mut highest) = (0.0_f64, 0.0_f64);
+    for _ in 0..30 {
+        run(&mut v, 1.0);
+        let t = v.telemetry();
+        assert_eq!(t.state, SystemState::Active, "flying at {:.1} m", t.pos_m.z);
+        fastest = fastest.max(t.vel_m_s.z);
+        highest = highest.max(t.pos_m.z);
+    }
+    assert!(fastest <= climb * 1.1, "climbed at {fastest:.2} m/s");
+    assert!(highest < 20.5, "overshot to {highest:.2} m");
+    assert!((v.telemetry().pos_m.z - 20.0).abs() < 0.05);
+}
