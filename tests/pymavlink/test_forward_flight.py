@@ -13,7 +13,7 @@ from pymavlink import mavutil
 
 pytestmark = pytest.mark.vtol_twin(
     speed="lockstep",
-    params={"NAV_RADIUS_MAX": 1000, "SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
+    params={"SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
 )
 
 MAV = mavutil.mavlink

@@ -122,7 +122,6 @@ fn the_same_mission_on_the_noisy_sensors_and_the_estimators() {
 }
 
 fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
-    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
     for (name, value) in params {
         ep.handle(GCS, &v2(&param_set(name, *value)));
     }
@@ -233,7 +232,6 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
 #[test]
 fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
-    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
     let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
     transition.params[0] = 4.0;
     transition.frame = frame::MISSION;
