@@ -147,6 +147,9 @@ fn fbwa_on_the_sticks_transitions_turns_with_the_roll_stick_and_comes_back_to_a_
         assert!(s.z_min > 15.0 && s.z_max < 30.0, "{report}");
     }
     assert_eq!(ep.vehicle().vtol_state(), VtolState::Fw);
+    // A last right turn, so the back transition ends on a heading well off north.
+    fly(&mut ep, &mut t, 5.0, &sticks(1750, 1500, THROTTLE_US));
+    fly(&mut ep, &mut t, 3.0, &centred);
 
     back_to_a_hover_and_land(&mut ep, &mut t, &centred);
 }
@@ -166,6 +169,14 @@ fn back_to_a_hover_and_land(ep: &mut Endpoint, t: &mut u64, stick: &Frame) {
     assert!(
         climb <= 3.0,
         "the back transition moved the height {climb:.2} m"
+    );
+    // The hover keeps the heading the transition ended with, as ArduPlane does.
+    let heading = ep.vehicle().telemetry().euler.psi;
+    fly(ep, t, 5.0, stick);
+    let turned = crate::model::frames::wrap_pi(ep.vehicle().telemetry().euler.psi - heading);
+    assert!(
+        turned.abs() < 0.1,
+        "the hover turned {turned:.2} rad from {heading:.2}"
     );
     set_mode(ep, FlightMode::QLand);
     while ep.vehicle().telemetry().armed {
