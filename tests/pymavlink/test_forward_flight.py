@@ -1,5 +1,5 @@
 """Forward flight as a ground station sees it: a mission that takes off vertically, transitions,
-flies a 400 m square on the wing in AUTO, transitions back and lands vertically, flown with
+flies a 400 m × 150 m rectangle on the wing in AUTO, transitions back and lands vertically, flown with
 pymavlink against the twin in lockstep (`docs/forward-flight.md`).
 
 The twin flies on its noisy sensors and its estimators (the hover's, and the forward-flight
@@ -13,7 +13,7 @@ from pymavlink import mavutil
 
 pytestmark = pytest.mark.vtol_twin(
     speed="lockstep",
-    params={"NAV_RADIUS_MAX": 1000, "SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
+    params={"SR0_EXT_STAT": 10, "SR0_EXTRA2": 10, "SR0_POSITION": 10},
 )
 
 MAV = mavutil.mavlink
@@ -24,6 +24,8 @@ VTOL_STATE_NAMES = {
     MAV.MAV_VTOL_STATE_FW: "FW",
     MAV.MAV_VTOL_STATE_TRANSITION_TO_MC: "TRANSITION_TO_MC",
 }
+RECT_LONG_M = 400.0  # the rectangle's long side, south from home
+RECT_SHORT_M = 150.0  # its short side, east
 LAND_NE_M = (-60.0, 50.0)
 
 
@@ -34,7 +36,7 @@ def ack_of(m, command):
     return ack
 
 
-def square_mission(lat0: float, lon0: float) -> list:
+def rectangle_mission(lat0: float, lon0: float) -> list:
     """(command, frame, params, lat_e7, lon_e7, alt) of every item; item 0 is home."""
 
     def at(north_m: float, east_m: float) -> tuple:
@@ -48,10 +50,10 @@ def square_mission(lat0: float, lon0: float) -> list:
         (wp, rel, (0, 0, 0, 0), *at(0, 0), 0.0),
         (MAV.MAV_CMD_NAV_VTOL_TAKEOFF, rel, (0, 0, 0, 0), 0, 0, 20.0),
         (MAV.MAV_CMD_DO_VTOL_TRANSITION, MAV.MAV_FRAME_MISSION, (MAV.MAV_VTOL_STATE_FW, 0, 0, 0), 0, 0, 0.0),
-        (wp, rel, (0, 0, 0, 0), *at(-100, 0), 20.0),
-        (wp, rel, (0, 0, 0, 0), *at(-100, 100), 20.0),
+        (wp, rel, (0, 0, 0, 0), *at(-RECT_LONG_M, 0), 20.0),
+        (wp, rel, (0, 0, 0, 0), *at(-RECT_LONG_M, RECT_SHORT_M), 20.0),
         # Its own acceptance radius: 5 m (WP_RADIUS elsewhere).
-        (wp, rel, (0, 5, 0, 0), *at(0, 100), 20.0),
+        (wp, rel, (0, 5, 0, 0), *at(0, RECT_SHORT_M), 20.0),
         (wp, rel, (0, 0, 0, 0), *at(0, 0), 20.0),
         (MAV.MAV_CMD_NAV_VTOL_LAND, rel, (0, 0, 0, 0), *at(*LAND_NE_M), 0.0),
     ]
@@ -71,28 +73,29 @@ def upload(m, items) -> None:
                                     MAV.MAV_MISSION_TYPE_MISSION)
 
 
-def test_vtol_take_off_square_on_the_wing_and_vtol_landing(vtol_twin):
-    fly_square(vtol_twin)
+def test_vtol_take_off_rectangle_on_the_wing_and_vtol_landing(vtol_twin):
+    fly_rectangle(vtol_twin)
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the vertical take-off now climbs to 20 m in the wind (the hover hold's wind "
-    "estimate), but the flight is still lost later in AUTO (76 s in, 23 m up, 70 m out), not yet "
-    "analysed; forward flight itself holds its airspeed and height in it "
-    "(model::vehicle::forward_tests::cruise_in_a_3_m_s_wind_with_gusts_holds_airspeed_and_height)",
+    reason="the take-off, the transitions and the rectangle hold in the wind; the hover at the "
+    "landing point meets the wind obliquely on the plate's face, which needs more lean than "
+    "Q_ANGLE_MAX (docs/model.md, Limits), so it is held 7-8 m downwind, the landing never "
+    "begins, and a gust tumbles it (docs/forward-flight.md, Status: a wind estimate on the wing "
+    "and a crosswind final approach are what is left)",
 )
 def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     vtol_twin.wind(3.0, direction_deg=45, turbulence_m_s=0.5)
-    fly_square(vtol_twin)
+    fly_rectangle(vtol_twin)
 
 
-def fly_square(vtol_twin) -> None:
-    """Flies the square mission and checks what a ground station sees of it."""
+def fly_rectangle(vtol_twin) -> None:
+    """Flies the rectangle mission and checks what a ground station sees of it."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
     assert start is not None
-    upload(m, square_mission(start.lat / 1e7, start.lon / 1e7))
+    upload(m, rectangle_mission(start.lat / 1e7, start.lon / 1e7))
 
     m.set_mode("AUTO")
     assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
@@ -105,6 +108,7 @@ def fly_square(vtol_twin) -> None:
     alt = 0.0
     fw_airspeeds = []
     fw_aoa = []
+    fw_reach = [0.0, 0.0]  # farthest south and east on the wing, m from home
     armed = True
     for _ in range(300):  # two-second steps: at most 600 s of sim time
         vtol_twin.advance(2)
@@ -112,6 +116,11 @@ def fly_square(vtol_twin) -> None:
             kind = msg.get_type()
             if kind == "GLOBAL_POSITION_INT":
                 alt = msg.relative_alt / 1000.0
+                if states[-1] == "FW":
+                    south = math.radians(start.lat / 1e7 - msg.lat / 1e7) * EARTH_RADIUS_M
+                    east = (math.radians(msg.lon / 1e7 - start.lon / 1e7) * EARTH_RADIUS_M
+                            * math.cos(math.radians(start.lat / 1e7)))
+                    fw_reach = [max(fw_reach[0], south), max(fw_reach[1], east)]
                 if states[-1] in worst and alt_at_start is not None:
                     worst[states[-1]] = max(worst[states[-1]], abs(alt - alt_at_start))
             elif kind == "EXTENDED_SYS_STATE":
@@ -132,6 +141,9 @@ def fly_square(vtol_twin) -> None:
     assert not truth.armed and truth.landed, f"still flying: {truth}"
     assert truth.system_status != "EMERGENCY", truth
     assert states == ["MC", "TRANSITION_TO_FW", "FW", "TRANSITION_TO_MC", "MC"], states
+    # The whole rectangle is flown on the wing (the turns swing out past its corners).
+    for reach, side in zip(fw_reach, (RECT_LONG_M, RECT_SHORT_M)):
+        assert side - 5.0 < reach < side + 30.0, f"the rectangle reached {fw_reach} m (south, east)"
     assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
     # AOA_SSA: the wing flies at a small positive angle of attack.
     assert fw_aoa, "no AOA_SSA on the wing"

@@ -116,7 +116,9 @@ def test_round_trip_refusal_and_long_reason(twin_factory, gcs_factory):
     assert "Mission item 3: DO_SET_SERVO is not supported" in reassemble(texts)
     assert [wire_bytes(m) for m in download(g)] == [wire_bytes(m) for m in sent]
 
-    # A waypoint 120 m out: refused, and the 64-character reason arrives whole, in two chunks.
+    # A waypoint 120 m out with the envelope set to the hover's 100 m (the default is sized for
+    # forward flight): refused, and the 64-character reason arrives whole, in two chunks.
+    g.param_set("NAV_RADIUS_MAX", 100)
     far = plan()
     far[2] = item(2, MAV.MAV_CMD_NAV_WAYPOINT, 120.0, 0, 3.0)
     result, texts = upload(g, far)

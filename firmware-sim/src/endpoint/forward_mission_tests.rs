@@ -1,5 +1,5 @@
-//! AUTO with fixed-wing legs: a VTOL take-off, a transition, a rectangle on the wing, a VTOL
-//! landing, frames in and out, sim time only.
+//! AUTO with fixed-wing legs: a VTOL take-off, a transition, a 400 m × 150 m rectangle on the
+//! wing, a VTOL landing, frames in and out, sim time only.
 
 use mavlink::dialects::ardupilotmega as apm;
 
@@ -82,6 +82,13 @@ fn upload(ep: &mut Endpoint, items: &[MissionItem]) {
     assert!(acked, "mission accepted: {:?}", decode(&out));
 }
 
+/// The rectangle's long side (south from home), m.
+const RECT_LONG_M: f64 = 400.0;
+/// Its short side (east), m.
+const RECT_SHORT_M: f64 = 150.0;
+
+/// Home, a VTOL take-off to 20 m, the transition, a 400 m × 150 m rectangle of fixed-wing
+/// waypoints back to home, a VTOL landing inside it.
 fn rectangle_mission() -> Vec<MissionItem> {
     let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
     transition.params[0] = 4.0;
@@ -96,9 +103,9 @@ fn rectangle_mission() -> Vec<MissionItem> {
             ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 20.0)
         },
         transition,
-        item(mcmd::NAV_WAYPOINT, -100.0, 0.0, 20.0),
-        item(mcmd::NAV_WAYPOINT, -100.0, 100.0, 20.0),
-        item(mcmd::NAV_WAYPOINT, 0.0, 100.0, 20.0),
+        item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, 0.0, 20.0),
+        item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, RECT_SHORT_M, 20.0),
+        item(mcmd::NAV_WAYPOINT, 0.0, RECT_SHORT_M, 20.0),
         item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 20.0),
         item(mcmd::NAV_VTOL_LAND, -60.0, 50.0, 0.0),
     ]
@@ -115,7 +122,6 @@ fn the_same_mission_on_the_noisy_sensors_and_the_estimators() {
 }
 
 fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
-    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
     for (name, value) in params {
         ep.handle(GCS, &v2(&param_set(name, *value)));
     }
@@ -147,6 +153,8 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
     );
     let mut phases = vec![VtolState::Mc];
     let (mut v_min_fw, mut z_min_fw, mut z_max_fw) = (f64::INFINITY, f64::INFINITY, 0.0_f64);
+    // The farthest south and east flown on the wing (NED), m.
+    let (mut south_fw, mut east_fw) = (0.0_f64, 0.0_f64);
     let mut trace = Vec::new();
     while t < 400_000_000 {
         t += 20_000;
@@ -175,6 +183,9 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
             v_min_fw = v_min_fw.min(tel.airspeed_m_s());
             z_min_fw = z_min_fw.min(tel.pos_m.z);
             z_max_fw = z_max_fw.max(tel.pos_m.z);
+            let ned = crate::model::frames::paper_to_ned(&tel.pos_m);
+            south_fw = south_fw.max(-ned.x);
+            east_fw = east_fw.max(ned.y);
         }
         if !tel.armed && t > 5_000_000 {
             break;
@@ -199,6 +210,12 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
         ],
         "{trace}"
     );
+    // The whole rectangle is flown; the turns at its corners swing out by about 20 m.
+    let flown = |reach: f64, side: f64| (side - 5.0..side + 30.0).contains(&reach);
+    assert!(
+        flown(south_fw, RECT_LONG_M) && flown(east_fw, RECT_SHORT_M),
+        "the rectangle flown on the wing reached {south_fw:.1} m south, {east_fw:.1} m east:\n{trace}"
+    );
     assert!(
         v_min_fw >= 10.0,
         "airspeed on the wing fell to {v_min_fw:.1}:\n{trace}"
@@ -215,7 +232,6 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
 #[test]
 fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
-    ep.handle(GCS, &v2(&param_set("NAV_RADIUS_MAX", 1000.0)));
     let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
     transition.params[0] = 4.0;
     transition.frame = frame::MISSION;

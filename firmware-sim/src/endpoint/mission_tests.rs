@@ -29,6 +29,15 @@ fn endpoint() -> Endpoint {
     endpoint_with(None)
 }
 
+/// The endpoint with the hover's envelope: targets within 100 m of home and 50 m above it
+/// (the defaults are sized for forward flight), so the refusals can be tested close by.
+fn endpoint_in_a_small_envelope() -> Endpoint {
+    let mut ep = endpoint();
+    ep.set_param("NAV_RADIUS_MAX", 100.0).unwrap();
+    ep.set_param("NAV_ALT_MAX", 50.0).unwrap();
+    ep
+}
+
 fn from(compid: u8, msg: &apm::MavMessage) -> Frame {
     Frame::encode_v2(
         vtol_link::SystemId(GCS_SYSID),
@@ -235,7 +244,7 @@ fn upload_then_download_is_byte_identical() {
 
 #[test]
 fn a_refused_item_leaves_the_stored_mission_unchanged() {
-    let mut ep = endpoint();
+    let mut ep = endpoint_in_a_small_envelope();
     upload(&mut ep, &flight_plan());
     let before = ep.mission().clone();
     // DO_SET_SERVO (183) in the middle.
@@ -457,7 +466,7 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
 // starts from where the previous one left the vehicle.
 #[test]
 fn guided_take_off_reposition_and_auto_mission() {
-    let mut ep = endpoint();
+    let mut ep = endpoint_in_a_small_envelope();
     upload(&mut ep, &flight_plan());
     run_until(&mut ep, 200_000);
     assert_eq!(acks(&set_mode(&mut ep, FlightMode::Guided)), vec![(176, 0)]);
@@ -586,7 +595,7 @@ fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
 
 #[test]
 fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
-    let mut ep = endpoint();
+    let mut ep = endpoint_in_a_small_envelope();
     run_until(&mut ep, 200_000);
     // Not in GUIDED: refused with the reason, as ArduPlane refuses it.
     let out = ep.handle(GCS, &guided_waypoint(3.0, 2.0));

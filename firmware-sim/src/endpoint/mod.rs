@@ -627,6 +627,8 @@ impl Endpoint {
 #[cfg(test)]
 mod forward_mission_tests;
 #[cfg(test)]
+mod forward_stick_tests;
+#[cfg(test)]
 mod mission_tests;
 #[cfg(test)]
 mod params_tests;

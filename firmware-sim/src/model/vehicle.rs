@@ -534,7 +534,7 @@ impl Vehicle {
                 pos_m: self.plant.pos_m,
                 vel_m_s: truth_vel,
                 setpoint_m: self.setpoint_m,
-                yaw_setpoint_rad: 0.0,
+                yaw_setpoint_rad: self.forward.hover_heading_rad(),
                 rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
                 pilot,
             }
@@ -554,7 +554,7 @@ impl Vehicle {
                 pos_m: fix.pos_m,
                 vel_m_s: fix.vel_m_s,
                 setpoint_m: self.setpoint_m,
-                yaw_setpoint_rad: 0.0,
+                yaw_setpoint_rad: self.forward.hover_heading_rad(),
                 rotor_speed_rad_s: self.actuators.state.rotor_speed_rad_s,
                 pilot,
             }

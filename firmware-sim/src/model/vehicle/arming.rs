@@ -24,6 +24,7 @@ impl Vehicle {
             self.pre_arm_check()?;
         }
         self.controller.reset();
+        self.forward.clear_hover_heading();
         self.telemetry.armed = true;
         self.telemetry.state = SystemState::Active;
         Ok(())

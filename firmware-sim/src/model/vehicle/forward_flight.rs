@@ -59,9 +59,23 @@ pub struct ForwardFlight {
     /// The attitude filter of forward flight (estimator mode only; from the first tick of a
     /// forward transition to the end of the back transition).
     attitude: Option<ForwardAttitude>,
+    /// The heading the hover holds after a back transition (the one it ended with, as
+    /// ArduPlane keeps it), rad; 0 until the first one, and again from each arming.
+    hover_heading_rad: f64,
 }
 
 impl ForwardFlight {
+    /// The heading the hover's position modes hold, rad.
+    #[must_use]
+    pub fn hover_heading_rad(&self) -> f64 {
+        self.hover_heading_rad
+    }
+
+    /// Forgets the heading of the last back transition (on arming).
+    pub fn clear_hover_heading(&mut self) {
+        self.hover_heading_rad = 0.0;
+    }
+
     /// The phase.
     #[must_use]
     pub fn state(&self) -> VtolState {
@@ -228,6 +242,7 @@ impl Vehicle {
                 {
                     // The hover holds where the transition ended, as ArduPlane's does.
                     let hold = input.pos_m;
+                    self.forward.hover_heading_rad = input.euler.psi;
                     if let Some(att) = self.forward.attitude.take() {
                         self.estimator
                             .realign(att.euler(), &input.pos_m, &input.vel_m_s);

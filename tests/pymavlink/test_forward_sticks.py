@@ -1,0 +1,82 @@
+"""FBWA flown on the sticks by a ground station's joystick (RC_CHANNELS_OVERRIDE), with
+pymavlink against the twin in lockstep (`docs/forward-flight.md`): a GUIDED take-off, FBWA
+transitions to the wing, the roll stick turns the aircraft, QLOITER brings it back to a hover.
+"""
+
+import math
+
+import pytest
+from pymavlink import mavutil
+
+pytestmark = pytest.mark.vtol_twin(speed="lockstep", params={"SR0_EXT_STAT": 10, "SR0_POSITION": 10})
+
+MAV = mavutil.mavlink
+THROTTLE_US = 1100  # 10 % of the rotors' thrust: near level flight at 12 m/s
+
+
+def ack_of(m, command):
+    ack = m.recv_match(type="COMMAND_ACK", condition=f"COMMAND_ACK.command=={command}",
+                       blocking=True, timeout=5)
+    assert ack is not None, f"no COMMAND_ACK for command {command}"
+    return ack.result
+
+
+def fly(vtol_twin, m, seconds: int, roll_us: int) -> dict:
+    """Flies `seconds` on the sticks (sent every second); what the ground station saw."""
+    seen = {"states": [], "course": [], "alt": []}
+    for _ in range(seconds):
+        m.mav.rc_channels_override_send(1, 1, roll_us, 1500, THROTTLE_US, 1500, 0, 0, 0, 0)
+        vtol_twin.advance(1)
+        while (msg := m.recv_match(blocking=False)) is not None:
+            if msg.get_type() == "EXTENDED_SYS_STATE":
+                seen["states"].append(msg.vtol_state)
+            elif msg.get_type() == "GLOBAL_POSITION_INT":
+                seen["course"].append(math.atan2(msg.vy, msg.vx))
+                seen["alt"].append(msg.relative_alt / 1000.0)
+    return seen
+
+
+def turned(courses: list) -> float:
+    """The course change along `courses`, unwrapped, rad (positive: to the right)."""
+    return sum(math.remainder(b - a, math.tau) for a, b in zip(courses, courses[1:]))
+
+
+def test_fbwa_on_the_sticks_turns_with_the_roll_stick(vtol_twin):
+    m = vtol_twin.connect()
+    vtol_twin.advance(2)  # the gyros calibrate for 1 s after power-up
+    m.set_mode("GUIDED")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE) == MAV.MAV_RESULT_ACCEPTED
+    m.arducopter_arm()
+    assert ack_of(m, MAV.MAV_CMD_COMPONENT_ARM_DISARM) == MAV.MAV_RESULT_ACCEPTED
+    m.mav.command_long_send(1, 1, MAV.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 20)
+    assert ack_of(m, MAV.MAV_CMD_NAV_TAKEOFF) == MAV.MAV_RESULT_ACCEPTED
+    for _ in range(60):
+        vtol_twin.advance(1)
+        if vtol_twin.state().altitude_m > 19.8:
+            break
+    assert vtol_twin.state().altitude_m > 19.8, vtol_twin.state()
+
+    m.mav.rc_channels_override_send(1, 1, 1500, 1500, THROTTLE_US, 1500, 0, 0, 0, 0)
+    m.set_mode("FBWA")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE) == MAV.MAV_RESULT_ACCEPTED
+    transition = fly(vtol_twin, m, 15, 1500)
+    assert MAV.MAV_VTOL_STATE_TRANSITION_TO_FW in transition["states"], transition["states"]
+    assert transition["states"][-1] == MAV.MAV_VTOL_STATE_FW, transition["states"]
+
+    straight = fly(vtol_twin, m, 5, 1500)
+    right = fly(vtol_twin, m, 8, 1750)
+    fly(vtol_twin, m, 3, 1500)
+    left = fly(vtol_twin, m, 8, 1250)
+    assert abs(turned(straight["course"])) < 0.1, turned(straight["course"])
+    assert turned(right["course"]) > 1.5, turned(right["course"])
+    assert turned(left["course"]) < -1.5, turned(left["course"])
+    alts = straight["alt"] + right["alt"] + left["alt"]
+    assert 15.0 < min(alts) and max(alts) < 30.0, (min(alts), max(alts))
+
+    m.set_mode("QLOITER")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE) == MAV.MAV_RESULT_ACCEPTED
+    back = fly(vtol_twin, m, 15, 1500)
+    assert MAV.MAV_VTOL_STATE_TRANSITION_TO_MC in back["states"], back["states"]
+    assert back["states"][-1] == MAV.MAV_VTOL_STATE_MC, back["states"]
+    truth = vtol_twin.state()
+    assert truth.armed and truth.system_status != "EMERGENCY", truth
