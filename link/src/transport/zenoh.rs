@@ -98,18 +98,20 @@ pub fn zenoh_config(opts: &ZenohOptions) -> Result<zenoh::Config, LinkError> {
 /// every session (an endpoint's own `#retry_period_init_ms=...` still overrides the retries).
 /// Zenoh's defaults (a 10 s lease, retries every 1-4 s, a 10 s open timeout) bring a fleet
 /// back 2-4 s after a partition that drops packets silently; these bring it back within about
-/// 1.5 s of the heal (docs/network.md, "Zenoh partitions"):
+/// 1 s of the heal (docs/network.md, "Zenoh partitions"):
 /// - a 3 s lease with 4 keep-alives in it: a session silent for 3 s is closed (its liveliness
 ///   tokens go, so the ground shows the vehicle's link down), and an idle link sends a
 ///   keep-alive every 0.75 s (a 3-byte message in one TCP segment, about 60 B/s each way on
 ///   Ethernet/IP; none while frames flow, as any message counts);
-/// - a 2 s open timeout: a connect that a silent partition holds in SYN retransmissions is
-///   abandoned after the first retransmission (at 1 s) instead of 10 s later;
+/// - a 1.5 s open timeout: a connect that a silent partition holds in SYN retransmissions is
+///   abandoned after the first retransmission (at 1 s) instead of 10 s later, so that a SYN
+///   goes out at least once a second (and a session over a link with up to 0.5 s round trips,
+///   three of which an open takes, still opens);
 /// - retries 0.25 s apart, doubling to at most 0.5 s: one small TCP SYN each.
 const LIVENESS: [(&str, &str); 4] = [
     ("transport/link/tx/lease", "3000"),
     ("transport/link/tx/keep_alive", "4"),
-    ("transport/unicast/open_timeout", "2000"),
+    ("transport/unicast/open_timeout", "1500"),
     (
         "connect/retry",
         "{period_init_ms: 250, period_max_ms: 500, period_increase_factor: 2}",
@@ -314,7 +316,7 @@ mod tests {
         assert_eq!(c.get_json("transport/link/tx/lease").unwrap(), "3000");
         assert_eq!(
             c.get_json("transport/unicast/open_timeout").unwrap(),
-            "2000"
+            "1500"
         );
         let retry = c.get_json("connect/retry").unwrap();
         assert!(retry.contains("\"period_max_ms\":500"), "{retry}");
