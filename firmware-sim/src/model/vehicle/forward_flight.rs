@@ -12,7 +12,7 @@ use crate::model::control::forward::{
     self, ForwardCommand, ForwardInput, ForwardLaw, Longitudinal,
 };
 use crate::model::control::{ControlInput, ControlOutput, PilotInput, forward_gains};
-use nalgebra::Vector3;
+use nalgebra::{Vector2, Vector3};
 
 use crate::model::estimator_forward::ForwardAttitude;
 use crate::model::frames::{Euler, wrap_pi};
@@ -42,6 +42,15 @@ const PULL_UP_THRUST_WEIGHTS: f64 = 0.5;
 const PULL_UP_SPEED_MARGIN_M_S: f64 = 0.3;
 /// Longest slowing stage, s.
 const SLOWING_MAX_S: f64 = 6.0;
+/// Time constant of the wind estimate on the wing (ground velocity less air velocity), s.
+const WIND_ESTIMATE_TIME_CONST_S: f64 = 5.0;
+/// Least wind, as estimated on the wing, for which the hover after a back transition turns its
+/// span into the wind, m/s.
+const WEATHERVANE_MIN_WIND_M_S: f64 = 1.0;
+/// Rate at which the hover turns its span into the wind, rad/s (ArduPilot's weathervaning,
+/// rate-limited): the plate passes slowly through the angles where its yaw and pitch moments
+/// are largest; 0.5 rad/s brought it down in most runs.
+const WEATHERVANE_RATE_RAD_S: f64 = 0.1;
 
 /// The forward-flight side of the vehicle: the phase, its clock and targets, and the law.
 #[derive(Debug, Clone, Default)]
@@ -62,6 +71,11 @@ pub struct ForwardFlight {
     /// The heading the hover holds after a back transition (the one it ended with, as
     /// ArduPlane keeps it), rad; 0 until the first one, and again from each arming.
     hover_heading_rad: f64,
+    /// The wind estimated on the wing (ground velocity less air velocity, low-passed),
+    /// inertial x, y, m/s.
+    wind_m_s: Vector2<f64>,
+    /// Whether the hover turns its span into [`Self::wind_m_s`] (after a back transition).
+    weathervane: bool,
 }
 
 impl ForwardFlight {
@@ -74,6 +88,30 @@ impl ForwardFlight {
     /// Forgets the heading of the last back transition (on arming).
     pub fn clear_hover_heading(&mut self) {
         self.hover_heading_rad = 0.0;
+        self.weathervane = false;
+    }
+
+    /// The wind estimated on the wing, inertial x, y, m/s.
+    #[must_use]
+    pub fn wind_estimate_m_s(&self) -> Vector2<f64> {
+        self.wind_m_s
+    }
+
+    /// Turns the hover's heading toward the nearer of the two that put the span (y_B) into
+    /// the wind estimated on the wing, at [`WEATHERVANE_RATE_RAD_S`]: a 3 m/s wind on the
+    /// plate's face needs more lean than `Q_ANGLE_MAX`, along its span 9° (`docs/model.md`).
+    fn weathervane_step(&mut self, dt_s: f64) {
+        let w = self.wind_m_s;
+        if !self.weathervane || w.norm() < WEATHERVANE_MIN_WIND_M_S {
+            return;
+        }
+        let toward = w.y.atan2(w.x);
+        let h = self.hover_heading_rad;
+        let a = wrap_pi(toward + std::f64::consts::FRAC_PI_2 - h);
+        let b = wrap_pi(toward - std::f64::consts::FRAC_PI_2 - h);
+        let err = if a.abs() <= b.abs() { a } else { b };
+        let step = WEATHERVANE_RATE_RAD_S * dt_s;
+        self.hover_heading_rad = wrap_pi(h + err.clamp(-step, step));
     }
 
     /// The phase.
@@ -181,6 +219,9 @@ impl Vehicle {
     /// One function for the three phases: each ends or aborts on the state the others read,
     /// and splitting them would pass the same half-dozen values back and forth.
     pub(super) fn forward_tick(&mut self, input: &ControlInput) -> Option<ControlOutput> {
+        if self.forward.state == VtolState::Mc && self.telemetry.armed && !self.on_ground {
+            self.forward.weathervane_step(input.dt_s);
+        }
         if !self.forward.state.is_forward() || !self.telemetry.armed {
             return None;
         }
@@ -188,6 +229,12 @@ impl Vehicle {
         let dt = input.dt_s;
         let r = input.euler.rotation_body_to_inertial();
         let airspeed = self.telemetry.air_velocity_body_m_s.norm();
+        if self.forward.state == VtolState::Fw {
+            let air = r * self.telemetry.air_velocity_body_m_s;
+            let w = input.vel_m_s.xy() - air.xy();
+            let k = (dt / WIND_ESTIMATE_TIME_CONST_S).min(1.0);
+            self.forward.wind_m_s += k * (w - self.forward.wind_m_s);
+        }
         self.forward.phase_time_s += dt;
         let cmd = match self.forward.state {
             VtolState::TransitionToFw => {
@@ -243,6 +290,7 @@ impl Vehicle {
                     // The hover holds where the transition ended, as ArduPlane's does.
                     let hold = input.pos_m;
                     self.forward.hover_heading_rad = input.euler.psi;
+                    self.forward.weathervane = true;
                     if let Some(att) = self.forward.attitude.take() {
                         self.estimator
                             .realign(att.euler(), &input.pos_m, &input.vel_m_s);
