@@ -81,12 +81,10 @@ def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     """3 m/s from 45° with 0.5 m/s gusts: after the back transition the hover turns its span
     into the wind estimated on the wing, where the wind needs 9° of lean, not 34° on the face."""
     vtol_twin.wind(3.0, direction_deg=45, turbulence_m_s=0.5)
-    # Gusts change the airspeed faster than the energy controller answers: the floor on the
-    # wing is 10 m/s less two gust intensities.
-    fly_rectangle(vtol_twin, airspeed_floor_m_s=10.0 - 2 * 0.5)
+    fly_rectangle(vtol_twin)
 
 
-def fly_rectangle(vtol_twin, airspeed_floor_m_s: float = 10.0) -> None:
+def fly_rectangle(vtol_twin) -> None:
     """Flies the rectangle mission and checks what a ground station sees of it."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
@@ -140,7 +138,9 @@ def fly_rectangle(vtol_twin, airspeed_floor_m_s: float = 10.0) -> None:
     # The whole rectangle is flown on the wing (the turns swing out past its corners).
     for reach, side in zip(fw_reach, (RECT_LONG_M, RECT_SHORT_M)):
         assert side - 5.0 < reach < side + 30.0, f"the rectangle reached {fw_reach} m (south, east)"
-    assert fw_airspeeds and min(fw_airspeeds) >= airspeed_floor_m_s, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
+    print(f"on the wing: airspeed >= {min(fw_airspeeds, default=0):.1f} m/s; transitions moved the "
+          f"altitude {worst['TRANSITION_TO_FW']:.2f} m and {worst['TRANSITION_TO_MC']:.2f} m")
+    assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
     # AOA_SSA: the wing flies at a small positive angle of attack.
     assert fw_aoa, "no AOA_SSA on the wing"
     median_aoa = sorted(fw_aoa)[len(fw_aoa) // 2]
@@ -149,4 +149,5 @@ def fly_rectangle(vtol_twin, airspeed_floor_m_s: float = 10.0) -> None:
         assert dz <= 3.0, f"{phase} moved the altitude {dz:.2f} m"
     north, east, _ = truth.position_ned_m
     miss = math.hypot(north - LAND_NE_M[0], east - LAND_NE_M[1])
+    print(f"landed {miss:.2f} m from the target")
     assert miss <= 2.0, f"landed {miss:.2f} m from the target"
