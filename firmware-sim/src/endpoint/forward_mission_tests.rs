@@ -4,10 +4,9 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_INT_ID, item_payload};
-use super::test_support::{acks, decode, param_set, raw_command, v2};
+use super::test_support::{acks, decode, item, param_set, raw_command, v2};
 use super::*;
 use crate::model::mode::{FlightMode, VtolState};
-use crate::nav::globe::GeoPoint;
 use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
 
 const GCS: LinkKey = LinkKey(1);
@@ -30,20 +29,12 @@ fn command(command: u16, p: [f32; 7]) -> Frame {
     raw_command(76, 33, command, &p)
 }
 
-/// A point `north_m`, `east_m` from the origin at `alt` m above home.
-fn item(command: u16, north_m: f64, east_m: f64, alt: f32) -> MissionItem {
-    let o = Params::new().origin();
-    let p: GeoPoint = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
-    MissionItem {
-        params: [0.0, 0.0, 0.0, f32::NAN],
-        x: p.lat_e7,
-        y: p.lon_e7,
-        z: alt,
-        command,
-        frame: frame::GLOBAL_RELATIVE_ALT_INT,
-        current: 0,
-        autocontinue: 1,
-    }
+/// MAV_CMD_DO_SET_MODE (176) to `mode`, as a GCS sends it.
+fn set_mode(mode: FlightMode) -> Frame {
+    command(
+        176,
+        [1.0, mode.custom_mode() as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+    )
 }
 
 /// Uploads `items` as a GCS answering each request (the twin asks with MISSION_REQUEST, as
@@ -138,21 +129,7 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
         ep.handle(GCS, &v2(&param_set(name, *value)));
     }
     upload(&mut ep, &rectangle_mission());
-    ep.handle(
-        GCS,
-        &command(
-            176,
-            [
-                1.0,
-                FlightMode::Auto.custom_mode() as f32,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            ],
-        ),
-    );
+    ep.handle(GCS, &set_mode(FlightMode::Auto));
     // The gyros calibrate for 1 s after power-up.
     let mut t = 0u64;
     while t < 2_000_000 {
@@ -268,21 +245,7 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
             item(mcmd::NAV_WAYPOINT, -200.0, 100.0, 20.0),
         ],
     );
-    ep.handle(
-        GCS,
-        &command(
-            176,
-            [
-                1.0,
-                FlightMode::Auto.custom_mode() as f32,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            ],
-        ),
-    );
+    ep.handle(GCS, &set_mode(FlightMode::Auto));
     assert_eq!(
         acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
         vec![(400, 0)]

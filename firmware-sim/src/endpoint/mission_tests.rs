@@ -4,10 +4,9 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
-use super::test_support::{each, from_gcs, raw_command, run_until};
+use super::test_support::{each, from_gcs, item, raw_command, run_until};
 use super::*;
 use crate::model::mode::FlightMode;
-use crate::nav::globe::GeoPoint;
 use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
 
 const GCS: LinkKey = LinkKey(1);
@@ -123,22 +122,6 @@ fn count_msg(count: u16) -> apm::MavMessage {
 
 fn item_frame(seq: u16, it: &MissionItem) -> Frame {
     from_gcs(9, MISSION_ITEM_INT_ID, &item_payload(seq, it, (1, 1), true))
-}
-
-/// A point `north_m`, `east_m` from the origin at `alt` m above home.
-fn item(command: u16, north_m: f64, east_m: f64, alt: f32) -> MissionItem {
-    let o = Params::new().origin();
-    let p: GeoPoint = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
-    MissionItem {
-        params: [0.0, 0.0, 0.0, f32::NAN],
-        x: p.lat_e7,
-        y: p.lon_e7,
-        z: alt,
-        command,
-        frame: frame::GLOBAL_RELATIVE_ALT_INT,
-        current: 0,
-        autocontinue: 1,
-    }
 }
 
 fn flight_plan() -> Vec<MissionItem> {

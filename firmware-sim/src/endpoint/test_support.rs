@@ -12,6 +12,27 @@ pub(super) const GCS: LinkKey = LinkKey(1);
 pub(super) const GCS_SYSID: u8 = 255;
 pub(super) const GCS_COMPID: u8 = 190;
 
+/// A mission item at a point `north_m`, `east_m` from the origin, `alt` m above home.
+pub(super) fn item(
+    command: u16,
+    north_m: f64,
+    east_m: f64,
+    alt: f32,
+) -> crate::nav::mission::MissionItem {
+    let o = Params::new().origin();
+    let p = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
+    crate::nav::mission::MissionItem {
+        params: [0.0, 0.0, 0.0, f32::NAN],
+        x: p.lat_e7,
+        y: p.lon_e7,
+        z: alt,
+        command,
+        frame: crate::nav::mission::frame::GLOBAL_RELATIVE_ALT_INT,
+        current: 0,
+        autocontinue: 1,
+    }
+}
+
 pub(super) fn endpoint() -> Endpoint {
     let mut config = EndpointConfig::default();
     config.vehicle.ideal_sensors = true;

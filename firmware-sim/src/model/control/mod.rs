@@ -199,6 +199,14 @@ impl Default for Gains {
     }
 }
 
+/// The first of `gains` that is not a positive, finite number, as the error naming it.
+fn all_positive(gains: &[(&'static str, f64)]) -> Result<(), GainError> {
+    match gains.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+        Some(&(name, value)) => Err(GainError::NotPositive { name, value }),
+        None => Ok(()),
+    }
+}
+
 impl Gains {
     /// Checks every constraint of the set: the saturation conditions of both chains and positive,
     /// finite linear gains.
@@ -208,7 +216,7 @@ impl Gains {
     pub fn validate(&self) -> Result<(), GainError> {
         self.lateral.validate("LAT_SAT")?;
         self.longitudinal.validate("LON_SAT")?;
-        for (name, v) in [
+        all_positive(&[
             ("ALT_KD", self.alt_kd),
             ("ALT_KP", self.alt_kp),
             ("YAW_KD", self.yaw_kd),
@@ -216,17 +224,8 @@ impl Gains {
             ("LAND_SPEED", self.land_speed_m_s),
             ("Q_PILOT_SPEED_UP", self.climb_max_m_s),
             ("Q_PILOT_SPEED_DN", self.sink_max_m_s),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(GainError::NotPositive { name, value: v });
-            }
-        }
-        if !(self.hover_alt_m.is_finite() && self.hover_alt_m > 0.0) {
-            return Err(GainError::NotPositive {
-                name: "HOVER_ALT",
-                value: self.hover_alt_m,
-            });
-        }
+            ("HOVER_ALT", self.hover_alt_m),
+        ])?;
         self.validate_hover()?;
         // The twin flies one airframe (Table I): the stall speed is checked against it.
         self.forward.validate(&Airframe::default())
@@ -236,7 +235,7 @@ impl Gains {
     /// cross-checks (`docs/model.md`, "Hover position hold").
     fn validate_hover(&self) -> Result<(), GainError> {
         let h = &self.hover;
-        for (name, v) in [
+        all_positive(&[
             ("Q_P_POSXY_P", h.pos_p),
             ("Q_P_VELXY_P", h.vel_p),
             ("Q_WP_SPEED", h.speed_max_m_s),
@@ -244,11 +243,7 @@ impl Gains {
             ("HOV_ATT_BW", h.att_bw_rad_s),
             ("HOV_ATT_ACC", h.att_acc_rad_s2),
             ("HOV_YAW_ACC", h.yaw_acc_rad_s2),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(GainError::NotPositive { name, value: v });
-            }
-        }
+        ])?;
         for (name, v) in [
             ("Q_P_VELXY_I", h.vel_i),
             ("Q_P_VELXY_IMAX", h.vel_imax_m_s2),

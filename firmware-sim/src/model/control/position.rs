@@ -283,21 +283,26 @@ mod tests {
     #[test]
     fn a_steady_push_is_learned_and_bounded() {
         let k = HoverHoldGains::default();
-        let mut h = HoverHold::default();
-        // Held 0.2 m/s short of the setpoint's demand for a long time: I grows toward it and
-        // stops where the tilt reaches Q_ANGLE_MAX (no wind-up beyond the limit).
-        for _ in 0..100_000 {
-            h.tilt_setpoint(
-                &k,
-                Vector2::zeros(),
-                Vector2::zeros(),
-                Vector2::new(-0.2, 0.0),
-                0.0,
-                G,
-                0.01,
-            );
-        }
-        let w = h.wind_accel_m_s2();
+        // Held 0.2 m/s short of the setpoint's demand for `steps` of 10 ms: the wind estimate
+        // it has learned by then.
+        let learned = |k: &HoverHoldGains, steps: usize| {
+            let mut h = HoverHold::default();
+            for _ in 0..steps {
+                h.tilt_setpoint(
+                    k,
+                    Vector2::zeros(),
+                    Vector2::zeros(),
+                    Vector2::new(-0.2, 0.0),
+                    0.0,
+                    G,
+                    0.01,
+                );
+            }
+            h.wind_accel_m_s2()
+        };
+        // For a long time: I grows toward it and stops where the tilt reaches Q_ANGLE_MAX (no
+        // wind-up beyond the limit).
+        let w = learned(&k, 100_000);
         let a_max = G * k.angle_max_rad.tan();
         assert!(
             w.x > 0.0 && (w.x + k.vel_p * 0.2 - a_max).abs() < 0.01,
@@ -308,19 +313,7 @@ mod tests {
             vel_imax_m_s2: 1.0,
             ..k
         };
-        let mut h = HoverHold::default();
-        for _ in 0..10_000 {
-            h.tilt_setpoint(
-                &k,
-                Vector2::zeros(),
-                Vector2::zeros(),
-                Vector2::new(-0.2, 0.0),
-                0.0,
-                G,
-                0.01,
-            );
-        }
-        assert!((h.wind_accel_m_s2().norm() - 1.0).abs() < 1e-9);
+        assert!((learned(&k, 10_000).norm() - 1.0).abs() < 1e-9);
     }
 
     #[test]
