@@ -22,6 +22,10 @@ pub const STATUS_TEXTS_KEPT: usize = 32;
 /// A link with no traffic for this long is shown as lost (MAVProxy's default timeout).
 pub const LINK_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How many links that went down the state remembers (to ignore their frames still on the way).
+/// Their frames reach the tracker within a tick of their Down; a fleet's departures are many.
+pub const DOWN_MEMORY: usize = 1024;
+
 /// Attitude in NED, radians and rad/s.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Attitude {
@@ -253,7 +257,10 @@ pub struct VehicleState {
     text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
     /// Links that went down: frames of theirs still on the way to the tracker are stale and
     /// must not bring their vehicles back (a link that reconnects under its id leaves the set).
+    /// The last [`DOWN_MEMORY`] only: a fleet's vehicles come and go on new links for ever.
     down: HashSet<LinkId>,
+    /// The links of `down`, oldest first.
+    down_order: VecDeque<LinkId>,
     /// The time of the last frame applied, with its window bucket: a run's frames share it.
     stamp: Option<Stamp>,
 }
@@ -289,6 +296,7 @@ impl VehicleState {
             last_seq: HashMap::default(),
             text_chunks: HashMap::default(),
             down: HashSet::default(),
+            down_order: VecDeque::new(),
             stamp: None,
         }
     }
@@ -551,7 +559,14 @@ impl VehicleState {
     /// and its frames still on their way to the tracker are ignored until
     /// [`VehicleState::retain_links`] sees it live again.
     pub fn forget_link(&mut self, link: LinkId) {
-        self.down.insert(link);
+        if self.down.insert(link) {
+            self.down_order.push_back(link);
+            while self.down_order.len() > DOWN_MEMORY {
+                if let Some(old) = self.down_order.pop_front() {
+                    self.down.remove(&old);
+                }
+            }
+        }
         self.links.remove(&link);
         self.last_seq.retain(|(l, _, _), _| *l != link);
         for v in self.vehicles.values_mut().filter(|v| v.link == link) {
@@ -562,7 +577,9 @@ impl VehicleState {
     /// Forgets every link not in `live` (the router's current links).
     pub fn retain_links(&mut self, live: &[LinkId]) {
         for id in live {
-            self.down.remove(id);
+            if self.down.remove(id) {
+                self.down_order.retain(|l| l != id);
+            }
         }
         let gone: Vec<LinkId> = self
             .links

@@ -236,3 +236,53 @@ fn a_vehicle_whose_link_goes_down_is_lost_at_once_and_back_with_its_next_heartbe
     );
     assert!(!lost(&s, 2));
 }
+
+#[test]
+fn vehicles_leaving_and_rejoining_on_new_links_leave_the_state_at_its_steady_size() {
+    let mut s = VehicleState::default();
+    let now = Instant::now();
+    let v = hb(
+        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
+        MavAutopilot::MAV_AUTOPILOT_GENERIC,
+        false,
+    );
+    let att = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA::default());
+    // Five vehicles, each leaving and coming back on a new link (a fleet's vehicle does) many
+    // times more often than the state remembers departed links.
+    let rounds = 3 * DOWN_MEMORY as u64 / 5;
+    let mut next_link = 1;
+    let mut sizes = Vec::new();
+    for round in 0..rounds {
+        let mut live = Vec::new();
+        for sys in 1..=5u8 {
+            let link = LinkId(next_link);
+            next_link += 1;
+            let seq = (round % 128) as u8 * 2;
+            for (i, m) in [&v, &att].into_iter().enumerate() {
+                let f = Frame::encode_v2(SystemId(sys), ComponentId(1), seq + i as u8, m);
+                s.apply(link, Side::Vehicle, &f, now);
+            }
+            live.push(link);
+        }
+        // Every one of them leaves: the router's links are none.
+        s.retain_links(&[]);
+        sizes.push((
+            s.vehicles.len(),
+            s.links.len(),
+            s.messages.len(),
+            s.last_seq.len(),
+            s.down.len().max(s.down_order.len()),
+        ));
+        // A frame of a departed link still on its way is stale.
+        let stale = Frame::encode_v2(SystemId(1), ComponentId(1), 255, &v);
+        s.apply(live[0], Side::Vehicle, &stale, now);
+        assert!(s.vehicles[&(SystemId(1), ComponentId(1))].is_lost(now));
+    }
+    // The same five vehicles, however often they came back.
+    assert_eq!(s.vehicles.len(), 5);
+    assert!(s.vehicles.values().all(|x| x.frames >= rounds));
+    let last = *sizes.last().unwrap();
+    assert_eq!(last, (5, 0, 10, 0, DOWN_MEMORY));
+    assert!(sizes.iter().all(|x| x.4 <= DOWN_MEMORY), "{sizes:?}");
+    assert_eq!(s.down.len(), s.down_order.len());
+}

@@ -6,11 +6,16 @@
 //! go through a subscriber queue to the ground task, which hands the frames on.
 //!
 //! A vehicle's link goes down [`LEAVE_GRACE`] after its liveliness token goes away: the token's
-//! removal may overtake the vehicle's last samples (they are separate subscriptions), and what
-//! it published before it left still reaches its link. Samples later still are counted and
-//! dropped; a new token (or, without one, a vehicle's first samples) brings a link up.
+//! removal may overtake the vehicle's last samples (they are separate subscriptions, and the
+//! liveliness goes through the ground task while the data may be routed inline), and what it
+//! published before it left still reaches its link; each of its samples in the grace extends
+//! it. Samples later still, or a returning vehicle's first samples ahead of its new token, bring
+//! its link back up at once (the same vehicle, on a new link) with a grace of its own that a new
+//! token ends; nothing the network delivered is dropped. A new token (or, without one, a
+//! vehicle's first samples) brings a link up. The ground end remembers a departed vehicle for
+//! [`GONE_MEMORY`] only, so a fleet whose vehicles come and go keeps a bounded state.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
@@ -35,6 +40,10 @@ use crate::transport::{
 /// How long a vehicle's link outlives its liveliness token.
 pub(crate) const LEAVE_GRACE: Duration = Duration::from_millis(500);
 
+/// How long the ground end remembers that a vehicle left (its late samples then get a link with
+/// a grace, not one that lasts until a token goes away).
+pub(crate) const GONE_MEMORY: Duration = Duration::from_secs(60);
+
 /// One vehicle as the ground end sees it.
 struct GroundLink {
     id: LinkId,
@@ -56,11 +65,14 @@ struct Ground {
     cancel: CancellationToken,
     runtime: tokio::runtime::Handle,
     links: HashMap<String, GroundLink>,
-    /// Vehicles whose link went down after their token went away: their samples are dropped
-    /// until a new token appears.
-    gone: HashSet<String>,
-    /// Samples dropped as too late (their vehicle's link was down).
+    /// Vehicles whose link went down after their token went away, and when: a sample of theirs
+    /// brings a link up with a grace (no token is known to be live). Forgotten after
+    /// [`GONE_MEMORY`].
+    gone: HashMap<String, Instant>,
+    /// Samples that came after their vehicle's link went down (each brought it back up).
     late: u64,
+    /// Wakes the ground task when a sample handler set a grace (an earlier expiry).
+    wake: Arc<tokio::sync::Notify>,
 }
 
 impl Ground {
@@ -117,16 +129,28 @@ impl Ground {
         let Some(v) = vehicle_of(sample.key_expr().as_str(), 3) else {
             return;
         };
-        if self.gone.contains(v) {
+        let now = Instant::now();
+        if self.gone.remove(v).is_some() {
+            // Its last samples after the grace, or its first ones back ahead of its new token.
             self.late += 1;
-            tracing::debug!(fleet = %self.fleet, vehicle = %v, "sample after the vehicle left, dropped");
-            return;
-        }
-        if !self.links.contains_key(v) {
+            tracing::debug!(fleet = %self.fleet, vehicle = %v, "sample after the vehicle left: back up");
+            let up = self.open(v);
+            events.push(up);
+            if let Some(l) = self.links.get_mut(v) {
+                l.leaving = Some(now);
+            }
+        } else if !self.links.contains_key(v) {
             let up = self.open(v);
             events.push(up);
         }
         if let Some(l) = self.links.get_mut(v) {
+            if let Some(t) = &mut l.leaving {
+                let was = *t;
+                *t = was.max(now + LEAVE_GRACE);
+                if was <= now {
+                    self.wake.notify_one();
+                }
+            }
             decode_sample(l.id, sample, &mut l.decoder, &l.stats, frames);
         }
     }
@@ -154,8 +178,11 @@ impl Ground {
         }
     }
 
-    /// The links whose grace is over: down, their vehicles gone.
+    /// The links whose grace is over: down, their vehicles gone; departures older than
+    /// [`GONE_MEMORY`] forgotten.
     fn expire(&mut self, now: Instant, events: &mut Vec<LinkEvent>) {
+        self.gone
+            .retain(|_, at| now.duration_since(*at) < GONE_MEMORY);
         let over: Vec<String> = self
             .links
             .iter()
@@ -174,13 +201,18 @@ impl Ground {
                 );
                 tracing::debug!(id = %l.id, %reason, "link down");
                 events.push(LinkEvent::Down { id: l.id, reason });
-                self.gone.insert(v);
+                self.gone.insert(v, now);
             }
         }
     }
 
     fn next_expiry(&self) -> Option<Instant> {
-        self.links.values().filter_map(|l| l.leaving).min()
+        let forget = self.gone.values().min().map(|t| *t + GONE_MEMORY);
+        self.links
+            .values()
+            .filter_map(|l| l.leaving)
+            .chain(forget)
+            .min()
     }
 }
 
@@ -232,6 +264,7 @@ pub(crate) async fn spawn_ground_end(
     let name = vehicle.unwrap_or("*");
     let data_key = from_vehicle_key(fleet, name);
     let live_key = liveliness_key(fleet, name);
+    let wake = Arc::new(tokio::sync::Notify::new());
     let ground: Shared = Arc::new(Mutex::new(Ground {
         fleet: fleet.to_string(),
         session: session.clone(),
@@ -239,8 +272,9 @@ pub(crate) async fn spawn_ground_end(
         cancel: cancel.clone(),
         runtime: tokio::runtime::Handle::current(),
         links: HashMap::new(),
-        gone: HashSet::new(),
+        gone: HashMap::new(),
         late: 0,
+        wake: wake.clone(),
     }));
     // The owner gone (an inline handler said so): the ground task stops.
     let owner_gone = cancel.child_token();
@@ -301,6 +335,7 @@ pub(crate) async fn spawn_ground_end(
                     Err(_) => break,
                 },
                 () = sleep_until_opt(expiry) => Wake::Expiry,
+                () = wake.notified() => Wake::Expiry,
                 s = next_data => match s {
                     Some(sample) => Wake::Data(sample),
                     None => break,
@@ -330,7 +365,7 @@ pub(crate) async fn spawn_ground_end(
         owner_gone.cancel();
         let late = lock(&ground).late;
         if late > 0 {
-            tracing::debug!(late, "samples dropped after their vehicle left");
+            tracing::debug!(late, "samples that came after their vehicle left");
         }
         let links: Vec<GroundLink> = lock(&ground).links.drain().map(|(_, l)| l).collect();
         for l in links {
@@ -353,3 +388,7 @@ async fn sleep_until_opt(t: Option<Instant>) {
         None => std::future::pending().await,
     }
 }
+
+#[cfg(test)]
+#[path = "ground_tests.rs"]
+mod tests;
