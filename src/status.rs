@@ -81,8 +81,8 @@ pub fn line(
         let _ = write!(
             s,
             " | vehicle {id} {health} {:.0} Hz loss {:.1}%",
-            h.rate_hz(now),
-            h.loss_pct(now)
+            h.window.rate_hz(now),
+            h.window.loss_pct(now)
         );
     }
     // The daemon's own-traffic link is not a client.
@@ -235,8 +235,8 @@ pub fn fleet_part(
                     v.system_id,
                     v.mode_name(),
                     if v.armed { "ARMED" } else { "disarmed" },
-                    v.rate_hz(now),
-                    v.loss_pct(now)
+                    v.window.rate_hz(now),
+                    v.window.loss_pct(now)
                 );
             }
         }

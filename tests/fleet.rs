@@ -89,8 +89,8 @@ fn the_tracker_keeps_vehicles_on_one_link_apart() {
     assert_eq!(s.vehicles[&ids(1)].lost, 0);
     assert_eq!(s.vehicles[&ids(2)].lost, 0);
     assert_eq!(s.vehicles[&ids(3)].lost, 9);
-    assert!(s.vehicles[&ids(3)].loss_pct(now) > 20.0);
-    assert!(s.vehicles[&ids(1)].loss_pct(now) < 1e-9);
+    assert!(s.vehicles[&ids(3)].window.loss_pct(now) > 20.0);
+    assert!(s.vehicles[&ids(1)].window.loss_pct(now) < 1e-9);
     assert!(s.vehicles.values().all(|v| v.link == link));
 }
 

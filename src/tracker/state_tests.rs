@@ -166,7 +166,7 @@ fn late_frames_are_no_loss_and_repeated_ones_count_once() {
     let now = f.now;
     let h = f.link(1);
     assert_eq!((h.frames, h.lost), (6, 1));
-    assert!((h.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
+    assert!((h.window.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
     let view = f.vehicle(VEHICLE);
     assert_eq!((view.frames, view.lost), (6, 1));
     assert!((view.window.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
@@ -182,7 +182,7 @@ fn sequence_gaps_count_as_loss() {
     let h = f.link(1);
     assert_eq!(h.frames, 7);
     assert_eq!(h.lost, 3);
-    assert!((h.loss_pct(f.now) - 30.0).abs() < 1e-9);
+    assert!((h.window.loss_pct(f.now) - 30.0).abs() < 1e-9);
     // Once the link goes down and comes back (a reconnect keeps its id), the gap is not
     // loss.
     f.s.retain_links(&[]);
