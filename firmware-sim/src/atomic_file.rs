@@ -1,7 +1,7 @@
 //! Whole-file writes that a crash cannot tear: the twin's parameter and mission files.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed to disk,
 /// then renamed over `path`, so a crash leaves either the old file or the new one.
@@ -15,6 +15,29 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.sync_all()?;
     drop(f);
     std::fs::rename(&tmp, path)
+}
+
+/// An error type with a variant for a failed read or write of a named file, so that
+/// [`read_text`] and [`write_text`] can report in the caller's own error.
+pub trait FileIoError {
+    /// The error for `source` met on `path`.
+    fn io(path: PathBuf, source: std::io::Error) -> Self;
+}
+
+/// Reads `path` as UTF-8 text.
+///
+/// # Errors
+/// The I/O error, with the file's name.
+pub fn read_text<E: FileIoError>(path: &Path) -> Result<String, E> {
+    std::fs::read_to_string(path).map_err(|source| E::io(path.to_owned(), source))
+}
+
+/// [`write`] of `text`, its error with the file's name.
+///
+/// # Errors
+/// The I/O error of the step that failed, with the file's name.
+pub fn write_text<E: FileIoError>(path: &Path, text: &str) -> Result<(), E> {
+    write(path, text.as_bytes()).map_err(|source| E::io(path.to_owned(), source))
 }
 
 /// The temporary file [`write`] goes through: `.NAME.tmp` in the same directory.

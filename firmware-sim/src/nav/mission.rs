@@ -437,6 +437,12 @@ pub enum MissionFileError {
     },
 }
 
+impl crate::atomic_file::FileIoError for MissionFileError {
+    fn io(path: PathBuf, source: std::io::Error) -> Self {
+        Self::Io { path, source }
+    }
+}
+
 /// The header of the `QGC WPL 110` format.
 pub const WPL_HEADER: &str = "QGC WPL 110";
 
@@ -593,10 +599,7 @@ impl Mission {
     /// # Errors
     /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, MissionFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MissionFileError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = crate::atomic_file::read_text::<MissionFileError>(path)?;
         Self::from_wpl_str(&text, path)
     }
 
@@ -605,12 +608,7 @@ impl Mission {
     /// # Errors
     /// [`MissionFileError::Io`].
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
-        crate::atomic_file::write(path, self.to_wpl_string().as_bytes()).map_err(|source| {
-            MissionFileError::Io {
-                path: path.to_owned(),
-                source,
-            }
-        })
+        crate::atomic_file::write_text(path, &self.to_wpl_string())
     }
 }
 

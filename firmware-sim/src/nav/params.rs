@@ -335,6 +335,12 @@ pub enum ParamFileError {
     },
 }
 
+impl crate::atomic_file::FileIoError for ParamFileError {
+    fn io(path: PathBuf, source: std::io::Error) -> Self {
+        Self::Io { path, source }
+    }
+}
+
 /// The result of an accepted write.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Accepted {
@@ -607,10 +613,7 @@ impl Params {
     /// # Errors
     /// I/O errors and everything [`Params::from_parm_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, ParamFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ParamFileError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = crate::atomic_file::read_text::<ParamFileError>(path)?;
         Self::from_parm_str(&text, path)
     }
 
@@ -620,12 +623,7 @@ impl Params {
     /// # Errors
     /// [`ParamFileError::Io`].
     pub fn save(&self, path: &Path) -> Result<(), ParamFileError> {
-        crate::atomic_file::write(path, self.to_parm_string().as_bytes()).map_err(|source| {
-            ParamFileError::Io {
-                path: path.to_owned(),
-                source,
-            }
-        })
+        crate::atomic_file::write_text(path, &self.to_parm_string())
     }
 }
 
