@@ -17,27 +17,49 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
-/// An error type with a variant for a failed read or write of a named file, so that
-/// [`read_text`] and [`write_text`] can report in the caller's own error.
-pub trait FileIoError {
-    /// The error for `source` met on `path`.
-    fn io(path: PathBuf, source: std::io::Error) -> Self;
+/// A text file of the twin's (parameters, mission) that cannot be read, written or parsed.
+#[derive(Debug, thiserror::Error)]
+pub enum TextFileError {
+    /// Reading or writing failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A line cannot be used.
+    #[error("{path}:{line}: {reason}")]
+    Line {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// Reads `path` as UTF-8 text.
 ///
 /// # Errors
-/// The I/O error, with the file's name.
-pub fn read_text<E: FileIoError>(path: &Path) -> Result<String, E> {
-    std::fs::read_to_string(path).map_err(|source| E::io(path.to_owned(), source))
+/// [`TextFileError::Io`].
+pub fn read_text(path: &Path) -> Result<String, TextFileError> {
+    std::fs::read_to_string(path).map_err(|source| TextFileError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
-/// [`write`] of `text`, its error with the file's name.
+/// [`write`] of `text`.
 ///
 /// # Errors
-/// The I/O error of the step that failed, with the file's name.
-pub fn write_text<E: FileIoError>(path: &Path, text: &str) -> Result<(), E> {
-    write(path, text.as_bytes()).map_err(|source| E::io(path.to_owned(), source))
+/// [`TextFileError::Io`], of the step that failed.
+pub fn write_text(path: &Path, text: &str) -> Result<(), TextFileError> {
+    write(path, text.as_bytes()).map_err(|source| TextFileError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// The temporary file [`write`] goes through: `.NAME.tmp` in the same directory.

@@ -414,34 +414,8 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
     Ok(())
 }
 
-/// A mission file that cannot be used.
-#[derive(Debug, thiserror::Error)]
-pub enum MissionFileError {
-    /// Reading or writing failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// A line is not a mission item.
-    #[error("{path}:{line}: {reason}")]
-    Line {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong.
-        reason: String,
-    },
-}
-
-impl crate::atomic_file::FileIoError for MissionFileError {
-    fn io(path: PathBuf, source: std::io::Error) -> Self {
-        Self::Io { path, source }
-    }
-}
+/// A mission file that cannot be used: unreadable, or a line that is not a mission item.
+pub type MissionFileError = crate::atomic_file::TextFileError;
 
 /// The header of the `QGC WPL 110` format.
 pub const WPL_HEADER: &str = "QGC WPL 110";
@@ -510,7 +484,7 @@ impl Mission {
     /// numbered 0, 1, 2… in order.
     ///
     /// # Errors
-    /// [`MissionFileError::Line`] naming the first bad line.
+    /// [`TextFileError::Line`](crate::atomic_file::TextFileError::Line) naming the first bad line.
     pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
         let err = |line: usize, reason: String| MissionFileError::Line {
             path: path.to_owned(),
@@ -599,14 +573,14 @@ impl Mission {
     /// # Errors
     /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, MissionFileError> {
-        let text = crate::atomic_file::read_text::<MissionFileError>(path)?;
+        let text = crate::atomic_file::read_text(path)?;
         Self::from_wpl_str(&text, path)
     }
 
     /// Writes the mission atomically (a temporary file in the same directory, flushed, renamed).
     ///
     /// # Errors
-    /// [`MissionFileError::Io`].
+    /// [`TextFileError::Io`](crate::atomic_file::TextFileError::Io).
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
         crate::atomic_file::write_text(path, &self.to_wpl_string())
     }
