@@ -16,6 +16,8 @@ use vtol_link::{ComponentId, Frame, LinkId, LinkStatsSnapshot, SystemId};
 
 /// The link every recorded vehicle frame comes on.
 pub const VEHICLE_LINK: LinkId = LinkId(1);
+/// The link of the daemon's own client, in a recording [`Recording::with_own_traffic`].
+pub const OWN_LINK: LinkId = LinkId(2);
 
 /// The tracker state and history after frames applied at known times.
 pub struct Recording {
@@ -26,6 +28,7 @@ pub struct Recording {
     /// The history the charts read.
     pub history: History,
     seq: [u8; 256],
+    own_traffic: bool,
 }
 
 impl Default for Recording {
@@ -44,6 +47,17 @@ impl Recording {
             state: VehicleState::new(t0),
             history: History::new(t0),
             seq: [0; 256],
+            own_traffic: false,
+        }
+    }
+
+    /// Nothing recorded yet; [`Recording::fly`] also records the daemon's own client's 1 Hz
+    /// heartbeat on [`OWN_LINK`].
+    #[must_use]
+    pub fn with_own_traffic() -> Self {
+        Self {
+            own_traffic: true,
+            ..Self::new()
         }
     }
 
@@ -68,6 +82,19 @@ impl Recording {
         self.feed_from(1, ms, msg);
     }
 
+    /// Applies the daemon's own client's heartbeat (255, 190) at `ms`, on [`OWN_LINK`].
+    pub fn feed_gcs(&mut self, ms: u64) {
+        let frame = Frame::encode_v2(
+            SystemId(255),
+            ComponentId(190),
+            (ms / 1000) as u8,
+            &vtol_link::gcs_heartbeat(),
+        );
+        let now = self.at(ms);
+        let decoded = self.state.apply(OWN_LINK, Side::Client, &frame, now);
+        self.history.record(&frame, decoded.as_ref(), now);
+    }
+
     /// Vehicle 1 from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
     /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
     pub fn fly(
@@ -81,6 +108,9 @@ impl Recording {
             let (mode, armed, roll, pitch, yaw, alt) = f(ms as f64 / 1000.0);
             if ms.is_multiple_of(1000) {
                 self.feed(ms, &heartbeat(mode, armed));
+                if self.own_traffic {
+                    self.feed_gcs(ms);
+                }
             }
             self.feed(
                 ms,
