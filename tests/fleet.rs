@@ -4,6 +4,7 @@
 //! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
 
 mod common;
+mod ui_support;
 
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -15,6 +16,7 @@ use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
+use ui_support::recording::draw_snapshot;
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
 use vtol_gcs::router::Router;
@@ -23,7 +25,7 @@ use vtol_gcs::tlog::TlogReader;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
-use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
+use vtol_gcs::tui::view::{self, RouterCounters, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{ComponentId, Frame, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint};
 
@@ -293,7 +295,6 @@ fn render_with_links(
     now: Instant,
     links: Vec<view::LinkRow>,
 ) -> String {
-    let mut terminal = Terminal::new(TestBackend::new(110, 30)).expect("test backend");
     let snap = Snapshot {
         now,
         state,
@@ -303,11 +304,7 @@ fn render_with_links(
         tlog: None,
         serving: vec!["tcpin:127.0.0.1:5770".into()],
     };
-    let mut cache = SeriesCache::default();
-    terminal
-        .draw(|f| view::draw(f, app, &snap, &mut cache))
-        .expect("draw");
-    format!("{}", terminal.backend())
+    draw_snapshot(app, &snap, (110, 30))
 }
 
 #[test]

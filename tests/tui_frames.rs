@@ -3,18 +3,16 @@
 //! snapshots: hover, armed climb, link lost, parameter edit, refused parameter, help overlay,
 //! a terminal too small, and the charts, links and messages views.
 
-use ratatui::Terminal;
-use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::KeyCode;
 use vtol_gcs::tap::Side;
 use vtol_gcs::tui::app::{App, Outcome, View};
-use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
+use vtol_gcs::tui::view::{LinkRow, RouterCounters, Snapshot, TlogInfo};
 use vtol_link::LinkStatsSnapshot;
 use vtol_link::dialect::{self, MavMessage, MavState};
 
 mod ui_support;
 
-use ui_support::recording::{OWN_LINK, Recording, VEHICLE_LINK, heartbeat, key};
+use ui_support::recording::{OWN_LINK, Recording, VEHICLE_LINK, draw_snapshot, heartbeat, key};
 
 fn links(rec: &Recording) -> Vec<LinkRow> {
     let vehicle = &rec.state.links[&VEHICLE_LINK];
@@ -68,7 +66,6 @@ fn params() -> Vec<(String, f32)> {
 }
 
 fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> String {
-    let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
     let snap = Snapshot {
         now: rec.at(at_ms),
         state: &rec.state,
@@ -93,11 +90,7 @@ fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> Strin
             "udpout:127.0.0.1:14550".into(),
         ],
     };
-    let mut cache = SeriesCache::default();
-    terminal
-        .draw(|f| view::draw(f, app, &snap, &mut cache))
-        .expect("draw");
-    format!("{}", terminal.backend())
+    draw_snapshot(app, &snap, size)
 }
 
 fn app_with_params() -> App {

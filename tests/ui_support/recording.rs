@@ -168,7 +168,6 @@ impl Recording {
 
     /// Renders one whole frame at `at_ms` on a `size` terminal.
     pub fn render(&self, app: &mut App, at_ms: u64, size: (u16, u16)) -> String {
-        let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
         let vehicle = self.state.links.get(&VEHICLE_LINK);
         let links = vec![LinkRow {
             id: VEHICLE_LINK,
@@ -199,12 +198,19 @@ impl Recording {
             }),
             serving: vec!["tcpin:127.0.0.1:5770".into()],
         };
-        let mut cache = SeriesCache::default();
-        terminal
-            .draw(|f| view::draw(f, app, &snap, &mut cache))
-            .expect("draw");
-        format!("{}", terminal.backend())
+        draw_snapshot(app, &snap, size)
     }
+}
+
+/// One whole frame of `snap` drawn by `app` on a `size` terminal, as text.
+#[must_use]
+pub fn draw_snapshot(app: &mut App, snap: &Snapshot, size: (u16, u16)) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
+    let mut cache = SeriesCache::default();
+    terminal
+        .draw(|f| view::draw(f, app, snap, &mut cache))
+        .expect("draw");
+    format!("{}", terminal.backend())
 }
 
 /// A tailsitter's heartbeat in ArduPlane mode `mode`.
