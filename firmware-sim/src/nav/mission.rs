@@ -600,11 +600,13 @@ pub fn file_beside(param_file: &Path) -> PathBuf {
     }
 }
 
+/// What the mission's and the navigator's tests build missions from.
 #[cfg(test)]
-mod tests {
+pub(crate) mod test_items {
     use super::*;
 
-    fn limits() -> Limits {
+    /// A 100 m radius and 50 m ceiling around home at the origin, near Canberra.
+    pub fn limits() -> Limits {
         Limits {
             origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
             home_ned_m: Vector3::zeros(),
@@ -613,17 +615,28 @@ mod tests {
         }
     }
 
-    fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
+    /// An item `command` at (`x`, `y`, `alt`) relative to home, auto-continuing.
+    pub fn item(command: u16, params: [f32; 4], x: i32, y: i32, alt: f32) -> MissionItem {
         MissionItem {
-            params: [0.0, 0.0, 0.0, f32::NAN],
-            x: lat_e7,
-            y: lon_e7,
+            params,
+            x,
+            y,
             z: alt,
             command,
             frame: frame::GLOBAL_RELATIVE_ALT_INT,
             current: 0,
             autocontinue: 1,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_items::limits;
+    use super::*;
+
+    fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
+        test_items::item(command, [0.0, 0.0, 0.0, f32::NAN], lat_e7, lon_e7, alt)
     }
 
     #[test]
