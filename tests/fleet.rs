@@ -16,7 +16,7 @@ use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
-use ui_support::recording::draw_snapshot;
+use ui_support::recording::{draw_snapshot, tailsitter_heartbeat};
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
 use vtol_gcs::router::Router;
@@ -26,22 +26,17 @@ use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, Snapshot};
-use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavState};
 use vtol_link::{ComponentId, Frame, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint};
 
+/// A tailsitter's heartbeat from a generic autopilot, standing by even when armed.
 fn heartbeat(mode: u32, armed: bool) -> MavMessage {
-    let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
-    if armed {
-        base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-    }
-    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-        custom_mode: mode,
-        mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        base_mode,
-        system_status: MavState::MAV_STATE_STANDBY,
-        mavlink_version: 3,
-    })
+    tailsitter_heartbeat(
+        mode,
+        armed,
+        MavAutopilot::MAV_AUTOPILOT_GENERIC,
+        MavState::MAV_STATE_STANDBY,
+    )
 }
 
 /// A heartbeat of system `sys` (component 1), framed with sequence number `seq`.

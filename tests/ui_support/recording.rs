@@ -213,9 +213,31 @@ pub fn draw_snapshot(app: &mut App, snap: &Snapshot, size: (u16, u16)) -> String
     format!("{}", terminal.backend())
 }
 
-/// A tailsitter's heartbeat in ArduPlane mode `mode`.
+/// A tailsitter's heartbeat in ArduPlane mode `mode`, from an ArduPilot autopilot: active when
+/// armed, standing by otherwise.
 #[must_use]
 pub fn heartbeat(mode: u32, armed: bool) -> MavMessage {
+    let status = if armed {
+        MavState::MAV_STATE_ACTIVE
+    } else {
+        MavState::MAV_STATE_STANDBY
+    };
+    tailsitter_heartbeat(
+        mode,
+        armed,
+        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        status,
+    )
+}
+
+/// A tailsitter's heartbeat in ArduPlane mode `mode` from `autopilot` in state `status`.
+#[must_use]
+pub fn tailsitter_heartbeat(
+    mode: u32,
+    armed: bool,
+    autopilot: MavAutopilot,
+    system_status: MavState,
+) -> MavMessage {
     let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
     if armed {
         base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
@@ -223,13 +245,9 @@ pub fn heartbeat(mode: u32, armed: bool) -> MavMessage {
     MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
         custom_mode: mode,
         mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        autopilot,
         base_mode,
-        system_status: if armed {
-            MavState::MAV_STATE_ACTIVE
-        } else {
-            MavState::MAV_STATE_STANDBY
-        },
+        system_status,
         mavlink_version: 3,
     })
 }
