@@ -229,15 +229,7 @@ pub fn fleet_part(
             if v.is_lost(now) {
                 let _ = write!(s, " [{} LOST]", v.system_id);
             } else {
-                let _ = write!(
-                    s,
-                    " [{} {} {} {:.0} Hz {:.1}%]",
-                    v.system_id,
-                    v.mode_name(),
-                    if v.armed { "ARMED" } else { "disarmed" },
-                    v.window.rate_hz(now),
-                    v.window.loss_pct(now)
-                );
+                let _ = write!(s, " [{}]", v.summary(now));
             }
         }
     }

@@ -107,6 +107,20 @@ impl VehicleView {
         self.link_down || now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
     }
 
+    /// One line of its state for a list of vehicles: id, mode, armed, frame rate and loss
+    /// (`1 QHOVER ARMED 50 Hz 0.0%`).
+    #[must_use]
+    pub fn summary(&self, now: Instant) -> String {
+        format!(
+            "{} {} {} {:.0} Hz {:.1}%",
+            self.system_id,
+            self.mode_name(),
+            if self.armed { "ARMED" } else { "disarmed" },
+            self.window.rate_hz(now),
+            self.window.loss_pct(now)
+        )
+    }
+
     /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
     #[must_use]
     pub fn mode_name(&self) -> String {

@@ -279,14 +279,7 @@ pub(super) fn vehicle_list_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> 
                         .as_secs_f64()
                 )
             } else {
-                format!(
-                    " {} {} {} {:.0} Hz {:.1}% ",
-                    v.system_id,
-                    v.mode_name(),
-                    if v.armed { "ARMED" } else { "disarmed" },
-                    v.window.rate_hz(now),
-                    v.window.loss_pct(now)
-                )
+                format!(" {} ", v.summary(now))
             };
             let mut style = if v.is_lost(now) {
                 Style::new().fg(Color::Red)
