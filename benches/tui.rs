@@ -86,13 +86,48 @@ impl Write for TimedSink {
 }
 
 fn terminal<W2: Write>(w: W2) -> Terminal<CrosstermBackend<W2>> {
+    terminal_sized(w, (W, H))
+}
+
+fn terminal_sized<W2: Write>(w: W2, (width, height): (u16, u16)) -> Terminal<CrosstermBackend<W2>> {
     Terminal::with_options(
         CrosstermBackend::new(w),
         TerminalOptions {
-            viewport: Viewport::Fixed(Rect::new(0, 0, W, H)),
+            viewport: Viewport::Fixed(Rect::new(0, 0, width, height)),
         },
     )
     .expect("terminal")
+}
+
+/// Draws `frames` frames of `app` on a `size` terminal, frame `i` at `now_of(i)`: the CPU per
+/// frame in µs of this thread and the bytes per frame written to the terminal.
+fn draw_cost(
+    app: &mut App,
+    size: (u16, u16),
+    state: &VehicleState,
+    history: &History,
+    frames: usize,
+    now_of: impl Fn(usize) -> Instant,
+) -> (f64, usize) {
+    let bytes = Arc::new(Mutex::new(0usize));
+    let mut term = terminal_sized(CountingSink(Arc::clone(&bytes)), size);
+    let mut cache = SeriesCache::default();
+    let cpu0 = thread_cpu_ns();
+    for i in 0..frames {
+        let snap = Snapshot {
+            now: now_of(i),
+            state,
+            history,
+            links: Vec::new(),
+            router: RouterCounters::default(),
+            tlog: None,
+            serving: Vec::new(),
+        };
+        term.draw(|f| view::draw(f, app, &snap, &mut cache))
+            .expect("draw");
+    }
+    let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;
+    (cpu, *bytes.lock().unwrap() / frames)
 }
 
 /// 30 s of hover: 50 Hz attitude, 10 Hz outputs and position, 1 Hz heartbeat.
@@ -188,27 +223,10 @@ fn render_cost(frames: usize) {
                 },
             ]];
         }
-        let bytes = Arc::new(Mutex::new(0usize));
-        let mut term = terminal(CountingSink(Arc::clone(&bytes)));
-        let mut cache = SeriesCache::default();
-        let cpu0 = thread_cpu_ns();
-        for i in 0..frames {
-            // The clock moves a frame (33 ms) each time, so every frame differs like live ones.
-            let now = t0 + Duration::from_millis(29_000 + (i as u64 * 33) % 1000);
-            let snap = Snapshot {
-                now,
-                state: &state,
-                history: &history,
-                links: Vec::new(),
-                router: RouterCounters::default(),
-                tlog: None,
-                serving: Vec::new(),
-            };
-            term.draw(|f| view::draw(f, &mut app, &snap, &mut cache))
-                .expect("draw");
-        }
-        let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;
-        let b = *bytes.lock().unwrap() / frames;
+        // The clock moves a frame (33 ms) each time, so every frame differs like live ones.
+        let (cpu, b) = draw_cost(&mut app, (W, H), &state, &history, frames, |i| {
+            t0 + Duration::from_millis(29_000 + (i as u64 * 33) % 1000)
+        });
         println!("{:<10} {cpu:>12.0} {b:>12}", v.title());
     }
 }
@@ -254,31 +272,9 @@ fn fleet_render_cost(frames: usize) {
             view: View::Fleet,
             ..App::default()
         };
-        let bytes = Arc::new(Mutex::new(0usize));
-        let mut term = Terminal::with_options(
-            CrosstermBackend::new(CountingSink(Arc::clone(&bytes))),
-            TerminalOptions {
-                viewport: Viewport::Fixed(Rect::new(0, 0, w, h)),
-            },
-        )
-        .expect("terminal");
-        let mut cache = SeriesCache::default();
-        let cpu0 = thread_cpu_ns();
-        for i in 0..frames {
-            let snap = Snapshot {
-                now: t0 + Duration::from_millis(9_500 + (i as u64 * 33) % 400),
-                state: &state,
-                history: &history,
-                links: Vec::new(),
-                router: RouterCounters::default(),
-                tlog: None,
-                serving: Vec::new(),
-            };
-            term.draw(|f| view::draw(f, &mut app, &snap, &mut cache))
-                .expect("draw");
-        }
-        let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;
-        let b = *bytes.lock().unwrap() / frames;
+        let (cpu, b) = draw_cost(&mut app, (w, h), &state, &history, frames, |i| {
+            t0 + Duration::from_millis(9_500 + (i as u64 * 33) % 400)
+        });
         println!("{:<10} {cpu:>12.0} {b:>12}", format!("{w}x{h}"));
     }
 }

@@ -81,8 +81,8 @@ pub fn line(
         let _ = write!(
             s,
             " | vehicle {id} {health} {:.0} Hz loss {:.1}%",
-            h.rate_hz(now),
-            h.loss_pct(now)
+            h.window.rate_hz(now),
+            h.window.loss_pct(now)
         );
     }
     // The daemon's own-traffic link is not a client.
@@ -229,15 +229,7 @@ pub fn fleet_part(
             if v.is_lost(now) {
                 let _ = write!(s, " [{} LOST]", v.system_id);
             } else {
-                let _ = write!(
-                    s,
-                    " [{} {} {} {:.0} Hz {:.1}%]",
-                    v.system_id,
-                    v.mode_name(),
-                    if v.armed { "ARMED" } else { "disarmed" },
-                    v.rate_hz(now),
-                    v.loss_pct(now)
-                );
+                let _ = write!(s, " [{}]", v.summary(now));
             }
         }
     }

@@ -4,6 +4,7 @@
 //! reported as a conflict and never merged; and a snapshot of the UI with three vehicles.
 
 mod common;
+mod ui_support;
 
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -15,6 +16,7 @@ use ratatui::crossterm::event::{Event, KeyCode, KeyEvent, KeyModifiers};
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
+use ui_support::recording::{draw_snapshot, tailsitter_heartbeat};
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
 use vtol_gcs::router::Router;
@@ -23,23 +25,18 @@ use vtol_gcs::tlog::TlogReader;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
 use vtol_gcs::tui::exec::ClientControl;
-use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
-use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+use vtol_gcs::tui::view::{self, RouterCounters, Snapshot};
+use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavState};
 use vtol_link::{ComponentId, Frame, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint};
 
+/// A tailsitter's heartbeat from a generic autopilot, standing by even when armed.
 fn heartbeat(mode: u32, armed: bool) -> MavMessage {
-    let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
-    if armed {
-        base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-    }
-    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-        custom_mode: mode,
-        mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        base_mode,
-        system_status: MavState::MAV_STATE_STANDBY,
-        mavlink_version: 3,
-    })
+    tailsitter_heartbeat(
+        mode,
+        armed,
+        MavAutopilot::MAV_AUTOPILOT_GENERIC,
+        MavState::MAV_STATE_STANDBY,
+    )
 }
 
 /// A heartbeat of system `sys` (component 1), framed with sequence number `seq`.
@@ -89,8 +86,8 @@ fn the_tracker_keeps_vehicles_on_one_link_apart() {
     assert_eq!(s.vehicles[&ids(1)].lost, 0);
     assert_eq!(s.vehicles[&ids(2)].lost, 0);
     assert_eq!(s.vehicles[&ids(3)].lost, 9);
-    assert!(s.vehicles[&ids(3)].loss_pct(now) > 20.0);
-    assert!(s.vehicles[&ids(1)].loss_pct(now) < 1e-9);
+    assert!(s.vehicles[&ids(3)].window.loss_pct(now) > 20.0);
+    assert!(s.vehicles[&ids(1)].window.loss_pct(now) < 1e-9);
     assert!(s.vehicles.values().all(|v| v.link == link));
 }
 
@@ -293,7 +290,6 @@ fn render_with_links(
     now: Instant,
     links: Vec<view::LinkRow>,
 ) -> String {
-    let mut terminal = Terminal::new(TestBackend::new(110, 30)).expect("test backend");
     let snap = Snapshot {
         now,
         state,
@@ -303,11 +299,7 @@ fn render_with_links(
         tlog: None,
         serving: vec!["tcpin:127.0.0.1:5770".into()],
     };
-    let mut cache = SeriesCache::default();
-    terminal
-        .draw(|f| view::draw(f, app, &snap, &mut cache))
-        .expect("draw");
-    format!("{}", terminal.backend())
+    draw_snapshot(app, &snap, (110, 30))
 }
 
 #[test]

@@ -3,154 +3,16 @@
 //! snapshots: hover, armed climb, link lost, parameter edit, refused parameter, help overlay,
 //! a terminal too small, and the charts, links and messages views.
 
-use std::time::{Duration, Instant};
-
-use ratatui::Terminal;
-use ratatui::backend::TestBackend;
-use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+use ratatui::crossterm::event::KeyCode;
 use vtol_gcs::tap::Side;
-use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
-use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
-use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
-use vtol_link::{Frame, FrameSource, LinkId, LinkStatsSnapshot};
+use vtol_gcs::tui::view::{LinkRow, RouterCounters, Snapshot, TlogInfo};
+use vtol_link::LinkStatsSnapshot;
+use vtol_link::dialect::{self, MavMessage, MavState};
 
-const VEHICLE_LINK: LinkId = LinkId(1);
-const OWN_LINK: LinkId = LinkId(2);
+mod ui_support;
 
-/// A recording: the tracker state and history after frames applied at known times.
-struct Recording {
-    t0: Instant,
-    state: VehicleState,
-    history: History,
-    vehicle: FrameSource,
-}
-
-impl Recording {
-    fn new() -> Self {
-        let t0 = Instant::now();
-        Self {
-            t0,
-            state: VehicleState::new(t0),
-            history: History::new(t0),
-            vehicle: FrameSource::new(vtol_link::SystemId(1), vtol_link::ComponentId(1)),
-        }
-    }
-
-    fn at(&self, ms: u64) -> Instant {
-        self.t0 + Duration::from_millis(ms)
-    }
-
-    fn feed(&mut self, ms: u64, msg: &MavMessage) {
-        let frame = self.vehicle.encode_v2(msg);
-        let now = self.at(ms);
-        let decoded = self.state.apply(VEHICLE_LINK, Side::Vehicle, &frame, now);
-        self.history.record(&frame, decoded.as_ref(), now);
-    }
-
-    fn feed_gcs(&mut self, ms: u64) {
-        let frame = Frame::encode_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            (ms / 1000) as u8,
-            &vtol_link::gcs_heartbeat(),
-        );
-        let now = self.at(ms);
-        let decoded = self.state.apply(OWN_LINK, Side::Client, &frame, now);
-        self.history.record(&frame, decoded.as_ref(), now);
-    }
-
-    /// A flight from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
-    /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
-    fn fly(
-        &mut self,
-        from_ms: u64,
-        to_ms: u64,
-        f: impl Fn(f64) -> (u32, bool, f32, f32, f32, f32),
-    ) {
-        let mut ms = from_ms;
-        while ms < to_ms {
-            let t = ms as f64 / 1000.0;
-            let (mode, armed, roll, pitch, yaw, alt) = f(t);
-            if ms.is_multiple_of(1000) {
-                self.feed(ms, &heartbeat(mode, armed));
-                self.feed_gcs(ms);
-            }
-            self.feed(
-                ms,
-                &MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
-                    time_boot_ms: ms as u32,
-                    roll,
-                    pitch,
-                    yaw,
-                    rollspeed: 0.01,
-                    pitchspeed: -0.02,
-                    yawspeed: 0.0,
-                }),
-            );
-            if ms.is_multiple_of(100) {
-                let esc = if armed {
-                    1450 + (alt * 40.0) as u16
-                } else {
-                    1000
-                };
-                self.feed(
-                    ms,
-                    &MavMessage::SERVO_OUTPUT_RAW(dialect::SERVO_OUTPUT_RAW_DATA {
-                        time_usec: 0,
-                        servo1_raw: esc + 12,
-                        servo2_raw: esc - 12,
-                        servo3_raw: 1500 + (roll * 500.0) as u16,
-                        servo4_raw: 1500 - (roll * 500.0) as u16,
-                        servo5_raw: 1520,
-                        ..Default::default()
-                    }),
-                );
-                self.feed(
-                    ms,
-                    &MavMessage::LOCAL_POSITION_NED(dialect::LOCAL_POSITION_NED_DATA {
-                        time_boot_ms: ms as u32,
-                        x: 0.05,
-                        y: -0.02,
-                        z: -alt,
-                        vx: 0.0,
-                        vy: 0.0,
-                        vz: 0.0,
-                    }),
-                );
-            }
-            ms += 20;
-        }
-    }
-
-    fn status(&mut self, ms: u64, severity: dialect::MavSeverity, text: &str) {
-        let mut data = dialect::STATUSTEXT_DATA {
-            severity,
-            ..Default::default()
-        };
-        data.text = text.into();
-        self.feed(ms, &MavMessage::STATUSTEXT(data));
-    }
-}
-
-fn heartbeat(mode: u32, armed: bool) -> MavMessage {
-    let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
-    if armed {
-        base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
-    }
-    MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
-        custom_mode: mode,
-        mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode,
-        system_status: if armed {
-            MavState::MAV_STATE_ACTIVE
-        } else {
-            MavState::MAV_STATE_STANDBY
-        },
-        mavlink_version: 3,
-    })
-}
+use ui_support::recording::{OWN_LINK, Recording, VEHICLE_LINK, draw_snapshot, heartbeat, key};
 
 fn links(rec: &Recording) -> Vec<LinkRow> {
     let vehicle = &rec.state.links[&VEHICLE_LINK];
@@ -204,7 +66,6 @@ fn params() -> Vec<(String, f32)> {
 }
 
 fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> String {
-    let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
     let snap = Snapshot {
         now: rec.at(at_ms),
         state: &rec.state,
@@ -229,11 +90,7 @@ fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> Strin
             "udpout:127.0.0.1:14550".into(),
         ],
     };
-    let mut cache = SeriesCache::default();
-    terminal
-        .draw(|f| view::draw(f, app, &snap, &mut cache))
-        .expect("draw");
-    format!("{}", terminal.backend())
+    draw_snapshot(app, &snap, size)
 }
 
 fn app_with_params() -> App {
@@ -242,12 +99,8 @@ fn app_with_params() -> App {
     app
 }
 
-fn key(c: KeyCode) -> KeyEvent {
-    KeyEvent::new(c, KeyModifiers::NONE)
-}
-
 fn hover() -> Recording {
-    let mut rec = Recording::new();
+    let mut rec = Recording::with_own_traffic();
     rec.fly(0, 20_000, |t| {
         let wobble = (t * 2.0).sin() as f32;
         (18, true, 0.05 * wobble, -0.03 * wobble, 0.3, 1.0)
@@ -274,7 +127,7 @@ fn hover_flight_view() {
 
 #[test]
 fn armed_climb_flight_and_charts() {
-    let mut rec = Recording::new();
+    let mut rec = Recording::with_own_traffic();
     rec.fly(0, 4_000, |_| (18, false, 0.0, 0.0, 1.5, 0.0));
     rec.fly(4_000, 12_000, |t| {
         let alt = ((t - 4.0) / 6.0).min(1.0) as f32 * 0.8;
@@ -521,7 +374,7 @@ fn vitals_row_battery_gps_home_and_the_reason_for_an_emergency() {
 /// every axis (not "-").
 #[test]
 fn qloiter_shows_the_entry_point_as_its_target() {
-    let mut rec = Recording::new();
+    let mut rec = Recording::with_own_traffic();
     rec.fly(0, 5_000, |_| (18, true, 0.0, 0.0, 0.3, 1.0));
     let mut app = app_with_params();
     render(&mut app, &rec, 5_000, (80, 24));

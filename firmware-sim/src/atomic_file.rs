@@ -1,7 +1,7 @@
 //! Whole-file writes that a crash cannot tear: the twin's parameter and mission files.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed to disk,
 /// then renamed over `path`, so a crash leaves either the old file or the new one.
@@ -15,6 +15,51 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.sync_all()?;
     drop(f);
     std::fs::rename(&tmp, path)
+}
+
+/// A text file of the twin's (parameters, mission) that cannot be read, written or parsed.
+#[derive(Debug, thiserror::Error)]
+pub enum TextFileError {
+    /// Reading or writing failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A line cannot be used.
+    #[error("{path}:{line}: {reason}")]
+    Line {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Reads `path` as UTF-8 text.
+///
+/// # Errors
+/// [`TextFileError::Io`].
+pub fn read_text(path: &Path) -> Result<String, TextFileError> {
+    std::fs::read_to_string(path).map_err(|source| TextFileError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// [`write`] of `text`.
+///
+/// # Errors
+/// [`TextFileError::Io`], of the step that failed.
+pub fn write_text(path: &Path, text: &str) -> Result<(), TextFileError> {
+    write(path, text.as_bytes()).map_err(|source| TextFileError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// The temporary file [`write`] goes through: `.NAME.tmp` in the same directory.

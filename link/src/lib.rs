@@ -28,7 +28,7 @@ pub use mavlink::dialects::ardupilotmega as dialect;
 
 pub use decoder::{DecodeStats, FrameDecoder};
 pub use frame::{
-    Frame, FrameError, FrameSource, RawCommand, RawCommandAck, RawCommandKind,
+    Frame, FrameError, FrameSource, RawCommand, RawCommandAck, RawCommandKind, command_long,
     frame_len_from_prefix, gcs_heartbeat,
 };
 pub use ids::{ComponentId, SystemId};

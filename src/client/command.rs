@@ -102,20 +102,7 @@ impl CommandMachine {
         let confirmation = self.tries;
         self.tries += 1;
         self.deadline = now + retry_wait(self.rto, self.tries);
-        let p = self.params;
-        MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            command: self.command,
-            target_system: self.target.0.0,
-            target_component: self.target.1.0,
-            confirmation,
-        })
+        vtol_link::command_long(self.target, self.command, self.params, confirmation)
     }
 
     fn finish(&mut self, result: MavResult, now: Instant) {

@@ -230,26 +230,33 @@ impl Machine for ParamMachine {
     }
 }
 
+/// The vehicle (1, 1) of the parameter machines' tests.
+#[cfg(test)]
+const TEST_VEHICLE: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
+
+/// A PARAM_VALUE from [`TEST_VEHICLE`], as the parameter machines' tests feed them.
+#[cfg(test)]
+fn test_value(name: &str, v: f32, index: u16, count: u16, ty: MavParamType) -> Inbound {
+    Inbound {
+        sys: TEST_VEHICLE.0,
+        comp: TEST_VEHICLE.1,
+        msg: MavMessage::PARAM_VALUE(apm::PARAM_VALUE_DATA {
+            param_value: v,
+            param_count: count,
+            param_index: index,
+            param_id: name.into(),
+            param_type: ty,
+        }),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
+    const V: (SystemId, ComponentId) = TEST_VEHICLE;
     const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
-
-    fn value(name: &str, v: f32, index: u16, count: u16, ty: MavParamType) -> Inbound {
-        Inbound {
-            sys: V.0,
-            comp: V.1,
-            msg: MavMessage::PARAM_VALUE(apm::PARAM_VALUE_DATA {
-                param_value: v,
-                param_count: count,
-                param_index: index,
-                param_id: name.into(),
-                param_type: ty,
-            }),
-        }
-    }
+    use super::test_value as value;
 
     #[test]
     fn write_is_confirmed_only_by_the_exact_echo() {

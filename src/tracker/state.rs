@@ -111,16 +111,18 @@ impl VehicleView {
         self.link_down || now.duration_since(self.last_heartbeat) >= LINK_TIMEOUT
     }
 
-    /// Its frames per second over the last 2 s.
+    /// One line of its state for a list of vehicles: id, mode, armed, frame rate and loss
+    /// (`1 QHOVER ARMED 50 Hz 0.0%`).
     #[must_use]
-    pub fn rate_hz(&self, now: Instant) -> f64 {
-        self.window.rate_hz(now)
-    }
-
-    /// Its loss in percent over the last 10 s, from its sequence gaps.
-    #[must_use]
-    pub fn loss_pct(&self, now: Instant) -> f64 {
-        self.window.loss_pct(now)
+    pub fn summary(&self, now: Instant) -> String {
+        format!(
+            "{} {} {} {:.0} Hz {:.1}%",
+            self.system_id,
+            self.mode_name(),
+            if self.armed { "ARMED" } else { "disarmed" },
+            self.window.rate_hz(now),
+            self.window.loss_pct(now)
+        )
     }
 
     /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
@@ -206,18 +208,6 @@ impl LinkHealth {
     #[must_use]
     pub fn bytes_per_s(&self, now: Instant) -> f64 {
         self.bytes.rate_hz(now)
-    }
-
-    /// Frames per second over the last 2 s (0 when the link is silent).
-    #[must_use]
-    pub fn rate_hz(&self, now: Instant) -> f64 {
-        self.window.rate_hz(now)
-    }
-
-    /// Loss in percent over the last 10 s, from sequence gaps.
-    #[must_use]
-    pub fn loss_pct(&self, now: Instant) -> f64 {
-        self.window.loss_pct(now)
     }
 
     /// Whether the link has been silent for [`LINK_TIMEOUT`].

@@ -18,40 +18,100 @@ fn hb(mavtype: MavType, autopilot: MavAutopilot, armed: bool) -> MavMessage {
     })
 }
 
-#[test]
-fn a_boot_clock_going_back_is_a_reboot() {
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let beat = hb(
+/// The twin's heartbeat: a tailsitter, armed or not.
+fn vehicle_beat(armed: bool) -> MavMessage {
+    hb(
         MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
         MavAutopilot::MAV_AUTOPILOT_GENERIC,
+        armed,
+    )
+}
+
+/// A ground station's heartbeat.
+fn gcs_beat() -> MavMessage {
+    hb(
+        MavType::MAV_TYPE_GCS,
+        MavAutopilot::MAV_AUTOPILOT_INVALID,
         false,
-    );
-    s.apply(
-        LinkId(1),
-        Side::Vehicle,
-        &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &beat),
-        now,
-    );
-    let attitude = |ms: u32, seq: u8| {
-        let m = MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+    )
+}
+
+/// The vehicle (1, 1) and a ground station (255, 190), as senders.
+const VEHICLE: (u8, u8) = (1, 1);
+const CLIENT: (u8, u8) = (255, 190);
+
+/// A tracker fed frames, by default all at one instant.
+struct Fixture {
+    s: VehicleState,
+    now: Instant,
+}
+
+impl Fixture {
+    fn new() -> Self {
+        Self {
+            s: VehicleState::default(),
+            now: Instant::now(),
+        }
+    }
+
+    /// Applies `msg` sent by `from` under `seq` on `link` at `now`.
+    fn feed(
+        &mut self,
+        link: u32,
+        side: Side,
+        from: (u8, u8),
+        seq: u8,
+        msg: &MavMessage,
+    ) -> Option<MavMessage> {
+        let now = self.now;
+        self.feed_at(link, side, from, seq, msg, now)
+    }
+
+    /// Applies `msg` sent by `from` under `seq` on `link` at `at`.
+    fn feed_at(
+        &mut self,
+        link: u32,
+        side: Side,
+        (sys, comp): (u8, u8),
+        seq: u8,
+        msg: &MavMessage,
+        at: Instant,
+    ) -> Option<MavMessage> {
+        let frame = Frame::encode_v2(SystemId(sys), ComponentId(comp), seq, msg);
+        self.s.apply(LinkId(link), side, &frame, at)
+    }
+
+    fn vehicle(&self, (sys, comp): (u8, u8)) -> &VehicleView {
+        &self.s.vehicles[&(SystemId(sys), ComponentId(comp))]
+    }
+
+    fn link(&self, link: u32) -> &LinkHealth {
+        &self.s.links[&LinkId(link)]
+    }
+}
+
+#[test]
+fn a_boot_clock_going_back_is_a_reboot() {
+    let mut f = Fixture::new();
+    f.feed(1, Side::Vehicle, VEHICLE, 0, &vehicle_beat(false));
+    let attitude = |ms: u32| {
+        MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
             time_boot_ms: ms,
             ..Default::default()
-        });
-        Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &m)
+        })
     };
     for (seq, ms) in [10_000, 10_050, 10_050, 10_100].into_iter().enumerate() {
-        s.apply(LinkId(1), Side::Vehicle, &attitude(ms, seq as u8), now);
+        f.feed(1, Side::Vehicle, VEHICLE, seq as u8, &attitude(ms));
     }
-    let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+    let v = f.vehicle(VEHICLE);
     assert_eq!(
         (v.reboots, v.last_reboot),
         (0, None),
         "equal or rising times"
     );
-    s.apply(LinkId(1), Side::Vehicle, &attitude(1_520, 9), now);
-    s.apply(LinkId(1), Side::Vehicle, &attitude(1_570, 10), now);
-    let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+    f.feed(1, Side::Vehicle, VEHICLE, 9, &attitude(1_520));
+    f.feed(1, Side::Vehicle, VEHICLE, 10, &attitude(1_570));
+    let v = f.vehicle(VEHICLE);
     assert_eq!(v.reboots, 1);
     let r = v.last_reboot.unwrap();
     assert_eq!((r.before_ms, r.after_ms), (10_100, 1_520));
@@ -59,37 +119,11 @@ fn a_boot_clock_going_back_is_a_reboot() {
 
 #[test]
 fn vehicle_found_by_heartbeat_and_gcs_ignored() {
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let gcs = hb(
-        MavType::MAV_TYPE_GCS,
-        MavAutopilot::MAV_AUTOPILOT_INVALID,
-        false,
-    );
-    s.apply(
-        LinkId(1),
-        Side::Client,
-        &Frame::encode_v2(
-            vtol_link::SystemId(255),
-            vtol_link::ComponentId(190),
-            0,
-            &gcs,
-        ),
-        now,
-    );
-    assert!(s.vehicles.is_empty());
-    let v = hb(
-        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        true,
-    );
-    s.apply(
-        LinkId(2),
-        Side::Vehicle,
-        &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0, &v),
-        now,
-    );
-    let view = &s.vehicles[&(SystemId(1), ComponentId(1))];
+    let mut f = Fixture::new();
+    f.feed(1, Side::Client, CLIENT, 0, &gcs_beat());
+    assert!(f.s.vehicles.is_empty());
+    f.feed(2, Side::Vehicle, VEHICLE, 0, &vehicle_beat(true));
+    let view = f.vehicle(VEHICLE);
     assert!(view.armed);
     assert_eq!(view.mode_name(), "QHOVER");
 }
@@ -98,143 +132,82 @@ fn vehicle_found_by_heartbeat_and_gcs_ignored() {
 fn a_restart_on_a_link_that_stays_up_is_no_loss() {
     // A twin restarted behind a UDP link (which never goes down): its sequence starts at 0
     // again, and a client's first two frames both carry 0. Neither is a wrap of 255 lost.
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let v = hb(
-        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        false,
-    );
-    let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
-    let client = (vtol_link::SystemId(255), vtol_link::ComponentId(190));
+    let mut f = Fixture::new();
+    let v = vehicle_beat(false);
+    let other = gcs_beat();
     let frames = [
-        (vehicle, 0u8),
-        (vehicle, 1),
-        (vehicle, 2),
-        (vehicle, 0),
-        (vehicle, 1),
+        (VEHICLE, 0u8),
+        (VEHICLE, 1),
+        (VEHICLE, 2),
+        (VEHICLE, 0),
+        (VEHICLE, 1),
     ];
-    let client_frames = [(client, 0u8), (client, 0), (client, 1)];
-    let other = hb(
-        MavType::MAV_TYPE_GCS,
-        MavAutopilot::MAV_AUTOPILOT_INVALID,
-        false,
-    );
+    let client_frames = [(CLIENT, 0u8), (CLIENT, 0), (CLIENT, 1)];
     // The restart comes a second later, and the client's two frames differ: identical
     // frames under one number within moments of each other are one datagram repeated.
-    for (k, ((sys, comp), seq)) in frames.into_iter().chain(client_frames).enumerate() {
-        let at = now + Duration::from_secs(u64::from(k >= 3));
+    for (k, (from, seq)) in frames.into_iter().chain(client_frames).enumerate() {
+        let at = f.now + Duration::from_secs(u64::from(k >= 3));
         let msg = if k == 6 { &other } else { &v };
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(sys, comp, seq, msg),
-            at,
-        );
+        f.feed_at(1, Side::Vehicle, from, seq, msg, at);
     }
-    assert_eq!(s.links[&LinkId(1)].lost, 0);
-    assert_eq!(s.links[&LinkId(1)].frames, 8);
+    assert_eq!(f.link(1).lost, 0);
+    assert_eq!(f.link(1).frames, 8);
 }
 
 #[test]
 fn late_frames_are_no_loss_and_repeated_ones_count_once() {
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let v = hb(
-        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        false,
-    );
-    let vehicle = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
+    let mut f = Fixture::new();
+    let v = vehicle_beat(false);
     // 1 overtaken by 2, 2 and 4 repeated, 5 lost.
     for (k, seq) in [0u8, 2, 1, 2, 3, 4, 4, 6].into_iter().enumerate() {
-        let applied = s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(vehicle.0, vehicle.1, seq, &v),
-            now,
-        );
+        let applied = f.feed(1, Side::Vehicle, VEHICLE, seq, &v);
         assert_eq!(applied.is_none(), k == 3 || k == 6, "frame {k}");
     }
-    let h = &s.links[&LinkId(1)];
+    let now = f.now;
+    let h = f.link(1);
     assert_eq!((h.frames, h.lost), (6, 1));
-    assert!((h.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
-    let view = &s.vehicles[&vehicle];
+    assert!((h.window.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
+    let view = f.vehicle(VEHICLE);
     assert_eq!((view.frames, view.lost), (6, 1));
     assert!((view.window.loss_pct(now) - 100.0 / 7.0).abs() < 1e-9);
 }
 
 #[test]
 fn sequence_gaps_count_as_loss() {
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let v = hb(
-        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        false,
-    );
+    let mut f = Fixture::new();
+    let v = vehicle_beat(false);
     for seq in [250u8, 251, 253, 254, 255, 0, 3] {
-        s.apply(
-            LinkId(1),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), seq, &v),
-            now,
-        );
+        f.feed(1, Side::Vehicle, VEHICLE, seq, &v);
     }
-    let h = &s.links[&LinkId(1)];
+    let h = f.link(1);
     assert_eq!(h.frames, 7);
     assert_eq!(h.lost, 3);
-    assert!((h.loss_pct(now) - 30.0).abs() < 1e-9);
+    assert!((h.window.loss_pct(f.now) - 30.0).abs() < 1e-9);
     // Once the link goes down and comes back (a reconnect keeps its id), the gap is not
     // loss.
-    s.retain_links(&[]);
-    s.retain_links(&[LinkId(1)]);
-    s.apply(
-        LinkId(1),
-        Side::Vehicle,
-        &Frame::encode_v2(vtol_link::SystemId(1), vtol_link::ComponentId(1), 100, &v),
-        now,
-    );
-    assert_eq!(s.links[&LinkId(1)].lost, 0);
+    f.s.retain_links(&[]);
+    f.s.retain_links(&[LinkId(1)]);
+    f.feed(1, Side::Vehicle, VEHICLE, 100, &v);
+    assert_eq!(f.link(1).lost, 0);
 }
 
 #[test]
 fn a_vehicle_whose_link_goes_down_is_lost_at_once_and_back_with_its_next_heartbeat() {
-    let mut s = VehicleState::default();
-    let now = Instant::now();
-    let v = hb(
-        MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        false,
-    );
+    let mut f = Fixture::new();
+    let v = vehicle_beat(false);
     for (link, sys) in [(1, 1), (2, 2)] {
-        s.apply(
-            LinkId(link),
-            Side::Vehicle,
-            &Frame::encode_v2(vtol_link::SystemId(sys), vtol_link::ComponentId(1), 0, &v),
-            now,
-        );
+        f.feed(link, Side::Vehicle, (sys, 1), 0, &v);
     }
-    s.forget_link(LinkId(2));
+    f.s.forget_link(LinkId(2));
     // A heartbeat of link 2 still on its way to the tracker is stale: 2 stays lost.
-    s.apply(
-        LinkId(2),
-        Side::Vehicle,
-        &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 1, &v),
-        now,
-    );
-    let lost =
-        |s: &VehicleState, sys: u8| s.vehicles[&(SystemId(sys), ComponentId(1))].is_lost(now);
-    assert!(!lost(&s, 1));
-    assert!(lost(&s, 2));
-    assert!(!s.vehicle_lost(now));
-    s.apply(
-        LinkId(3),
-        Side::Vehicle,
-        &Frame::encode_v2(vtol_link::SystemId(2), vtol_link::ComponentId(1), 2, &v),
-        now,
-    );
-    assert!(!lost(&s, 2));
+    f.feed(2, Side::Vehicle, (2, 1), 1, &v);
+    let now = f.now;
+    let lost = |f: &Fixture, sys: u8| f.vehicle((sys, 1)).is_lost(now);
+    assert!(!lost(&f, 1));
+    assert!(lost(&f, 2));
+    assert!(!f.s.vehicle_lost(now));
+    f.feed(3, Side::Vehicle, (2, 1), 2, &v);
+    assert!(!lost(&f, 2));
 }
 
 #[test]

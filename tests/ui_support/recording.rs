@@ -16,6 +16,8 @@ use vtol_link::{ComponentId, Frame, LinkId, LinkStatsSnapshot, SystemId};
 
 /// The link every recorded vehicle frame comes on.
 pub const VEHICLE_LINK: LinkId = LinkId(1);
+/// The link of the daemon's own client, in a recording [`Recording::with_own_traffic`].
+pub const OWN_LINK: LinkId = LinkId(2);
 
 /// The tracker state and history after frames applied at known times.
 pub struct Recording {
@@ -26,6 +28,7 @@ pub struct Recording {
     /// The history the charts read.
     pub history: History,
     seq: [u8; 256],
+    own_traffic: bool,
 }
 
 impl Default for Recording {
@@ -44,6 +47,17 @@ impl Recording {
             state: VehicleState::new(t0),
             history: History::new(t0),
             seq: [0; 256],
+            own_traffic: false,
+        }
+    }
+
+    /// Nothing recorded yet; [`Recording::fly`] also records the daemon's own client's 1 Hz
+    /// heartbeat on [`OWN_LINK`].
+    #[must_use]
+    pub fn with_own_traffic() -> Self {
+        Self {
+            own_traffic: true,
+            ..Self::new()
         }
     }
 
@@ -68,6 +82,19 @@ impl Recording {
         self.feed_from(1, ms, msg);
     }
 
+    /// Applies the daemon's own client's heartbeat (255, 190) at `ms`, on [`OWN_LINK`].
+    pub fn feed_gcs(&mut self, ms: u64) {
+        let frame = Frame::encode_v2(
+            SystemId(255),
+            ComponentId(190),
+            (ms / 1000) as u8,
+            &vtol_link::gcs_heartbeat(),
+        );
+        let now = self.at(ms);
+        let decoded = self.state.apply(OWN_LINK, Side::Client, &frame, now);
+        self.history.record(&frame, decoded.as_ref(), now);
+    }
+
     /// Vehicle 1 from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
     /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
     pub fn fly(
@@ -81,6 +108,9 @@ impl Recording {
             let (mode, armed, roll, pitch, yaw, alt) = f(ms as f64 / 1000.0);
             if ms.is_multiple_of(1000) {
                 self.feed(ms, &heartbeat(mode, armed));
+                if self.own_traffic {
+                    self.feed_gcs(ms);
+                }
             }
             self.feed(
                 ms,
@@ -138,7 +168,6 @@ impl Recording {
 
     /// Renders one whole frame at `at_ms` on a `size` terminal.
     pub fn render(&self, app: &mut App, at_ms: u64, size: (u16, u16)) -> String {
-        let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
         let vehicle = self.state.links.get(&VEHICLE_LINK);
         let links = vec![LinkRow {
             id: VEHICLE_LINK,
@@ -169,17 +198,46 @@ impl Recording {
             }),
             serving: vec!["tcpin:127.0.0.1:5770".into()],
         };
-        let mut cache = SeriesCache::default();
-        terminal
-            .draw(|f| view::draw(f, app, &snap, &mut cache))
-            .expect("draw");
-        format!("{}", terminal.backend())
+        draw_snapshot(app, &snap, size)
     }
 }
 
-/// A tailsitter's heartbeat in ArduPlane mode `mode`.
+/// One whole frame of `snap` drawn by `app` on a `size` terminal, as text.
+#[must_use]
+pub fn draw_snapshot(app: &mut App, snap: &Snapshot, size: (u16, u16)) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
+    let mut cache = SeriesCache::default();
+    terminal
+        .draw(|f| view::draw(f, app, snap, &mut cache))
+        .expect("draw");
+    format!("{}", terminal.backend())
+}
+
+/// A tailsitter's heartbeat in ArduPlane mode `mode`, from an ArduPilot autopilot: active when
+/// armed, standing by otherwise.
 #[must_use]
 pub fn heartbeat(mode: u32, armed: bool) -> MavMessage {
+    let status = if armed {
+        MavState::MAV_STATE_ACTIVE
+    } else {
+        MavState::MAV_STATE_STANDBY
+    };
+    tailsitter_heartbeat(
+        mode,
+        armed,
+        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        status,
+    )
+}
+
+/// A tailsitter's heartbeat in ArduPlane mode `mode` from `autopilot` in state `status`.
+#[must_use]
+pub fn tailsitter_heartbeat(
+    mode: u32,
+    armed: bool,
+    autopilot: MavAutopilot,
+    system_status: MavState,
+) -> MavMessage {
     let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
     if armed {
         base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
@@ -187,13 +245,9 @@ pub fn heartbeat(mode: u32, armed: bool) -> MavMessage {
     MavMessage::HEARTBEAT(dialect::HEARTBEAT_DATA {
         custom_mode: mode,
         mavtype: MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        autopilot,
         base_mode,
-        system_status: if armed {
-            MavState::MAV_STATE_ACTIVE
-        } else {
-            MavState::MAV_STATE_STANDBY
-        },
+        system_status,
         mavlink_version: 3,
     })
 }

@@ -85,20 +85,14 @@ pub(super) fn decode(out: &[Outbound]) -> Vec<apm::MavMessage> {
         .collect()
 }
 
+/// A COMMAND_LONG to the twin (system 1, any component).
 pub(super) fn command_long(command: apm::MavCmd, p: [f32; 7], confirmation: u8) -> apm::MavMessage {
-    apm::MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
-        param1: p[0],
-        param2: p[1],
-        param3: p[2],
-        param4: p[3],
-        param5: p[4],
-        param6: p[5],
-        param7: p[6],
+    vtol_link::command_long(
+        (vtol_link::SystemId(1), vtol_link::ComponentId(0)),
         command,
-        target_system: 1,
-        target_component: 0,
+        p,
         confirmation,
-    })
+    )
 }
 
 /// (command, result) of every COMMAND_ACK, read from raw bytes (unknown ids do not decode).

@@ -414,28 +414,8 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
     Ok(())
 }
 
-/// A mission file that cannot be used.
-#[derive(Debug, thiserror::Error)]
-pub enum MissionFileError {
-    /// Reading or writing failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// A line is not a mission item.
-    #[error("{path}:{line}: {reason}")]
-    Line {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong.
-        reason: String,
-    },
-}
+/// A mission file that cannot be used: unreadable, or a line that is not a mission item.
+pub type MissionFileError = crate::atomic_file::TextFileError;
 
 /// The header of the `QGC WPL 110` format.
 pub const WPL_HEADER: &str = "QGC WPL 110";
@@ -504,7 +484,7 @@ impl Mission {
     /// numbered 0, 1, 2… in order.
     ///
     /// # Errors
-    /// [`MissionFileError::Line`] naming the first bad line.
+    /// [`TextFileError::Line`](crate::atomic_file::TextFileError::Line) naming the first bad line.
     pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
         let err = |line: usize, reason: String| MissionFileError::Line {
             path: path.to_owned(),
@@ -593,24 +573,16 @@ impl Mission {
     /// # Errors
     /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, MissionFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MissionFileError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = crate::atomic_file::read_text(path)?;
         Self::from_wpl_str(&text, path)
     }
 
     /// Writes the mission atomically (a temporary file in the same directory, flushed, renamed).
     ///
     /// # Errors
-    /// [`MissionFileError::Io`].
+    /// [`TextFileError::Io`](crate::atomic_file::TextFileError::Io).
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
-        crate::atomic_file::write(path, self.to_wpl_string().as_bytes()).map_err(|source| {
-            MissionFileError::Io {
-                path: path.to_owned(),
-                source,
-            }
-        })
+        crate::atomic_file::write_text(path, &self.to_wpl_string())
     }
 }
 
@@ -628,11 +600,13 @@ pub fn file_beside(param_file: &Path) -> PathBuf {
     }
 }
 
+/// What the mission's and the navigator's tests build missions from.
 #[cfg(test)]
-mod tests {
+pub(crate) mod test_items {
     use super::*;
 
-    fn limits() -> Limits {
+    /// A 100 m radius and 50 m ceiling around home at the origin, near Canberra.
+    pub fn limits() -> Limits {
         Limits {
             origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
             home_ned_m: Vector3::zeros(),
@@ -641,17 +615,28 @@ mod tests {
         }
     }
 
-    fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
+    /// An item `command` at (`x`, `y`, `alt`) relative to home, auto-continuing.
+    pub fn item(command: u16, params: [f32; 4], x: i32, y: i32, alt: f32) -> MissionItem {
         MissionItem {
-            params: [0.0, 0.0, 0.0, f32::NAN],
-            x: lat_e7,
-            y: lon_e7,
+            params,
+            x,
+            y,
             z: alt,
             command,
             frame: frame::GLOBAL_RELATIVE_ALT_INT,
             current: 0,
             autocontinue: 1,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_items::limits;
+    use super::*;
+
+    fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
+        test_items::item(command, [0.0, 0.0, 0.0, f32::NAN], lat_e7, lon_e7, alt)
     }
 
     #[test]

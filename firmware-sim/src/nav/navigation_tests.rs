@@ -1,17 +1,8 @@
 //! The navigator's unit tests: take-off, AUTO missions, landing items, GUIDED holds.
 
 use super::*;
-use crate::nav::globe::Origin;
-use crate::nav::mission::{MissionItem, frame};
-
-fn limits() -> Limits {
-    Limits {
-        origin: Origin::from_degrees(-35.363_261, 149.165_230, 584.0),
-        home_ned_m: Vector3::zeros(),
-        radius_max_m: 100.0,
-        alt_max_m: 50.0,
-    }
-}
+use crate::nav::mission::MissionItem;
+use crate::nav::mission::test_items::{self, limits};
 
 struct World {
     nav: Navigator,
@@ -114,16 +105,12 @@ impl World {
 fn item(command: u16, north_m: f64, alt: f32, hold: f32) -> MissionItem {
     let l = limits();
     let p = l.origin.to_global(&Vector3::new(north_m, 0.0, 0.0));
-    MissionItem {
-        params: [hold, 0.0, 0.0, 0.0],
-        x: if north_m == 0.0 { 0 } else { p.lat_e7 },
-        y: if north_m == 0.0 { 0 } else { p.lon_e7 },
-        z: alt,
-        command,
-        frame: frame::GLOBAL_RELATIVE_ALT_INT,
-        current: 0,
-        autocontinue: 1,
-    }
+    let (x, y) = if north_m == 0.0 {
+        (0, 0)
+    } else {
+        (p.lat_e7, p.lon_e7)
+    };
+    test_items::item(command, [hold, 0.0, 0.0, 0.0], x, y, alt)
 }
 
 #[test]

@@ -29,6 +29,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::atomic_file::TextFileError;
 use crate::model::control::forward_gains::ForwardGains;
 use crate::model::control::position::{HoverHoldGains, HoverLaw};
 use crate::model::control::tecs::TecsLimits;
@@ -307,24 +308,10 @@ impl ParamError {
 /// A `.parm` file that cannot be used. Loading never silently falls back to defaults.
 #[derive(Debug, thiserror::Error)]
 pub enum ParamFileError {
-    /// Reading or writing failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// A line is not `NAME VALUE`, names an unknown parameter, or holds a refused value.
-    #[error("{path}:{line}: {reason}")]
-    Line {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong.
-        reason: String,
-    },
+    /// Reading or writing failed, or a line is not `NAME VALUE`, names an unknown parameter,
+    /// or holds a refused value.
+    #[error(transparent)]
+    File(#[from] TextFileError),
     /// The values are individually fine but break a constraint together.
     #[error("{path}: {source}")]
     Gains {
@@ -552,13 +539,15 @@ impl Params {
     /// MAVProxy skips its `exclude_load` names). Anything else is an error naming the line.
     ///
     /// # Errors
-    /// [`ParamFileError::Line`] or [`ParamFileError::Gains`].
+    /// [`ParamFileError::File`] (a line) or [`ParamFileError::Gains`].
     pub fn from_parm_str(text: &str, path: &Path) -> Result<Self, ParamFileError> {
         let mut params = Self::new();
-        let line_err = |line: usize, reason: String| ParamFileError::Line {
-            path: path.to_owned(),
-            line,
-            reason,
+        let line_err = |line: usize, reason: String| {
+            ParamFileError::from(TextFileError::Line {
+                path: path.to_owned(),
+                line,
+                reason,
+            })
         };
         let mut seen = BTreeMap::new();
         for (n, raw) in text.lines().enumerate() {
@@ -607,10 +596,7 @@ impl Params {
     /// # Errors
     /// I/O errors and everything [`Params::from_parm_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, ParamFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ParamFileError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = crate::atomic_file::read_text(path)?;
         Self::from_parm_str(&text, path)
     }
 
@@ -618,14 +604,12 @@ impl Params {
     /// then renamed over `path`, so a crash never leaves a half-written file.
     ///
     /// # Errors
-    /// [`ParamFileError::Io`].
+    /// [`ParamFileError::File`].
     pub fn save(&self, path: &Path) -> Result<(), ParamFileError> {
-        crate::atomic_file::write(path, self.to_parm_string().as_bytes()).map_err(|source| {
-            ParamFileError::Io {
-                path: path.to_owned(),
-                source,
-            }
-        })
+        Ok(crate::atomic_file::write_text(
+            path,
+            &self.to_parm_string(),
+        )?)
     }
 }
 

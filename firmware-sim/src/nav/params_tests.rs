@@ -152,7 +152,7 @@ fn save_is_atomic_and_loads_back() {
     assert_eq!(leftovers.len(), 1, "no temporary file left behind");
     assert!(matches!(
         Params::load(&dir.path().join("missing.parm")),
-        Err(ParamFileError::Io { .. })
+        Err(ParamFileError::File(TextFileError::Io { .. }))
     ));
 }
 

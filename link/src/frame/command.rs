@@ -166,3 +166,28 @@ pub fn gcs_heartbeat() -> MavMessage {
         mavlink_version: 3,
     })
 }
+
+/// A COMMAND_LONG of `command` with `params` (param1..param7) to `target` (system, component),
+/// its `confirmation` the number of sends before it (0 for the first).
+#[must_use]
+pub fn command_long(
+    target: (SystemId, ComponentId),
+    command: crate::dialect::MavCmd,
+    params: [f32; 7],
+    confirmation: u8,
+) -> MavMessage {
+    let [param1, param2, param3, param4, param5, param6, param7] = params;
+    MavMessage::COMMAND_LONG(crate::dialect::COMMAND_LONG_DATA {
+        param1,
+        param2,
+        param3,
+        param4,
+        param5,
+        param6,
+        param7,
+        command,
+        target_system: target.0.0,
+        target_component: target.1.0,
+        confirmation,
+    })
+}

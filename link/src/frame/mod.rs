@@ -21,7 +21,7 @@ use crate::dialect::MavMessage;
 use crate::ids::{ComponentId, SystemId};
 use crate::protocol::id;
 
-pub use command::{RawCommand, RawCommandAck, RawCommandKind, gcs_heartbeat};
+pub use command::{RawCommand, RawCommandAck, RawCommandKind, command_long, gcs_heartbeat};
 use dialect::dialect_table;
 pub use dialect::{crc_extra, frame_crc, frame_len_from_prefix, known_message_ids, message_name};
 pub use source::FrameSource;

@@ -12,21 +12,12 @@ use vtol_link::dialect::MavParamType;
 
 use super::*;
 
-const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
+const V: (SystemId, ComponentId) = super::super::TEST_VEHICLE;
 const F32: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
 
+/// A float PARAM_VALUE from the vehicle.
 fn value(name: &str, v: f32, index: u16, count: u16) -> Inbound {
-    Inbound {
-        sys: V.0,
-        comp: V.1,
-        msg: MavMessage::PARAM_VALUE(apm::PARAM_VALUE_DATA {
-            param_value: v,
-            param_count: count,
-            param_index: index,
-            param_id: name.into(),
-            param_type: F32,
-        }),
-    }
+    super::super::test_value(name, v, index, count, F32)
 }
 
 fn indexed(i: u16, count: u16) -> Inbound {

@@ -58,8 +58,8 @@ fn fleet_row(snap: &Snapshot<'_>, v: &VehicleView, shown: bool) -> Row<'static> 
         ("-".to_owned(), "-".to_owned(), "-".to_owned())
     } else {
         (
-            format!("{:.0}", v.rate_hz(now)),
-            format!("{:.1}", v.loss_pct(now)),
+            format!("{:.0}", v.window.rate_hz(now)),
+            format!("{:.1}", v.window.loss_pct(now)),
             battery(snap, v),
         )
     };

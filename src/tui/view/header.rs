@@ -85,8 +85,8 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         if let Some(h) = snap.state.links.get(&l.id) {
             spans.push(Span::raw(format!(
                 " │ {:.0} Hz {:.1}% loss",
-                h.rate_hz(now),
-                h.loss_pct(now)
+                h.window.rate_hz(now),
+                h.window.loss_pct(now)
             )));
         }
     }
@@ -279,14 +279,7 @@ pub(super) fn vehicle_list_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> 
                         .as_secs_f64()
                 )
             } else {
-                format!(
-                    " {} {} {} {:.0} Hz {:.1}% ",
-                    v.system_id,
-                    v.mode_name(),
-                    if v.armed { "ARMED" } else { "disarmed" },
-                    v.rate_hz(now),
-                    v.loss_pct(now)
-                )
+                format!(" {} ", v.summary(now))
             };
             let mut style = if v.is_lost(now) {
                 Style::new().fg(Color::Red)

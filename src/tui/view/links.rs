@@ -40,8 +40,8 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             let h = snap.state.links.get(&l.id);
             let (rate, loss, heard, lost) = match h {
                 Some(h) => (
-                    format!("{:.1}", h.rate_hz(now)),
-                    format!("{:.1}", h.loss_pct(now)),
+                    format!("{:.1}", h.window.rate_hz(now)),
+                    format!("{:.1}", h.window.loss_pct(now)),
                     format!(
                         "{:.1} s",
                         now.saturating_duration_since(h.last_heard).as_secs_f64()

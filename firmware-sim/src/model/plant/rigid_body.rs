@@ -25,9 +25,16 @@ impl EulerTrig {
     /// The trigonometric functions of `e`.
     #[must_use]
     pub fn new(e: &Euler) -> Self {
-        let (sps, cps) = e.psi.sin_cos();
-        let (sth, cth) = e.theta.sin_cos();
-        let (sph, cph) = e.phi.sin_cos();
+        Self::from_sin_cos(e.psi.sin_cos(), e.theta.sin_cos(), e.phi.sin_cos())
+    }
+
+    /// From the (sine, cosine) of ψ, θ and φ.
+    #[inline]
+    fn from_sin_cos(
+        (sps, cps): (f64, f64),
+        (sth, cth): (f64, f64),
+        (sph, cph): (f64, f64),
+    ) -> Self {
         Self {
             sps,
             cps,
@@ -54,17 +61,11 @@ impl EulerTrig {
         }
         // One branch for all three angles, so the common path is straight-line arithmetic.
         let short = largest <= SHIFT_SHORT_MAX_RAD;
-        let (sps, cps) = shift(self.sps, self.cps, d[0], short);
-        let (sth, cth) = shift(self.sth, self.cth, d[1], short);
-        let (sph, cph) = shift(self.sph, self.cph, d[2], short);
-        Self {
-            sps,
-            cps,
-            sth,
-            cth,
-            sph,
-            cph,
-        }
+        Self::from_sin_cos(
+            shift(self.sps, self.cps, d[0], short),
+            shift(self.sth, self.cth, d[1], short),
+            shift(self.sph, self.cph, d[2], short),
+        )
     }
 
     /// [`EulerTrig::new`] out of line: the rare fallback of [`EulerTrig::shifted`].

@@ -30,12 +30,7 @@ pub fn free_stream_lifts(
     act: &ActuatorCommand,
 ) -> SurfaceLifts {
     let vs_sq = axial_speed_sq(v_air_body_m_s);
-    let cl = af.lift_slope_per_rad;
-    SurfaceLifts {
-        elevator_n: af.k_elevator_kg_m * cl * vs_sq * act.elevator_rad,
-        aileron_left_n: af.k_aileron_kg_m * cl * vs_sq * act.aileron_left_rad,
-        aileron_right_n: af.k_aileron_kg_m * cl * vs_sq * act.aileron_right_rad,
-    }
+    surfaces::lifts_in(af, act, [vs_sq; 3])
 }
 
 /// Force and torque of the free stream over the surfaces, in B.

@@ -29,11 +29,19 @@ pub fn lifts(af: &Airframe, act: &ActuatorCommand) -> SurfaceLifts {
     let v2 = af.k_wash_m_per_rad * act.rotor_speed_rad_s[1];
     let (v1_sq, v2_sq) = (v1 * v1, v2 * v2);
     let ve_sq = 0.5 * (v1_sq + v2_sq);
+    lifts_in(af, act, [ve_sq, v2_sq, v1_sq])
+}
+
+/// Signed surface lifts with the squared air speed over the elevator, the left and the right
+/// aileron, m²/s²: L = k C_L υ² δ for each.
+#[must_use]
+pub fn lifts_in(af: &Airframe, act: &ActuatorCommand, speed_sq: [f64; 3]) -> SurfaceLifts {
     let cl = af.lift_slope_per_rad;
+    let [elevator_sq, left_sq, right_sq] = speed_sq;
     SurfaceLifts {
-        elevator_n: af.k_elevator_kg_m * cl * ve_sq * act.elevator_rad,
-        aileron_left_n: af.k_aileron_kg_m * cl * v2_sq * act.aileron_left_rad,
-        aileron_right_n: af.k_aileron_kg_m * cl * v1_sq * act.aileron_right_rad,
+        elevator_n: af.k_elevator_kg_m * cl * elevator_sq * act.elevator_rad,
+        aileron_left_n: af.k_aileron_kg_m * cl * left_sq * act.aileron_left_rad,
+        aileron_right_n: af.k_aileron_kg_m * cl * right_sq * act.aileron_right_rad,
     }
 }
 
