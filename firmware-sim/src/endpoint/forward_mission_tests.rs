@@ -4,10 +4,12 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_INT_ID, item_payload};
-use super::test_support::{acks, decode, item, param_set, raw_command, v2};
+use super::test_support::{
+    acks, decode, home_and_vtol_takeoff, item, param_set, raw_command, transition_to_fw, v2,
+};
 use super::*;
 use crate::model::mode::{FlightMode, VtolState};
-use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
+use crate::nav::mission::{MissionItem, cmd as mcmd};
 
 const GCS: LinkKey = LinkKey(1);
 
@@ -81,19 +83,11 @@ const RECT_SHORT_M: f64 = 150.0;
 /// Home, a VTOL take-off to 20 m, the transition, a 400 m × 150 m rectangle of fixed-wing
 /// waypoints back to home, a VTOL landing inside it.
 fn rectangle_mission() -> Vec<MissionItem> {
-    let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
-    transition.params[0] = 4.0;
-    transition.frame = frame::MISSION;
-    transition.x = 0;
-    transition.y = 0;
+    let [home, takeoff] = home_and_vtol_takeoff(20.0);
     vec![
-        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        MissionItem {
-            x: 0,
-            y: 0,
-            ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 20.0)
-        },
-        transition,
+        home,
+        takeoff,
+        transition_to_fw(),
         item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, 0.0, 20.0),
         item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, RECT_SHORT_M, 20.0),
         item(mcmd::NAV_WAYPOINT, 0.0, RECT_SHORT_M, 20.0),
@@ -226,21 +220,15 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
 #[test]
 fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
-    let mut transition = item(mcmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0);
-    transition.params[0] = 4.0;
-    transition.frame = frame::MISSION;
     let mut loiter = item(mcmd::NAV_LOITER_TIME, -100.0, 0.0, 20.0);
     loiter.params[0] = 20.0;
+    let [home, takeoff] = home_and_vtol_takeoff(20.0);
     upload(
         &mut ep,
         &[
-            item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-            MissionItem {
-                x: 0,
-                y: 0,
-                ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 20.0)
-            },
-            transition,
+            home,
+            takeoff,
+            transition_to_fw(),
             loiter,
             item(mcmd::NAV_WAYPOINT, -200.0, 100.0, 20.0),
         ],

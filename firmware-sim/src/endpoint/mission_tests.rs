@@ -4,7 +4,7 @@
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_item};
-use super::test_support::{each, from_gcs, item, raw_command, run_until};
+use super::test_support::{each, from_gcs, home_and_vtol_takeoff, item, raw_command, run_until};
 use super::*;
 use crate::model::mode::FlightMode;
 use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
@@ -127,13 +127,10 @@ fn item_frame(seq: u16, it: &MissionItem) -> Frame {
 fn flight_plan() -> Vec<MissionItem> {
     let mut loiter = item(mcmd::NAV_LOITER_TIME, 3.0, 2.0, 2.0);
     loiter.params[0] = 1.0;
+    let [home, takeoff] = home_and_vtol_takeoff(2.0);
     vec![
-        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        MissionItem {
-            x: 0,
-            y: 0,
-            ..item(mcmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, 2.0)
-        },
+        home,
+        takeoff,
         item(mcmd::NAV_WAYPOINT, 3.0, 0.0, 2.5),
         loiter,
         item(mcmd::NAV_VTOL_LAND, 0.0, 2.0, 0.0),

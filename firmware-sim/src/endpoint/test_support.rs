@@ -33,6 +33,31 @@ pub(super) fn item(
     }
 }
 
+/// The start of a VTOL mission: home (item 0) and a VTOL take-off to `alt` m where it stands.
+pub(super) fn home_and_vtol_takeoff(alt: f32) -> [crate::nav::mission::MissionItem; 2] {
+    use crate::nav::mission::cmd;
+    [
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        crate::nav::mission::MissionItem {
+            x: 0,
+            y: 0,
+            ..item(cmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, alt)
+        },
+    ]
+}
+
+/// A DO_VTOL_TRANSITION item to forward flight (MAV_VTOL_STATE_FW).
+pub(super) fn transition_to_fw() -> crate::nav::mission::MissionItem {
+    use crate::nav::mission::{cmd, frame};
+    crate::nav::mission::MissionItem {
+        x: 0,
+        y: 0,
+        frame: frame::MISSION,
+        params: [4.0, 0.0, 0.0, f32::NAN],
+        ..item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0)
+    }
+}
+
 pub(super) fn endpoint() -> Endpoint {
     let mut config = EndpointConfig::default();
     config.vehicle.ideal_sensors = true;

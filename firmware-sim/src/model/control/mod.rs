@@ -225,25 +225,23 @@ impl Gains {
             ("Q_PILOT_SPEED_UP", self.climb_max_m_s),
             ("Q_PILOT_SPEED_DN", self.sink_max_m_s),
             ("HOVER_ALT", self.hover_alt_m),
+            ("Q_P_POSXY_P", self.hover.pos_p),
+            ("Q_P_VELXY_P", self.hover.vel_p),
+            ("Q_WP_SPEED", self.hover.speed_max_m_s),
+            ("Q_ANGLE_MAX", self.hover.angle_max_rad),
+            ("HOV_ATT_BW", self.hover.att_bw_rad_s),
+            ("HOV_ATT_ACC", self.hover.att_acc_rad_s2),
+            ("HOV_YAW_ACC", self.hover.yaw_acc_rad_s2),
         ])?;
         self.validate_hover()?;
         // The twin flies one airframe (Table I): the stall speed is checked against it.
         self.forward.validate(&Airframe::default())
     }
 
-    /// The hold's gains: positive, a tilt limit short of the crash tilt, and the cascade's
-    /// cross-checks (`docs/model.md`, "Hover position hold").
+    /// The hold's gains (their signs are checked with the others): a tilt limit short of the
+    /// crash tilt, and the cascade's cross-checks (`docs/model.md`, "Hover position hold").
     fn validate_hover(&self) -> Result<(), GainError> {
         let h = &self.hover;
-        all_positive(&[
-            ("Q_P_POSXY_P", h.pos_p),
-            ("Q_P_VELXY_P", h.vel_p),
-            ("Q_WP_SPEED", h.speed_max_m_s),
-            ("Q_ANGLE_MAX", h.angle_max_rad),
-            ("HOV_ATT_BW", h.att_bw_rad_s),
-            ("HOV_ATT_ACC", h.att_acc_rad_s2),
-            ("HOV_YAW_ACC", h.yaw_acc_rad_s2),
-        ])?;
         for (name, v) in [
             ("Q_P_VELXY_I", h.vel_i),
             ("Q_P_VELXY_IMAX", h.vel_imax_m_s2),
