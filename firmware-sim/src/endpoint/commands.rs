@@ -151,25 +151,55 @@ impl From<&RawCommand> for Command {
 /// The last command done per sender, to answer retries without acting twice.
 #[derive(Debug, Clone, Default)]
 pub struct CommandMemory {
-    /// (sender sysid, sender compid, command) → (result, sim time done).
-    last: std::collections::HashMap<(u8, u8, u16), (u8, u64)>,
+    /// (sender sysid, sender compid, command) → (its parameters' bits, result, sim time done).
+    last: std::collections::HashMap<(u8, u8, u16), Remembered>,
+}
+
+/// A command done: a retransmission is the same command with the same parameters.
+#[derive(Debug, Clone, Copy)]
+struct Remembered {
+    params: [u32; 7],
+    result: u8,
+    at_us: u64,
+}
+
+/// The parameters' bits, so NaN ("unchanged") compares equal to itself.
+fn param_bits(c: &Command) -> [u32; 7] {
+    let mut bits = c.params.map(f32::to_bits);
+    if c.is_int {
+        // COMMAND_INT's x and y as sent, not their f32 approximations.
+        bits[4] = c.x as u32;
+        bits[5] = c.y as u32;
+    }
+    bits
 }
 
 impl Endpoint {
     pub(super) fn handle_command(&mut self, link: LinkKey, frame: &Frame, c: &Command) {
         let key = (frame.system_id(), frame.component_id(), c.command);
+        let params = param_bits(c);
         let remembered = self.commands.last.get(&key).copied();
         let result = match remembered {
-            Some((r, at))
-                if c.confirmation > 0 && self.now_us.saturating_sub(at) < RETRY_WINDOW_US =>
+            // Only a retransmission of the command done is answered from memory: a different
+            // command of the same number (a mode change to another mode whose first send was
+            // lost) is acted on.
+            Some(m)
+                if c.confirmation > 0
+                    && m.params == params
+                    && self.now_us.saturating_sub(m.at_us) < RETRY_WINDOW_US =>
             {
-                r
+                m.result
             }
             _ => {
                 let mut follow_up = Vec::new();
                 let mode_before = self.vehicle.telemetry().mode;
                 let r = self.execute(link, c, &mut follow_up);
-                self.commands.last.insert(key, (r, self.now_us));
+                let done = Remembered {
+                    params,
+                    result: r,
+                    at_us: self.now_us,
+                };
+                self.commands.last.insert(key, done);
                 self.ack(link, frame, c.command, r);
                 for msg in follow_up {
                     self.send(link, &msg);

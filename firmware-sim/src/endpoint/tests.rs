@@ -112,6 +112,14 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
         crate::model::mode::FlightMode::QStabilize,
         "not redone"
     );
+    // Another mode whose first send was lost comes with confirmation 1: it is a new command,
+    // acted on, not answered with the remembered result of the mode change before it.
+    let qland = crate::model::mode::FlightMode::QLand;
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&mode(qland.custom_mode() as f32, 1)))),
+        vec![(176, 0)]
+    );
+    assert_eq!(ep.vehicle().telemetry().mode, qland, "acted on");
     // Unknown mode number.
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&mode(3.0, 0)))),
