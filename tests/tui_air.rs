@@ -223,6 +223,18 @@ fn airspeed_angle_of_attack_vtol_state_and_transition_progress() {
     let frame = rec.render(&mut app, 5_000, (80, 24));
     assert!(frame.contains("→FW 75%"), "{frame}");
 
+    // Hovering in still air: the angle of attack is the wind's noise, shown as "-".
+    let mut rec = flight(18);
+    rec.feed(4_960, &hud(0.4));
+    rec.feed(4_960, &aoa(87.0, -40.0));
+    rec.feed(4_960, &ext_state(MavVtolState::MAV_VTOL_STATE_MC));
+    let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert!(frame.contains("MC air 0.4 m/s AoA -"), "{frame}");
+    assert!(
+        frame.contains("Air     0.4 m/s  AoA      -  SSA      -"),
+        "{frame}"
+    );
+
     // Nothing reported: "-" everywhere.
     let rec = flight(18);
     let frame = rec.render(&mut app, 5_000, (80, 24));

@@ -16,6 +16,10 @@ pub const ARSPD_FBW_MIN_DEFAULT: f32 = 10.0;
 /// extended status (1 to 4 Hz), and stops when the mode has none.
 pub const TARGET_FRESH: Duration = Duration::from_secs(3);
 
+/// Below this airspeed the air's angles mean nothing (the relative wind's direction is noise,
+/// and a hovering tailsitter reads about 90° of AoA): AoA and sideslip show as "-".
+pub const AIR_ANGLES_MIN_M_S: f32 = 2.0;
+
 /// Messages read here.
 const VFR_HUD: u32 = 74;
 const EXTENDED_SYS_STATE: u32 = 245;
@@ -54,7 +58,8 @@ impl Vtol {
     }
 }
 
-/// Air data and the VTOL state of one vehicle; `None` for what it does not report.
+/// Air data and the VTOL state of one vehicle; `None` for what it does not report (and the
+/// air's angles below [`AIR_ANGLES_MIN_M_S`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Air {
     /// True airspeed, m/s (VFR_HUD).
@@ -84,7 +89,10 @@ pub fn air(state: &VehicleState, v: &VehicleView, arspd_fbw_min: Option<f32>) ->
     {
         out.airspeed_m_s = Some(h.airspeed);
     }
-    if let Some((MavMessage::AOA_SSA(a), _)) = last(state, v, AOA_SSA) {
+    let too_slow = out.airspeed_m_s.is_some_and(|a| a < AIR_ANGLES_MIN_M_S);
+    if let Some((MavMessage::AOA_SSA(a), _)) = last(state, v, AOA_SSA)
+        && !too_slow
+    {
         out.aoa_deg = Some(a.AOA).filter(|x| x.is_finite());
         out.ssa_deg = Some(a.SSA).filter(|x| x.is_finite());
     }
