@@ -148,6 +148,14 @@ impl FlightMode {
         )
     }
 
+    /// Whether the sticks fly the attitude and the heading rate (QSTABILIZE, QHOVER); every
+    /// other mode flies the position law to a setpoint (its own, the navigator's or the
+    /// fixed-wing modes' in a hover).
+    #[must_use]
+    pub const fn pilot_flies_attitude(self) -> bool {
+        matches!(self, Self::QStabilize | Self::QHover)
+    }
+
     /// Whether the mode holds altitude (and so needs the external position sensor).
     #[must_use]
     pub const fn holds_altitude(self) -> bool {

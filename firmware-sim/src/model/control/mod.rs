@@ -503,65 +503,13 @@ impl Controller {
         let (psi_dot, theta_dot, phi_dot) = (eta_dot[0], eta_dot[1], eta_dot[2]);
 
         // The autonomous modes fly QLOITER's law to the setpoint their navigator chose (the
-        // vehicle passes the law itself as the mode; these arms keep a direct caller safe).
+        // vehicle passes the law itself as the mode; this branch keeps a direct caller safe).
         // `physical` mode flies its position modes on the hover hold (`position`).
-        let hold_flies = model == ModelMode::Physical
-            && gains.hover.law == HoverLaw::Cascade
-            && !matches!(mode, FlightMode::QStabilize | FlightMode::QHover);
-        let (tau_theta, tau_phi) = match mode {
-            FlightMode::QLoiter
-            | FlightMode::QLand
-            | FlightMode::Guided
-            | FlightMode::Auto
-            | FlightMode::QRtl
-            | FlightMode::Rtl
-            | FlightMode::Fbwa
-            | FlightMode::Cruise => {
-                let target = match (mode, self.land_hold_xy_m) {
-                    (FlightMode::QLand, Some(hold)) => hold,
-                    _ => setpoint.xy(),
-                };
-                if hold_flies {
-                    let sp = self.hold.tilt_setpoint(
-                        &gains.hover,
-                        target,
-                        pos.xy(),
-                        vel.xy(),
-                        euler.psi,
-                        g,
-                        dt,
-                    );
-                    self.hold.attitude_tau(
-                        &gains.hover,
-                        sp,
-                        euler.theta,
-                        theta_dot,
-                        euler.phi,
-                        phi_dot,
-                        dt,
-                    )
-                } else {
-                    let mut err = pos.xy() - target;
-                    let mut v = vel.xy();
-                    if model != ModelMode::Paper {
-                        err = chains::to_heading_frame(euler.psi, err);
-                        v = chains::to_heading_frame(euler.psi, v);
-                    }
-                    (
-                        chains::longitudinal_tau(
-                            &gains.longitudinal,
-                            model,
-                            g,
-                            err.x,
-                            v.x,
-                            euler.theta,
-                            theta_dot,
-                        ),
-                        chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                    )
-                }
-            }
-            FlightMode::QStabilize | FlightMode::QHover => (
+        let pilot_attitude = mode.pilot_flies_attitude();
+        let hold_flies =
+            model == ModelMode::Physical && gains.hover.law == HoverLaw::Cascade && !pilot_attitude;
+        let (tau_theta, tau_phi) = if pilot_attitude {
+            (
                 chains::attitude_hold_tau(
                     &gains.longitudinal,
                     ATTITUDE_BANDWIDTH_RAD_S,
@@ -576,28 +524,64 @@ impl Controller {
                     PILOT_TILT_MAX_RAD * pilot.roll,
                     phi_dot,
                 ),
-            ),
+            )
+        } else {
+            let target = match (mode, self.land_hold_xy_m) {
+                (FlightMode::QLand, Some(hold)) => hold,
+                _ => setpoint.xy(),
+            };
+            if hold_flies {
+                let sp = self.hold.tilt_setpoint(
+                    &gains.hover,
+                    target,
+                    pos.xy(),
+                    vel.xy(),
+                    euler.psi,
+                    g,
+                    dt,
+                );
+                self.hold.attitude_tau(
+                    &gains.hover,
+                    sp,
+                    euler.theta,
+                    theta_dot,
+                    euler.phi,
+                    phi_dot,
+                    dt,
+                )
+            } else {
+                let mut err = pos.xy() - target;
+                let mut v = vel.xy();
+                if model != ModelMode::Paper {
+                    err = chains::to_heading_frame(euler.psi, err);
+                    v = chains::to_heading_frame(euler.psi, v);
+                }
+                (
+                    chains::longitudinal_tau(
+                        &gains.longitudinal,
+                        model,
+                        g,
+                        err.x,
+                        v.x,
+                        euler.theta,
+                        theta_dot,
+                    ),
+                    chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
+                )
+            }
         };
 
         // Yaw (45): the pilot modes integrate the stick into the heading target, on a leash.
-        let (psi_target, psi_rate_target) = match mode {
-            FlightMode::QStabilize | FlightMode::QHover => {
-                let rate = PILOT_YAW_RATE_MAX_RAD_S * pilot.yaw;
-                let offset = wrap_pi(self.yaw_offset_rad + rate * dt);
-                let lead =
-                    wrap_pi(yaw_setpoint + offset - euler.psi).clamp(-YAW_LEASH_RAD, YAW_LEASH_RAD);
-                let target = wrap_pi(euler.psi + lead);
-                self.yaw_offset_rad = wrap_pi(target - yaw_setpoint);
-                (target, rate)
-            }
-            FlightMode::QLoiter
-            | FlightMode::QLand
-            | FlightMode::Guided
-            | FlightMode::Auto
-            | FlightMode::QRtl
-            | FlightMode::Rtl
-            | FlightMode::Fbwa
-            | FlightMode::Cruise => (yaw_setpoint, 0.0),
+        let (psi_target, psi_rate_target) = if pilot_attitude {
+            let rate = PILOT_YAW_RATE_MAX_RAD_S * pilot.yaw;
+            let offset = wrap_pi(self.yaw_offset_rad + rate * dt);
+            let lead =
+                wrap_pi(yaw_setpoint + offset - euler.psi).clamp(-YAW_LEASH_RAD, YAW_LEASH_RAD);
+            let target = wrap_pi(euler.psi + lead);
+            self.yaw_offset_rad = wrap_pi(target - yaw_setpoint);
+            (target, rate)
+        } else {
+            (yaw_setpoint, 0.0)
         };
         self.yaw_target_rad = psi_target;
         let tau_psi = if hold_flies {
