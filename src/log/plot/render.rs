@@ -18,12 +18,31 @@ use super::{FONT, PanelGeometry, Points};
 pub const GAP_FACTOR: f64 = 5.0;
 
 const LINE_WIDTH: u32 = 2;
-/// At most this many tick labels on a y axis, and one per this many pixels of height.
-const Y_LABELS: usize = 6;
-const Y_LABEL_PX: u32 = 26;
-/// At most this many on the time axis, one per this many pixels of width.
-const X_LABELS: usize = 10;
-const X_LABEL_PX: u32 = 50;
+/// Tick labels on a y axis: at most 6, one per 26 pixels of height.
+const Y_LABELS: LabelDensity = LabelDensity::new(6, 26);
+/// On the time axis: at most 10, one per 50 pixels of width.
+const X_LABELS: LabelDensity = LabelDensity::new(10, 50);
+
+/// How densely an axis is labelled: at most `most` tick labels, one per `px_each` pixels.
+#[derive(Debug, Clone, Copy)]
+struct LabelDensity {
+    most: usize,
+    px_each: u32,
+}
+
+impl LabelDensity {
+    const fn new(most: usize, px_each: u32) -> Self {
+        Self { most, px_each }
+    }
+
+    /// Labels on an axis of `px` pixels, `taken` of which go to the caption, margins and the
+    /// other axis' labels: at least 2.
+    fn count(self, px: u32, taken: u32) -> usize {
+        usize::try_from(px.saturating_sub(taken) / self.px_each)
+            .unwrap_or(self.most)
+            .clamp(2, self.most)
+    }
+}
 
 /// Splits a series into runs at outages (a step over [`GAP_FACTOR`] × the median step) and,
 /// for angles, where the value wraps (a jump larger than `wrap`).
@@ -287,12 +306,8 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
 ) -> Result<PanelGeometry, DrawingAreaErrorKind<DB::ErrorType>> {
     let (pw, ph) = area.dim_in_pixel();
     // the plotting area is the panel less its caption, margins and label areas
-    let y_labels = usize::try_from(ph.saturating_sub(80) / Y_LABEL_PX)
-        .unwrap_or(Y_LABELS)
-        .clamp(2, Y_LABELS);
-    let x_labels = usize::try_from(pw.saturating_sub(112) / X_LABEL_PX)
-        .unwrap_or(X_LABELS)
-        .clamp(2, X_LABELS);
+    let y_labels = Y_LABELS.count(ph, 80);
+    let x_labels = X_LABELS.count(pw, 112);
     let columns = usize::try_from(pw).unwrap_or(800).max(1);
     let lines: Vec<(Vec<Points>, &Line)> = panel
         .lines
