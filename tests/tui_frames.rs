@@ -12,7 +12,9 @@ use vtol_link::dialect::{self, MavMessage, MavState};
 
 mod ui_support;
 
-use ui_support::recording::{OWN_LINK, Recording, VEHICLE_LINK, draw_snapshot, heartbeat, key};
+use ui_support::recording::{
+    OWN_LINK, Recording, VEHICLE_LINK, app_with, draw_snapshot, heartbeat, key, params_with,
+};
 
 fn links(rec: &Recording) -> Vec<LinkRow> {
     let vehicle = &rec.state.links[&VEHICLE_LINK];
@@ -45,26 +47,6 @@ fn links(rec: &Recording) -> Vec<LinkRow> {
     ]
 }
 
-/// The twin's parameter table, as far as the views use it.
-fn params() -> Vec<(String, f32)> {
-    [
-        ("HOVER_ALT", 1.0),
-        ("LAT_SAT_A", 1.2),
-        ("LAT_SAT_B", 0.6),
-        ("LAT_SAT_C", 0.22),
-        ("LAT_SAT_D", 0.18),
-        ("SERVO1_FUNCTION", 74.0),
-        ("SERVO2_FUNCTION", 73.0),
-        ("SERVO3_FUNCTION", 4.0),
-        ("SERVO4_FUNCTION", 4.0),
-        ("SERVO5_FUNCTION", 19.0),
-        ("SIM_PUSH_ROLL", 0.0),
-    ]
-    .into_iter()
-    .map(|(n, v)| (n.to_owned(), v))
-    .collect()
-}
-
 fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> String {
     let snap = Snapshot {
         now: rec.at(at_ms),
@@ -93,18 +75,15 @@ fn render(app: &mut App, rec: &Recording, at_ms: u64, size: (u16, u16)) -> Strin
     draw_snapshot(app, &snap, size)
 }
 
+/// A UI with the twin's parameter table as the parameter frames show it: with all four
+/// lateral saturation levels.
 fn app_with_params() -> App {
-    let mut app = App::default();
-    app.on_outcome(Outcome::Params(params()));
-    app
+    app_with(params_with(&[("LAT_SAT_C", 0.22), ("LAT_SAT_D", 0.18)]))
 }
 
 fn hover() -> Recording {
     let mut rec = Recording::with_own_traffic();
-    rec.fly(0, 20_000, |t| {
-        let wobble = (t * 2.0).sin() as f32;
-        (18, true, 0.05 * wobble, -0.03 * wobble, 0.3, 1.0)
-    });
+    rec.fly_hover();
     rec.status(
         5_000,
         dialect::MavSeverity::MAV_SEVERITY_INFO,

@@ -95,6 +95,15 @@ impl Recording {
         self.history.record(&frame, decoded.as_ref(), now);
     }
 
+    /// Vehicle 1 armed in QHOVER for the first 20 s, rocking slightly in roll and pitch at
+    /// 1 m.
+    pub fn fly_hover(&mut self) {
+        self.fly(0, 20_000, |t| {
+            let wobble = (t * 2.0).sin() as f32;
+            (18, true, 0.05 * wobble, -0.03 * wobble, 0.3, 1.0)
+        });
+    }
+
     /// Vehicle 1 from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
     /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
     pub fn fly(
@@ -252,32 +261,49 @@ pub fn tailsitter_heartbeat(
     })
 }
 
+/// The part of the twin's parameter table every view test shows.
+const TWIN_PARAMS: [(&str, f32); 9] = [
+    ("HOVER_ALT", 1.0),
+    ("LAT_SAT_A", 1.2),
+    ("LAT_SAT_B", 0.6),
+    ("SERVO1_FUNCTION", 74.0),
+    ("SERVO2_FUNCTION", 73.0),
+    ("SERVO3_FUNCTION", 4.0),
+    ("SERVO4_FUNCTION", 4.0),
+    ("SERVO5_FUNCTION", 19.0),
+    ("SIM_PUSH_ROLL", 0.0),
+];
+
+/// [`TWIN_PARAMS`] and `more`, in name order.
+#[must_use]
+pub fn params_with(more: &[(&str, f32)]) -> Vec<(String, f32)> {
+    let mut table: Vec<(String, f32)> = TWIN_PARAMS
+        .iter()
+        .chain(more)
+        .map(|&(n, v)| (n.to_owned(), v))
+        .collect();
+    table.sort_by(|a, b| a.0.cmp(&b.0));
+    table
+}
+
 /// The twin's parameter table, as far as the views use it.
 #[must_use]
 pub fn params() -> Vec<(String, f32)> {
-    [
-        ("ARSPD_FBW_MIN", 10.0),
-        ("HOVER_ALT", 1.0),
-        ("LAT_SAT_A", 1.2),
-        ("LAT_SAT_B", 0.6),
-        ("SERVO1_FUNCTION", 74.0),
-        ("SERVO2_FUNCTION", 73.0),
-        ("SERVO3_FUNCTION", 4.0),
-        ("SERVO4_FUNCTION", 4.0),
-        ("SERVO5_FUNCTION", 19.0),
-        ("SIM_PUSH_ROLL", 0.0),
-    ]
-    .into_iter()
-    .map(|(n, v)| (n.to_owned(), v))
-    .collect()
+    params_with(&[("ARSPD_FBW_MIN", 10.0)])
+}
+
+/// A UI that has `table`.
+#[must_use]
+pub fn app_with(table: Vec<(String, f32)>) -> App {
+    let mut app = App::default();
+    app.on_outcome(Outcome::Params(table));
+    app
 }
 
 /// A UI that has the table.
 #[must_use]
 pub fn app_with_params() -> App {
-    let mut app = App::default();
-    app.on_outcome(Outcome::Params(params()));
-    app
+    app_with(params())
 }
 
 /// A key without modifiers.
@@ -290,10 +316,7 @@ pub fn key(c: KeyCode) -> KeyEvent {
 #[must_use]
 pub fn hover() -> Recording {
     let mut rec = Recording::new();
-    rec.fly(0, 20_000, |t| {
-        let wobble = (t * 2.0).sin() as f32;
-        (18, true, 0.05 * wobble, -0.03 * wobble, 0.3, 1.0)
-    });
+    rec.fly_hover();
     rec.status(
         19_990,
         dialect::MavSeverity::MAV_SEVERITY_INFO,
