@@ -56,6 +56,12 @@ pub mod id {
     pub const COMMAND_LONG: u32 = <apm::COMMAND_LONG_DATA as MessageData>::ID;
     /// COMMAND_ACK.
     pub const COMMAND_ACK: u32 = <apm::COMMAND_ACK_DATA as MessageData>::ID;
+    /// POSITION_TARGET_LOCAL_NED.
+    pub const POSITION_TARGET_LOCAL_NED: u32 =
+        <apm::POSITION_TARGET_LOCAL_NED_DATA as MessageData>::ID;
+    /// POSITION_TARGET_GLOBAL_INT.
+    pub const POSITION_TARGET_GLOBAL_INT: u32 =
+        <apm::POSITION_TARGET_GLOBAL_INT_DATA as MessageData>::ID;
     /// RADIO_STATUS.
     pub const RADIO_STATUS: u32 = <apm::RADIO_STATUS_DATA as MessageData>::ID;
     /// BATTERY_STATUS.
@@ -72,6 +78,8 @@ pub mod id {
     pub const SETUP_SIGNING: u32 = <apm::SETUP_SIGNING_DATA as MessageData>::ID;
     /// STATUSTEXT.
     pub const STATUSTEXT: u32 = <apm::STATUSTEXT_DATA as MessageData>::ID;
+    /// AOA_SSA (ardupilotmega).
+    pub const AOA_SSA: u32 = <apm::AOA_SSA_DATA as MessageData>::ID;
 }
 
 /// CRC_EXTRA of COMMAND_ACK.

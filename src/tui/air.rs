@@ -7,6 +7,10 @@
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{MavFrame, MavMessage, MavVtolState};
+use vtol_link::protocol::id::{
+    AOA_SSA, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT, HOME_POSITION, POSITION_TARGET_GLOBAL_INT,
+    POSITION_TARGET_LOCAL_NED, VFR_HUD,
+};
 
 use crate::tracker::state::{VehicleState, VehicleView};
 
@@ -19,15 +23,6 @@ pub const TARGET_FRESH: Duration = Duration::from_secs(3);
 /// Below this airspeed the air's angles mean nothing (the relative wind's direction is noise,
 /// and a hovering tailsitter reads about 90° of AoA): AoA and sideslip show as "-".
 pub const AIR_ANGLES_MIN_M_S: f32 = 2.0;
-
-/// Messages read here.
-const VFR_HUD: u32 = 74;
-const EXTENDED_SYS_STATE: u32 = 245;
-const AOA_SSA: u32 = 11020;
-const POSITION_TARGET_LOCAL_NED: u32 = 85;
-const POSITION_TARGET_GLOBAL_INT: u32 = 87;
-const HOME_POSITION: u32 = 242;
-const GLOBAL_POSITION_INT: u32 = 33;
 
 /// Metres per 1e-7 degree of latitude (ArduPilot's `LOCATION_SCALING_FACTOR`).
 const METERS_PER_E7_DEG: f64 = 0.011_131_884_502_145_034;

@@ -7,14 +7,12 @@ use ratatui::layout::{Constraint, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::widgets::{Block, Cell, Row, Table};
 use vtol_link::dialect::MavMessage;
+use vtol_link::protocol::id::SYS_STATUS;
 
 use super::{Snapshot, status_name};
 use crate::tracker::VehicleView;
 use crate::tui::app::fleet::{listing, state_word};
 use crate::tui::app::{App, View};
-
-/// SYS_STATUS, for each row's battery.
-const SYS_STATUS: u32 = 1;
 
 fn battery(snap: &Snapshot<'_>, v: &VehicleView) -> String {
     let Some(MavMessage::SYS_STATUS(s)) = snap
