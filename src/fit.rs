@@ -20,9 +20,22 @@
 //! link carries less than the first estimate: the fit goes again from the rates then flowing.
 //! If the loss stopped, the capacity stands, and a later loss fits again the same way.
 //!
+//! A fitted link that has room again (a radio's rate limit lifted, its buffer mostly empty) gets
+//! its rates back step by step: once it has been clear (loss under [`CLEAR_PCT`], the radio's
+//! buffer at least [`RADIO_TXBUF_HIGH`] % free where one reports it) for [`RAISE_HOLD`], each
+//! changed stream goes [`RAISE_STEP`] of the way from its fitted rate back to its rate before the
+//! first fit, the last step asking for the vehicle's default (interval 0). Each step is watched
+//! for [`SETTLE`]: loss of [`STEP_LOSS_PCT`] or a filling radio buffer takes it back at once, to
+//! the rates before it. A step that failed doubles the hold before the next (up to
+//! [`MAX_RAISE_HOLD`]) and leaves a ceiling: the frame bytes per second the streams were asked
+//! for then; later steps go at most half way to it, and none is made within [`MIN_STEP`] of it,
+//! until the ceiling is [`CEILING_MEMORY`] old. A step that worked is followed by the next after
+//! [`STEP_HOLD`] (doubled the same way). So a link whose capacity sits between two rates costs
+//! one failed step every few minutes, not a sawtooth.
+//!
 //! The fit follows the daemon client's vehicle (the first one heard).
 
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use mavlink::MessageData;
@@ -52,6 +65,22 @@ pub const RANDOM_LOSS_HOLD: Duration = Duration::from_secs(30);
 pub const RADIO_TXBUF_LOW: u8 = 50;
 /// A RADIO_STATUS older than this says nothing about the link now.
 const RADIO_STATUS_FRESH: Duration = Duration::from_secs(3);
+/// A radio's `txbuf` at or above which its buffer counts as empty enough to send more.
+pub const RADIO_TXBUF_HIGH: u8 = 90;
+/// How long a fitted link must be clear before its rates are first stepped back up.
+pub const RAISE_HOLD: Duration = Duration::from_secs(15);
+/// How long the link must be clear after a step that worked before the next one.
+pub const STEP_HOLD: Duration = Duration::from_secs(5);
+/// The longest hold before a step, however many failed.
+pub const MAX_RAISE_HOLD: Duration = Duration::from_secs(160);
+/// Share of the way from the fitted rates to the rates before the fit that one step goes.
+pub const RAISE_STEP: f64 = 0.25;
+/// A step shorter than this share of the way is not asked for.
+pub const MIN_STEP: f64 = 0.05;
+/// Loss over the last 2 s that takes a step back.
+pub const STEP_LOSS_PCT: f64 = 2.0;
+/// How long the rate of a step that failed limits the steps after it.
+pub const CEILING_MEMORY: Duration = Duration::from_secs(300);
 /// How often the fit looks at the link.
 pub const FIT_PERIOD: Duration = Duration::from_secs(1);
 /// Frames a link must have carried before its loss means anything.
@@ -93,13 +122,15 @@ pub struct LinkFit {
 enum Phase {
     /// Default rates, watching for loss.
     Watching,
-    /// Rates fitted, being asked for (one command after another, each with its retries); the
-    /// loss when they were fitted.
-    Asking { loss_before: f64 },
+    /// Rates fitted (or a step taken back, or up: `step`), being asked for (one command after
+    /// another, each with its retries); the loss when they were fitted.
+    Asking { loss_before: f64, step: bool },
     /// Rates fitted and asked for; judged at `until`.
     Settling { until: Instant, loss_before: f64 },
-    /// Rates fitted, the loss stopped.
+    /// Rates fitted, the loss stopped: stepped back up while the link stays clear.
     Fitted,
+    /// A step up asked for: taken back at the first congestion before `until`.
+    Stepping { until: Instant },
     /// The loss did not stop with the rates: defaults again, left alone until `until`.
     RandomLoss { until: Instant },
 }
@@ -134,21 +165,59 @@ impl Change {
     }
 }
 
+/// One stream the fit changed: its rate before the first fit, the rate it was fitted to (Hz,
+/// frames as received) and its frame size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Plan {
+    default_hz: f64,
+    fitted_hz: f64,
+    bytes: f64,
+}
+
+impl Plan {
+    /// The rate `way` of the way from the fitted rate back to the default.
+    fn hz(&self, way: f64) -> f64 {
+        self.fitted_hz + way * (self.default_hz - self.fitted_hz)
+    }
+}
+
 /// The fit as a state machine: a tracker snapshot in, stream intervals out.
 #[derive(Debug)]
 pub struct Fitter {
     phase: Phase,
-    /// Message ids whose interval the fit changed.
-    changed: BTreeSet<u32>,
+    /// The streams whose interval the fit changed, by message id.
+    plans: BTreeMap<u32, Plan>,
     report: Option<LinkFit>,
+    /// Share of the way from the fitted rates back to the defaults the streams run at (1: the
+    /// defaults asked for).
+    way: f64,
+    /// The way before the last step up: where a step that fails goes back to.
+    stable_way: f64,
+    /// Since when the link has been clear, if it is.
+    clear_since: Option<Instant>,
+    /// When the last change was asked for or judged: holds count from here.
+    hold_from: Option<Instant>,
+    /// Whether the last step up worked (the next comes after [`STEP_HOLD`]).
+    stepped: bool,
+    /// Steps up that failed since the streams last ran at their defaults for a while.
+    failures: u32,
+    /// Frame bytes per second of the changed streams at the last step that failed, and when.
+    ceiling: Option<(f64, Instant)>,
 }
 
 impl Default for Fitter {
     fn default() -> Self {
         Self {
             phase: Phase::Watching,
-            changed: BTreeSet::new(),
+            plans: BTreeMap::new(),
             report: None,
+            way: 0.0,
+            stable_way: 0.0,
+            clear_since: None,
+            hold_from: None,
+            stepped: false,
+            failures: 0,
+            ceiling: None,
         }
     }
 }
@@ -191,42 +260,88 @@ impl Fitter {
         report.link = v.link;
         report.radio_txbuf = txbuf;
         if v.is_lost(now) || h.frames < MIN_FRAMES {
+            self.clear_since = None;
             return Vec::new();
         }
         let loss = h.window.recent_loss_pct(now);
         let delivered = h.bytes_per_s(now);
-        let full = loss >= CONGESTED_PCT || txbuf.is_some_and(|t| t < RADIO_TXBUF_LOW);
         let radio_full = txbuf.is_some_and(|t| t < RADIO_TXBUF_LOW);
+        let full = loss >= CONGESTED_PCT || radio_full;
+        // Past a step up, less loss is enough to take it back.
+        let step_full = loss >= STEP_LOSS_PCT || radio_full;
+        let clear = loss < CLEAR_PCT && txbuf.is_none_or(|t| t >= RADIO_TXBUF_HIGH);
+        self.clear_since = clear.then(|| self.clear_since.unwrap_or(now));
         match self.phase {
+            // A step up that looked fine fills the link after all: take it back.
+            Phase::Fitted if step_full && self.way > 0.0 => self.back_off(loss, delivered, now),
             Phase::Watching | Phase::Fitted if full => {
                 self.fit_now(state, vehicle, loss, delivered, now)
             }
-            Phase::Settling { until, loss_before } if now >= until => {
-                if loss < CLEAR_PCT && !radio_full {
-                    self.phase = Phase::Fitted;
-                    return Vec::new();
-                }
-                // Still full, but the fit helped (or the radio says its buffer is full): the
-                // first estimate of what the link carries was high. Fit again from here.
-                if radio_full || loss < loss_before / 2.0 {
-                    return self.fit_now(state, vehicle, loss, delivered, now);
-                }
-                self.phase = Phase::RandomLoss {
-                    until: now + RANDOM_LOSS_HOLD,
-                };
-                self.report_mut().capacity = None;
-                self.report_mut().fitted = false;
-                std::mem::take(&mut self.changed)
-                    .into_iter()
-                    .map(|m| (m, Change::Default))
-                    .collect()
+            Phase::Settling { until, loss_before } if now >= until => self.judge_fit(
+                state,
+                vehicle,
+                (loss, loss_before),
+                delivered,
+                radio_full,
+                now,
+            ),
+            Phase::Stepping { .. } if step_full => self.back_off(loss, delivered, now),
+            Phase::Stepping { until } if now >= until => {
+                self.stepped = true;
+                self.enter_fitted(now);
+                Vec::new()
             }
+            Phase::Fitted => self.step_up(now),
             Phase::RandomLoss { until } if now >= until => {
                 self.phase = Phase::Watching;
                 Vec::new()
             }
             _ => Vec::new(),
         }
+    }
+
+    /// A fit (or a step taken back) asked for [`SETTLE`] ago, at `loss` now and `loss_before`
+    /// when it was made: kept, made again from the rates flowing, or given up.
+    fn judge_fit(
+        &mut self,
+        state: &VehicleState,
+        vehicle: (SystemId, ComponentId),
+        (loss, loss_before): (f64, f64),
+        delivered: f64,
+        radio_full: bool,
+        now: Instant,
+    ) -> Vec<(u32, Change)> {
+        if loss < CLEAR_PCT && !radio_full {
+            self.enter_fitted(now);
+            return Vec::new();
+        }
+        // Still full, but the fit helped (or the radio says its buffer is full): the first
+        // estimate of what the link carries was high. Fit again from here.
+        if radio_full || loss < loss_before / 2.0 {
+            return self.fit_now(state, vehicle, loss, delivered, now);
+        }
+        self.phase = Phase::RandomLoss {
+            until: now + RANDOM_LOSS_HOLD,
+        };
+        self.report_mut().capacity = None;
+        self.report_mut().fitted = false;
+        self.forget();
+        std::mem::take(&mut self.plans)
+            .into_keys()
+            .map(|m| (m, Change::Default))
+            .collect()
+    }
+
+    fn enter_fitted(&mut self, now: Instant) {
+        self.phase = Phase::Fitted;
+        self.hold_from = Some(now);
+    }
+
+    /// Forgets the steps: the streams run at their defaults, or are fitted afresh.
+    fn forget(&mut self) {
+        self.way = 0.0;
+        self.stable_way = 0.0;
+        self.stepped = false;
     }
 
     /// Fits the streams to `delivered` bytes/s, seen at `loss` %.
@@ -248,22 +363,147 @@ impl Fitter {
             };
             return Vec::new();
         }
-        self.changed.extend(out.iter().map(|(m, _)| *m));
+        // The changed streams' present rates are the base the steps up start from again.
+        let way = self.way;
+        for p in self.plans.values_mut() {
+            p.fitted_hz = p.hz(way);
+        }
+        self.forget();
+        for (msgid, change) in &out {
+            let (Some(s), Change::Scale { ratio, .. }) =
+                (streams.iter().find(|s| s.msgid == *msgid), change)
+            else {
+                continue;
+            };
+            let plan = self.plans.entry(*msgid).or_insert(Plan {
+                default_hz: s.hz,
+                fitted_hz: s.hz,
+                bytes: s.bytes,
+            });
+            plan.fitted_hz = s.hz * ratio;
+            plan.bytes = s.bytes;
+        }
         self.report_mut().capacity = Some(delivered);
-        self.phase = Phase::Asking { loss_before: loss };
+        self.phase = Phase::Asking {
+            loss_before: loss,
+            step: false,
+        };
         out
+    }
+
+    /// Frame bytes per second of the changed streams at `way`.
+    fn offered(&self, way: f64) -> f64 {
+        self.plans.values().map(|p| p.hz(way) * p.bytes).sum()
+    }
+
+    /// How long the link must be clear before the next step up.
+    fn hold(&self) -> Duration {
+        let base = if self.stepped { STEP_HOLD } else { RAISE_HOLD };
+        (base * 2u32.pow(self.failures.min(6))).min(MAX_RAISE_HOLD)
+    }
+
+    /// The next step up, once the link has been clear long enough; nothing while it is not,
+    /// at the defaults, or too close below the ceiling of a step that failed.
+    fn step_up(&mut self, now: Instant) -> Vec<(u32, Change)> {
+        let Some(since) = self.clear_since else {
+            return Vec::new();
+        };
+        let clear_from = self.hold_from.map_or(since, |h| h.max(since));
+        if self.way >= 1.0 {
+            // Back at the defaults and clear for long: the link has room; start afresh.
+            if now >= clear_from + MAX_RAISE_HOLD {
+                *self = Self {
+                    report: self.report,
+                    ..Self::default()
+                };
+                self.report_mut().capacity = None;
+            }
+            return Vec::new();
+        }
+        if now < clear_from + self.hold() {
+            return Vec::new();
+        }
+        if self
+            .ceiling
+            .is_some_and(|(_, at)| now >= at + CEILING_MEMORY)
+        {
+            self.ceiling = None;
+        }
+        let mut to = (self.way + RAISE_STEP).min(1.0);
+        if let Some((ceiling, _)) = self.ceiling {
+            let (low, high) = (self.offered(0.0), self.offered(1.0));
+            let half_way = (self.offered(self.way) + ceiling) / 2.0;
+            if high > low && self.offered(to) > half_way {
+                to = (half_way - low) / (high - low);
+            }
+        }
+        if to - self.way < MIN_STEP {
+            return Vec::new();
+        }
+        self.stable_way = self.way;
+        self.phase = Phase::Asking {
+            loss_before: 0.0,
+            step: true,
+        };
+        self.move_to(to)
+    }
+
+    /// A step up filled the link (`loss` %, `delivered` bytes/s carried): back to the rates
+    /// before it, its rate remembered as a ceiling, the next hold doubled.
+    fn back_off(&mut self, loss: f64, delivered: f64, now: Instant) -> Vec<(u32, Change)> {
+        self.failures += 1;
+        self.stepped = false;
+        self.ceiling = Some((self.offered(self.way), now));
+        self.report_mut().capacity = Some(delivered);
+        self.phase = Phase::Asking {
+            loss_before: loss,
+            step: false,
+        };
+        self.move_to(self.stable_way)
+    }
+
+    /// The changes that take every changed stream from the present way to `to` (the vehicle's
+    /// default at 1).
+    fn move_to(&mut self, to: f64) -> Vec<(u32, Change)> {
+        let from = self.way;
+        self.way = to;
+        self.plans
+            .iter()
+            .map(|(&msgid, p)| {
+                if to >= 1.0 {
+                    return (msgid, Change::Default);
+                }
+                let hz = p.hz(to);
+                let change = Change::Scale {
+                    ratio: hz / p.hz(from),
+                    fallback_us: (1e6 / hz) as f32,
+                };
+                (msgid, change)
+            })
+            .collect()
     }
 
     /// The intervals the last [`Fitter::tick`] returned have all been asked for (or given up):
     /// their effect is judged [`SETTLE`] from `now`.
     pub fn asked(&mut self, now: Instant) {
-        if let Phase::Asking { loss_before } = self.phase {
-            self.phase = Phase::Settling {
-                until: now + SETTLE,
-                loss_before,
+        if let Phase::Asking { loss_before, step } = self.phase {
+            self.phase = if step {
+                Phase::Stepping {
+                    until: now + SETTLE,
+                }
+            } else {
+                Phase::Settling {
+                    until: now + SETTLE,
+                    loss_before,
+                }
             };
+            self.hold_from = Some(now);
+            let fitted = self.way < 1.0;
             if let Some(r) = self.report.as_mut() {
-                r.fitted = true;
+                r.fitted = fitted;
+                if !fitted {
+                    r.capacity = None;
+                }
             }
         }
     }

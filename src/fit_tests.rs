@@ -36,6 +36,9 @@ struct Feed {
     seq: u8,
     sent: u64,
     lose_every: u64,
+    /// Share of frames lost at random (seeded), besides `lose_every`.
+    lose_share: f64,
+    rng: u64,
 }
 
 impl Feed {
@@ -45,6 +48,8 @@ impl Feed {
             seq: 0,
             sent: 0,
             lose_every: 0,
+            lose_share: 0.0,
+            rng: 0x9e37_79b9_7f4a_7c15,
         }
     }
 
@@ -53,6 +58,13 @@ impl Feed {
         let f = Frame::encode_v2(V.0, V.1, self.seq, m);
         self.seq = self.seq.wrapping_add(1);
         if self.lose_every > 0 && self.sent.is_multiple_of(self.lose_every) {
+            return;
+        }
+        // xorshift64: a loss that falls on no message more than another.
+        self.rng ^= self.rng << 13;
+        self.rng ^= self.rng >> 7;
+        self.rng ^= self.rng << 17;
+        if (self.rng >> 11) as f64 / (1u64 << 53) as f64 <= self.lose_share {
             return;
         }
         self.state.apply(L, Side::Vehicle, &f, at);
@@ -241,4 +253,234 @@ fn a_fit_that_halves_the_loss_goes_again_from_the_rates_then_flowing() {
     );
     let att = hz(&again, id::ATTITUDE).expect("ATTITUDE re-rated");
     assert!(att < 50.0, "{att}");
+}
+
+/// A vehicle that does what the fit asks of its ATTITUDE and SERVO_OUTPUT_RAW, over a link
+/// that carries `capacity` frames a second (the rest lost evenly), a second at a time.
+struct Loop {
+    feed: Feed,
+    fit: Fitter,
+    now: Instant,
+    defaults: [f64; 2],
+    rates: [f64; 2],
+    capacity: Option<f64>,
+}
+
+impl Loop {
+    fn new(capacity: Option<f64>) -> Self {
+        let t0 = Instant::now();
+        Self {
+            feed: Feed::new(t0),
+            fit: Fitter::default(),
+            now: t0,
+            defaults: [100.0, 50.0],
+            rates: [100.0, 50.0],
+            capacity,
+        }
+    }
+
+    /// One second of traffic, then a look by the fit; what it asked, done by the vehicle.
+    fn second(&mut self) -> Vec<(u32, Change)> {
+        let offered = self.rates[0] + self.rates[1] + 1.0;
+        self.feed.lose_share = match self.capacity {
+            Some(c) if offered > c => (offered - c) / offered,
+            _ => 0.0,
+        };
+        let hz = |r: f64| r.round().max(1.0) as u64;
+        let (att, servo) = (hz(self.rates[0]), hz(self.rates[1]));
+        self.feed.run(self.now, 1, att, servo);
+        self.now += Duration::from_secs(1);
+        let asked = self.fit.tick(&self.feed.state, V, self.now);
+        for (msgid, change) in &asked {
+            let i = usize::from(*msgid != id::ATTITUDE);
+            self.rates[i] = match *change {
+                Change::Scale { ratio, .. } => self.rates[i] * ratio,
+                Change::Default => self.defaults[i],
+            };
+        }
+        if !asked.is_empty() {
+            self.fit.asked(self.now);
+        }
+        asked
+    }
+
+    /// Seconds until the fit asks something (at most `limit`), and what.
+    fn until_asked(&mut self, limit: u64) -> Option<(u64, Vec<(u32, Change)>)> {
+        (1..=limit).find_map(|s| {
+            let asked = self.second();
+            (!asked.is_empty()).then_some((s, asked))
+        })
+    }
+}
+
+fn ratio(asked: &[(u32, Change)], msgid: u32) -> f64 {
+    match asked.iter().find(|(m, _)| *m == msgid) {
+        Some((_, Change::Scale { ratio, .. })) => *ratio,
+        other => panic!("{other:?} in {asked:?}"),
+    }
+}
+
+#[test]
+fn a_fitted_link_that_clears_gets_its_rates_back_step_by_step_up_to_the_defaults() {
+    // A radio whose rate limit is lifted as soon as the streams are fitted.
+    let mut l = Loop::new(Some(100.0));
+    let (_, fitted) = l.until_asked(5).expect("fitted");
+    assert!(ratio(&fitted, id::ATTITUDE) < 0.7, "{fitted:?}");
+    l.capacity = None;
+    let low = l.rates[0];
+    // Nothing until the link has been clear for the hold (after the fit's own settling).
+    let (waited, first) = l.until_asked(60).expect("a step up");
+    assert!(
+        waited >= RAISE_HOLD.as_secs(),
+        "after {waited} s: {first:?}"
+    );
+    // A quarter of the way back, every changed stream alike.
+    let step = ratio(&first, id::ATTITUDE);
+    let expected = (low + RAISE_STEP * (100.0 - low)) / low;
+    assert!((step - expected).abs() < 1e-9, "{step} != {expected}");
+    assert!(ratio(&first, id::SERVO_OUTPUT_RAW) > 1.0, "{first:?}");
+    assert!(l.fit.report().expect("a report").fitted);
+    // The next steps come sooner once one has worked, each higher, the last to the defaults.
+    let mut rates = vec![l.rates[0]];
+    let last = loop {
+        let (waited, asked) = l.until_asked(60).expect("another step");
+        assert!(waited < RAISE_HOLD.as_secs(), "after {waited} s");
+        if asked.iter().all(|(_, c)| *c == Change::Default) {
+            break asked;
+        }
+        assert!(l.rates[0] > rates[rates.len() - 1], "{asked:?}");
+        rates.push(l.rates[0]);
+    };
+    assert_eq!(rates.len(), 3, "{rates:?}");
+    assert_eq!(last.len(), 2, "{last:?}");
+    let report = l.fit.report().expect("a report");
+    assert!(!report.fitted && report.capacity.is_none(), "{report:?}");
+    // And then left alone.
+    assert!(l.until_asked(240).is_none());
+}
+
+#[test]
+fn a_step_that_fills_the_link_is_taken_back_and_the_steps_after_it_stay_below_it() {
+    let mut l = Loop::new(Some(100.0));
+    l.until_asked(5).expect("fitted");
+    let mut backs = Vec::new();
+    let mut ups = Vec::new();
+    for s in 0..600u64 {
+        let before = l.rates[0];
+        let asked = l.second();
+        if asked.is_empty() || asked.iter().any(|(_, c)| *c == Change::Default) {
+            assert!(asked.is_empty(), "the defaults never fit: {asked:?}");
+            continue;
+        }
+        if ratio(&asked, id::ATTITUDE) > 1.0 {
+            ups.push((s, l.rates[0]));
+        } else {
+            backs.push((s, before, l.rates[0]));
+        }
+    }
+    // The first step that overfilled the link went back to the rates before it...
+    let (at, failed, back) = backs[0];
+    let before = ups
+        .iter()
+        .rev()
+        .find(|(s, _)| *s < at)
+        .expect("a step first");
+    assert!(failed > back, "{backs:?}");
+    let prior = ups
+        .iter()
+        .rev()
+        .filter(|(s, _)| *s < before.0)
+        .map(|&(_, r)| r)
+        .next();
+    if let Some(p) = prior {
+        assert!((back - p).abs() < 1e-6, "{back} != {p}");
+    }
+    // ...and the steps after it stayed below its rate while it was remembered, the first one
+    // only after a doubled hold.
+    let next = ups.iter().find(|(s, _)| *s > at).expect("a later step");
+    assert!(next.0 - at >= 2 * RAISE_HOLD.as_secs(), "{ups:?} {backs:?}");
+    let remembered = at..at + CEILING_MEMORY.as_secs();
+    assert!(
+        ups.iter()
+            .filter(|(s, _)| remembered.contains(s))
+            .all(|&(_, r)| r < failed),
+        "{ups:?} {backs:?}"
+    );
+    // Ten minutes on a link that cannot carry the defaults: a handful of failed steps, not a
+    // sawtooth; and the capacity is the link's.
+    assert!(backs.len() <= 4, "{backs:?}");
+    assert!(l.rates[0] + l.rates[1] < 100.0, "{:?}", l.rates);
+    let capacity = l.fit.report().and_then(|r| r.capacity).expect("measured");
+    assert!(capacity > 0.0);
+}
+
+#[test]
+fn a_radio_buffer_that_is_not_mostly_empty_holds_the_rates() {
+    let mut l = Loop::new(None);
+    let radio = |txbuf, seq| {
+        let m = MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
+            rxerrors: 0,
+            fixed: 0,
+            rssi: 200,
+            remrssi: 190,
+            txbuf,
+            noise: 40,
+            remnoise: 41,
+        });
+        Frame::encode_v2(SystemId(51), ComponentId(68), seq, &m)
+    };
+    let mut seq = 0u8;
+    let mut say = |l: &mut Loop, txbuf| {
+        seq = seq.wrapping_add(1);
+        l.feed
+            .state
+            .apply(L, Side::Vehicle, &radio(txbuf, seq), l.now);
+    };
+    l.second();
+    say(&mut l, 30);
+    assert!(!l.second().is_empty(), "fitted on the radio's word");
+    // Half to nine tenths free: neither full nor clear, for a minute.
+    for _ in 0..60 {
+        say(&mut l, 70);
+        assert!(l.second().is_empty());
+    }
+    // Mostly empty: a step up after the hold.
+    let mut waited = 0;
+    loop {
+        say(&mut l, 95);
+        waited += 1;
+        let asked = l.second();
+        if !asked.is_empty() {
+            assert!(ratio(&asked, id::ATTITUDE) > 1.0, "{asked:?}");
+            break;
+        }
+        assert!(waited < 60);
+    }
+    assert!(waited >= RAISE_HOLD.as_secs(), "{waited}");
+    // The buffer filling during the step takes it back at once.
+    say(&mut l, 40);
+    let back = l.second();
+    assert!(ratio(&back, id::ATTITUDE) < 1.0, "{back:?}");
+}
+
+#[test]
+fn a_ceiling_is_forgotten_in_time_so_a_link_that_got_faster_gets_the_defaults_back() {
+    let mut l = Loop::new(Some(100.0));
+    l.until_asked(5).expect("fitted");
+    // Long enough for a step to fail and the rates to settle below it.
+    for _ in 0..120 {
+        l.second();
+    }
+    assert!(l.fit.ceiling.is_some(), "a step failed");
+    l.capacity = None;
+    let mut t = 0;
+    while l.rates != l.defaults {
+        l.second();
+        t += 1;
+        assert!(
+            t < CEILING_MEMORY.as_secs() + 2 * MAX_RAISE_HOLD.as_secs(),
+            "{:?} after {t} s",
+            l.rates
+        );
+    }
 }
