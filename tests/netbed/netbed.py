@@ -267,6 +267,11 @@ class Bed:
             run(["tc", "qdisc", "replace", "dev", dev, "root", "tbf", "rate", f"{bits_per_s}bit",
                  "burst", str(burst_bytes), "limit", str(queue_bytes)], self.link)
 
+    def lift_rate_limit(self) -> None:
+        """Takes the tbf off both directions of the link: the radio's limit gone."""
+        for dev in ("mv", "mg"):
+            run(["tc", "qdisc", "del", "dev", dev, "root"], self.link)
+
     def rate_limit_drops(self) -> int:
         """Packets the link's tbf queues dropped (both directions)."""
         out = "".join(run(["tc", "-s", "qdisc", "show", "dev", dev], self.link) for dev in ("mv", "mg"))

@@ -14,6 +14,7 @@ import time
 import pytest
 from pymavlink import mavutil
 
+from conftest import VEHICLE_COMPID, VEHICLE_SYSID
 from netbed_support import STATUS_RE, Scene, command, needs_bed
 
 pytestmark = needs_bed
@@ -119,5 +120,51 @@ def test_a_radio_that_reports_its_buffer_filling_gets_streams_it_can_carry(tmp_p
         free = [int(m["free"]) for line in lines[-3:] if (m := TXBUF_RE.search(line))]
         print(f"radio txbuf {free} %; {figures[-1].group(0)}")
         assert free and min(free) >= 50, lines[-3:]
+    finally:
+        s.close()
+
+
+def interval_us(g, msgid: int, timeout: float = 30.0) -> int:
+    """The vehicle's interval for `msgid` in µs (GET_MESSAGE_INTERVAL, asked again until its
+    MESSAGE_INTERVAL arrives); answers to the daemon's own requests read before are dropped."""
+    deadline = time.monotonic() + timeout
+    g.drain()
+    while time.monotonic() < deadline:
+        g.mav.command_long_send(VEHICLE_SYSID, VEHICLE_COMPID, MAV.MAV_CMD_GET_MESSAGE_INTERVAL, 0, msgid,
+                                0, 0, 0, 0, 0, 0)
+        resend = time.monotonic() + 0.7
+        while (left := min(resend, deadline) - time.monotonic()) > 0:
+            g.beat()
+            m = g.m.recv_match(type="MESSAGE_INTERVAL", blocking=True, timeout=min(left, 0.25))
+            if m is not None and m.message_id == msgid:
+                return m.interval_us
+    raise AssertionError(f"no MESSAGE_INTERVAL for message {msgid} in {timeout} s")
+
+
+def test_a_radio_whose_rate_limit_is_lifted_gets_the_default_rates_back(tmp_path):
+    """Fitted to the radio, then the radio's limit lifted: once the link has been clear for the
+    hold (15 s), the daemon steps the streams back up a quarter of the way at a time and ends at
+    the vehicle's defaults (src/fit.rs)."""
+    s = Scene(tmp_path)
+    try:
+        g = s.client()
+        g.wait_vehicle_heartbeat(timeout=20)
+        default = interval_us(g, MAV.MAVLINK_MSG_ID_ATTITUDE)
+        mark = s.daemon.mark()
+        s.bed.rate_limit(BITS_PER_S, QUEUE_BYTES)
+        s.status(r"streams fitted", timeout=30, since=mark)
+        fitted = interval_us(g, MAV.MAVLINK_MSG_ID_ATTITUDE)
+        assert fitted > default, (fitted, default)
+        lifted = s.daemon.mark()
+        s.bed.lift_rate_limit()
+        # Back at the defaults the status line has no capacity part: what the link carries is
+        # more than the vehicle sends.
+        back = s.status(r"^(?!.*capacity).*\| vehicle \S+ ok \d+ Hz loss 0\.0%", timeout=90, since=lifted)
+        lines = s.daemon.lines_since(lifted)
+        rates = [int(m["hz"]) for line in lines if (m := STATUS_RE.search(line))]
+        assert interval_us(g, MAV.MAVLINK_MSG_ID_ATTITUDE) == default
+        # Stepped, not jumped: the status lines on the way show rates between the two.
+        print(f"ATTITUDE interval {default} µs, fitted {fitted} µs; rates after the lift {rates}; {back.group(0)}")
+        assert len(set(rates)) >= 3, rates
     finally:
         s.close()
