@@ -628,6 +628,14 @@ async fn ask(
         Change::Scale { .. } => client.message_interval(msgid).await?,
         Change::Default => None,
     };
+    // The frames seen stand in for an interval the vehicle does not tell only to slow a
+    // stream: a message sent as several frames would be raised past its rate.
+    if matches!(change, Change::Scale { ratio, .. } if ratio > 1.0)
+        && present.is_none_or(|us| us <= 0)
+    {
+        tracing::debug!("stream rate of message {msgid}: interval unknown, not raised");
+        return Ok(());
+    }
     let params = [
         msgid as f32,
         change.interval_us(present),

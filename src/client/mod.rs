@@ -4,6 +4,7 @@
 //! - [`session`]: the one task that owns the identity, the sequence counter and the link.
 //! - [`machine`], [`command`], [`param`]: the protocol exchanges as pure state machines
 //!   (messages and time in, messages and a result out), tested without sockets.
+//! - [`pace`]: the session's sends paced by the RADIO_STATUS of a telemetry radio on the link.
 //! - [`ClientHandle`]: the async shell that drives those machines, cheap to clone; the
 //!   command line and the terminal UI use it.
 //!
@@ -13,6 +14,7 @@
 pub mod command;
 pub mod interval;
 pub mod machine;
+pub mod pace;
 pub mod param;
 pub mod probe;
 mod session;
@@ -125,6 +127,8 @@ pub struct ClientHandle {
     shared: Arc<session::Shared>,
     cache: Arc<Mutex<ParamSet>>,
     heard: watch::Receiver<Heard>,
+    /// Whether the session holds outgoing messages back (a radio's buffer full).
+    held: watch::Receiver<bool>,
 }
 
 /// While alive, the client sends its 1 Hz GCS heartbeat: an operator is watching.
@@ -164,6 +168,7 @@ impl ClientHandle {
             dropped: AtomicUsize::new(0),
         });
         let (links_up_tx, links_up) = watch::channel(0);
+        let (held_tx, held) = watch::channel(false);
         let session = session::Session {
             links_up: links_up_tx,
             me,
@@ -173,6 +178,7 @@ impl ClientHandle {
             shared: Arc::clone(&shared),
             signing,
             heard: heard_tx,
+            held: held_tx,
             hello,
         };
         tokio::spawn(session.run(links_rx, out_rx, cancel));
@@ -187,6 +193,7 @@ impl ClientHandle {
             shared,
             cache: Arc::new(Mutex::new(ParamSet::new())),
             heard,
+            held,
         }
     }
 
@@ -394,7 +401,9 @@ impl ClientHandle {
     }
 
     /// Runs a machine to its result: subscribe first, then send what it asks, feed it every
-    /// inbound message and its deadlines.
+    /// inbound message and its deadlines. While the session holds outgoing messages back (a
+    /// radio's buffer full, [`pace`]), the machine's deadlines wait: a retry would only queue
+    /// behind the copy not sent yet, and a request is not given up for the radio's delay.
     async fn drive<M: Machine>(
         &self,
         m: &mut M,
@@ -403,6 +412,7 @@ impl ClientHandle {
         // A first send with no link up would only be lost and cost a timeout.
         self.wait_connected(FIND_VEHICLE_TIMEOUT).await?;
         let mut rx = self.inbound.subscribe();
+        let mut held = self.held.clone();
         for msg in m.start(std::time::Instant::now()) {
             self.send(msg).await?;
         }
@@ -411,6 +421,7 @@ impl ClientHandle {
                 return Ok(out);
             }
             let deadline = tokio::time::Instant::from_std(m.deadline());
+            let holding = *held.borrow_and_update();
             let sends = tokio::select! {
                 r = rx.recv() => match r {
                     Ok(inb) => m.on_message(std::time::Instant::now(), &inb),
@@ -419,7 +430,13 @@ impl ClientHandle {
                         return Err(ClientError::Link("client stopped".into()));
                     }
                 },
-                () = tokio::time::sleep_until(deadline) => m.on_time(std::time::Instant::now()),
+                () = tokio::time::sleep_until(deadline), if !holding => {
+                    m.on_time(std::time::Instant::now())
+                }
+                r = held.changed(), if holding => match r {
+                    Ok(()) => Vec::new(),
+                    Err(_) => return Err(ClientError::Link("client stopped".into())),
+                },
             };
             for s in m.take_rtt_samples() {
                 self.sample_rtt(Some(s));

@@ -21,13 +21,15 @@ use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
 use vtol_link::{ComponentId, Frame, FrameSource, LinkEvent, LinkId, LinkSender, SystemId};
 
 use super::machine::Inbound;
+use super::pace::Pacer;
 use crate::trust::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 7] = [
+const WANTED: [u32; 8] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
     77,  // COMMAND_ACK
+    109, // RADIO_STATUS (the pacing of what the client sends)
     111, // TIMESYNC
     244, // MESSAGE_INTERVAL
     253, // STATUSTEXT
@@ -99,6 +101,9 @@ pub(crate) struct Session {
     pub signing: Option<DaemonSigning>,
     /// Who has been heard.
     pub heard: watch::Sender<Heard>,
+    /// Whether the radio's pacing holds outgoing messages back now (the requests' retry
+    /// timers wait meanwhile).
+    pub held: watch::Sender<bool>,
     /// Speak first: until a vehicle is heard, send [`hello`] on every link as it comes up and
     /// every [`HELLO_EVERY`] (a client on its own link: a `udpout` link's server learns its
     /// peer only from what the peer sends).
@@ -122,8 +127,8 @@ pub fn hello() -> MavMessage {
 
 impl Session {
     /// Runs the session until `cancel` fires or every sender is gone.
-    // Long: one `select!` over the session's event sources (links, outgoing messages, the hello and
-    // heartbeat ticks) sharing its send closure and link table.
+    // Long: one `select!` over the session's event sources (links, outgoing messages paced by the
+    // radio, the hello and heartbeat ticks) sharing its send closure and link table.
     pub(crate) async fn run(
         self,
         mut links_rx: mpsc::Receiver<LinkEvent>,
@@ -139,6 +144,7 @@ impl Session {
             links_up,
             mut signing,
             heard,
+            held,
             hello: speak_first,
         } = self;
         let mut hello_tick = tokio::time::interval(HELLO_EVERY);
@@ -168,7 +174,12 @@ impl Session {
             let counter = if ok { &shared.sent } else { &shared.dropped };
             counter.fetch_add(1, Ordering::Relaxed);
         };
+        let mut pacer = Pacer::default();
+        let now = || tokio::time::Instant::now().into_std();
         loop {
+            // While the radio's buffer is full, outgoing messages wait in their queue.
+            let wait = pacer.next_send(now());
+            held.send_if_modified(|h| std::mem::replace(h, wait.is_some()) != wait.is_some());
             tokio::select! {
                 () = cancel.cancelled() => break,
                 ev = links_rx.recv() => match ev {
@@ -187,15 +198,24 @@ impl Session {
                     Some(LinkEvent::Frame { frame, .. }) => {
                         let finder = Finder { fixed_target, target: &target, heard: &heard };
                         if let Some(inb) = finder.take(&frame, &mut signing) {
+                            if let MavMessage::RADIO_STATUS(r) = &inb.msg {
+                                pacer.on_radio_status(r.txbuf, now());
+                            }
                             // No receiver is fine: nothing is waiting for an answer right now.
                             let _ = inbound.send(Arc::new(inb));
                         }
                     }
                 },
-                msg = out_rx.recv() => match msg {
-                    Some(m) => send(&links, &m, &mut signing),
+                msg = out_rx.recv(), if wait.is_none() => match msg {
+                    Some(m) => {
+                        send(&links, &m, &mut signing);
+                        pacer.sent(now());
+                    }
                     None => break,
                 },
+                () = tokio::time::sleep_until(
+                    wait.map_or_else(tokio::time::Instant::now, tokio::time::Instant::from_std),
+                ), if wait.is_some() => {}
                 _ = hello_tick.tick(), if speak_first && heard.borrow().vehicles.is_empty() => {
                     send(&links, &hello(), &mut signing);
                 }
