@@ -1,5 +1,6 @@
 //! The fit against tracker states built from frames: a link that loses a share of every
-//! stream's frames, and a radio that reports its buffer.
+//! stream's frames, and a radio that reports its buffer; then a vehicle that does what the fit
+//! asks over a link of a given capacity, a second at a time, for the steps back up.
 
 use vtol_link::Frame;
 use vtol_link::dialect::{self as apm, MavAutopilot, MavModeFlag, MavState, MavType};

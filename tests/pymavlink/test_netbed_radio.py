@@ -3,7 +3,8 @@ each way (`tc` tbf) with a queue of 2000 bytes. The twin's default streams (abou
 second) do not fit: the queue overflows and the daemon's status line shows the loss. A ground
 station that asks for stream rates that fit (SET_MESSAGE_INTERVAL, through the daemon) then
 loses nothing; and so does the daemon left to itself, which measures what the link carries once
-it is full, asks the twin for rates that fit (src/fit.rs) and shows the capacity it measured.
+it is full, asks the twin for rates that fit (src/fit.rs) and shows the capacity it measured;
+and once the limit is lifted, steps the rates back up to the twin's defaults.
 """
 
 from __future__ import annotations
