@@ -213,28 +213,17 @@ pub fn signing_state(data: &[u8]) {
             one_line(&e);
             // The fixed description of the format may share text with any input.
             let line = vtol_link::error_line(&e).replace(vtol_link::signing::STATE_FILE_FORMAT, "");
+            // Key material is hex (a key is 64 hex digits): no run of 8 or more hex digits from
+            // a key line's value may stand in the error. (A check on the whole value misfires:
+            // libFuzzer writes values that are the error's own words, `key =: not valid TOM`.)
             for l in input.lines().filter(|l| l.trim_start().starts_with("key")) {
-                let value = l
-                    .split_once('=')
-                    .map_or("", |(_, v)| v.trim().trim_matches('"'));
-                if value.len() < 8 || !line.contains(value) {
-                    continue;
+                let value = l.split_once('=').map_or("", |(_, v)| v);
+                for run in value
+                    .split(|c: char| !c.is_ascii_hexdigit())
+                    .filter(|r| r.len() >= 8)
+                {
+                    assert!(!line.contains(run), "the error quotes the key: {line}");
                 }
-                // A value may also be the error's own words (libFuzzer wrote `key =: not valid
-                // TOML ()"`): it is quoted only if the error for another value in its place
-                // leaves it out.
-                let filler = if value.contains('x') { "y" } else { "x" }.repeat(value.len());
-                let other = input.replacen(l, &l.replacen(value, &filler, 1), 1);
-                let other_line = SigningState::parse(&other, Path::new(PATH))
-                    .err()
-                    .map(|e| {
-                        vtol_link::error_line(&e).replace(vtol_link::signing::STATE_FILE_FORMAT, "")
-                    })
-                    .unwrap_or_default();
-                assert!(
-                    other_line.contains(value),
-                    "the error quotes the key: {line}"
-                );
             }
         }
     }
