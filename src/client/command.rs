@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 use vtol_link::{ComponentId, SystemId};
 
-use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Step};
 use super::statustext::TextAssembler;
 
 /// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
@@ -55,10 +55,7 @@ pub struct CommandMachine {
     target: (SystemId, ComponentId),
     command: MavCmd,
     params: [f32; 7],
-    rto: Duration,
-    tries: u8,
-    started: Option<Instant>,
-    deadline: Instant,
+    retry: Retry,
     in_progress: bool,
     texts: Vec<String>,
     /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
@@ -79,16 +76,12 @@ impl CommandMachine {
         params: [f32; 7],
         rto: Duration,
     ) -> Self {
-        let now = Instant::now();
         Self {
             me,
             target,
             command,
             params,
-            rto,
-            tries: 0,
-            started: None,
-            deadline: now,
+            retry: Retry::new(rto, COMMAND_TRIES, GIVE_UP_AFTER),
             in_progress: false,
             texts: Vec::new(),
             assembler: TextAssembler::default(),
@@ -99,9 +92,7 @@ impl CommandMachine {
     }
 
     fn frame(&mut self, now: Instant) -> MavMessage {
-        let confirmation = self.tries;
-        self.tries += 1;
-        self.deadline = now + retry_wait(self.rto, self.tries);
+        let confirmation = self.retry.send(now) - 1;
         vtol_link::command_long(self.target, self.command, self.params, confirmation)
     }
 
@@ -109,8 +100,8 @@ impl CommandMachine {
         self.result = Some(Ok(CommandOutcome {
             result,
             reason: self.texts.last().cloned(),
-            tries: self.tries,
-            elapsed: now.duration_since(self.started.unwrap_or(now)),
+            tries: self.retry.tries(),
+            elapsed: self.retry.elapsed(now),
         }));
     }
 }
@@ -119,7 +110,6 @@ impl Machine for CommandMachine {
     type Output = Result<CommandOutcome, NoAck>;
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        self.started = Some(now);
         vec![self.frame(now)]
     }
 
@@ -146,18 +136,20 @@ impl Machine for CommandMachine {
                 if !to_us || self.refused.is_some() {
                     return Vec::new();
                 }
-                if self.tries == 1 && !self.in_progress {
-                    self.first_try_rtt = self.started.map(|s| now.duration_since(s));
+                if !self.in_progress
+                    && let Some(rtt) = self.retry.first_try_rtt(now)
+                {
+                    self.first_try_rtt = Some(rtt);
                 }
                 match a.result {
                     MavResult::MAV_RESULT_IN_PROGRESS => {
                         self.in_progress = true;
-                        self.deadline = now + IN_PROGRESS_WAIT;
+                        self.retry.wait_until(now + IN_PROGRESS_WAIT);
                     }
                     MavResult::MAV_RESULT_ACCEPTED => self.finish(a.result, now),
                     r if self.texts.is_empty() => {
                         self.refused = Some((r, now));
-                        self.deadline = now + REASON_GRACE;
+                        self.retry.wait_until(now + REASON_GRACE);
                     }
                     r => self.finish(r, now),
                 }
@@ -168,18 +160,18 @@ impl Machine for CommandMachine {
     }
 
     fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
-        if self.result.is_some() || now < self.deadline {
+        let step = self.retry.step(now);
+        if self.result.is_some() || step == Step::Wait {
             return Vec::new();
         }
         if let Some((r, _)) = self.refused {
             self.finish(r, now);
             return Vec::new();
         }
-        let waited = self
-            .started
-            .map_or(Duration::ZERO, |s| now.duration_since(s));
-        if self.tries >= COMMAND_TRIES && waited >= GIVE_UP_AFTER {
-            self.result = Some(Err(NoAck { tries: self.tries }));
+        if step == Step::GiveUp {
+            self.result = Some(Err(NoAck {
+                tries: self.retry.tries(),
+            }));
             return Vec::new();
         }
         // An IN_PROGRESS that went quiet is asked again, like a lost ACK.
@@ -188,7 +180,7 @@ impl Machine for CommandMachine {
     }
 
     fn deadline(&self) -> Instant {
-        self.deadline
+        self.retry.deadline()
     }
 
     fn result(&mut self) -> Option<Self::Output> {

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use vtol_link::dialect::{self as apm, MavCmd, MavMessage};
 use vtol_link::{ComponentId, SystemId};
 
-use super::machine::{Inbound, Machine, retry_wait};
+use super::machine::{Inbound, Machine, Retry, Step};
 
 /// Sends before the interval is called unknown…
 pub const INTERVAL_TRIES: u8 = 6;
@@ -20,10 +20,7 @@ pub const INTERVAL_GIVE_UP: Duration = Duration::from_secs(2);
 pub struct IntervalMachine {
     target: (SystemId, ComponentId),
     msgid: u32,
-    rto: Duration,
-    tries: u8,
-    started: Instant,
-    deadline: Instant,
+    retry: Retry,
     done: Option<Option<i32>>,
 }
 
@@ -34,10 +31,7 @@ impl IntervalMachine {
         Self {
             target,
             msgid,
-            rto,
-            tries: 0,
-            started: Instant::now(),
-            deadline: Instant::now(),
+            retry: Retry::new(rto, INTERVAL_TRIES, INTERVAL_GIVE_UP),
             done: None,
         }
     }
@@ -46,8 +40,7 @@ impl IntervalMachine {
     // neither ArduPilot nor the twin answers with the interval; both answer this.
     #[allow(deprecated)]
     fn request(&mut self, now: Instant) -> MavMessage {
-        self.tries += 1;
-        self.deadline = now + retry_wait(self.rto, self.tries);
+        let send = self.retry.send(now);
         MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
             param1: self.msgid as f32,
             param2: 0.0,
@@ -59,7 +52,7 @@ impl IntervalMachine {
             command: MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL,
             target_system: self.target.0.0,
             target_component: self.target.1.0,
-            confirmation: self.tries - 1,
+            confirmation: send - 1,
         })
     }
 }
@@ -68,7 +61,6 @@ impl Machine for IntervalMachine {
     type Output = Option<i32>;
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        self.started = now;
         vec![self.request(now)]
     }
 
@@ -83,18 +75,21 @@ impl Machine for IntervalMachine {
     }
 
     fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
-        if self.done.is_some() || now < self.deadline {
+        if self.done.is_some() {
             return Vec::new();
         }
-        if self.tries >= INTERVAL_TRIES && now.duration_since(self.started) >= INTERVAL_GIVE_UP {
-            self.done = Some(None);
-            return Vec::new();
+        match self.retry.step(now) {
+            Step::Wait => Vec::new(),
+            Step::GiveUp => {
+                self.done = Some(None);
+                Vec::new()
+            }
+            Step::Send => vec![self.request(now)],
         }
-        vec![self.request(now)]
     }
 
     fn deadline(&self) -> Instant {
-        self.deadline
+        self.retry.deadline()
     }
 
     fn result(&mut self) -> Option<Self::Output> {
@@ -132,7 +127,6 @@ mod tests {
 
         let mut m = IntervalMachine::new(V, 251, Duration::from_millis(20));
         let mut sends = m.start(t0).len();
-        m.started = t0;
         while m.done.is_none() {
             sends += m.on_time(m.deadline()).len();
         }

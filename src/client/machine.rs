@@ -113,6 +113,105 @@ pub fn retry_wait(rto: Duration, tries: u8) -> Duration {
     (rto * 2u32.pow(doublings)).min(MAX_RETRY_WAIT.max(rto))
 }
 
+/// What a [`Retry`] calls for when the machine's time comes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// The deadline has not passed.
+    Wait,
+    /// Send the request again.
+    Send,
+    /// The request is unanswered.
+    GiveUp,
+}
+
+/// The retry bookkeeping of a request that waits for one answer: the sends made, when the
+/// first went, when the next is due ([`retry_wait`] after each send, or a later time the
+/// machine sets) and when the request is called unanswered (after its tries *and* a least
+/// time, whichever comes later).
+#[derive(Debug, Clone)]
+pub struct Retry {
+    rto: Duration,
+    max_tries: u8,
+    give_up_after: Duration,
+    tries: u8,
+    started: Option<Instant>,
+    deadline: Instant,
+}
+
+impl Retry {
+    /// Sends every `rto` (then backing off), unanswered after `max_tries` sends and
+    /// `give_up_after` since the first.
+    #[must_use]
+    pub fn new(rto: Duration, max_tries: u8, give_up_after: Duration) -> Self {
+        Self {
+            rto,
+            max_tries,
+            give_up_after,
+            tries: 0,
+            started: None,
+            deadline: Instant::now(),
+        }
+    }
+
+    /// Counts a send at `now` and sets the deadline for the next; returns the send's number
+    /// (1 for the first).
+    pub fn send(&mut self, now: Instant) -> u8 {
+        self.started.get_or_insert(now);
+        self.tries += 1;
+        self.deadline = now + retry_wait(self.rto, self.tries);
+        self.tries
+    }
+
+    /// Sends made.
+    #[must_use]
+    pub fn tries(&self) -> u8 {
+        self.tries
+    }
+
+    /// When the machine wants `on_time` next.
+    #[must_use]
+    pub fn deadline(&self) -> Instant {
+        self.deadline
+    }
+
+    /// Moves the next deadline (a grace for a reason, a longer wait for a command in
+    /// progress).
+    pub fn wait_until(&mut self, deadline: Instant) {
+        self.deadline = deadline;
+    }
+
+    /// Time since the first send (zero before it).
+    #[must_use]
+    pub fn elapsed(&self, now: Instant) -> Duration {
+        self.started
+            .map_or(Duration::ZERO, |s| now.duration_since(s))
+    }
+
+    /// What is due at `now`: nothing before the deadline; after it, another send, or giving
+    /// up once every try is spent and the least time has passed.
+    #[must_use]
+    pub fn step(&self, now: Instant) -> Step {
+        if now < self.deadline {
+            Step::Wait
+        } else if self.tries >= self.max_tries && self.elapsed(now) >= self.give_up_after {
+            Step::GiveUp
+        } else {
+            Step::Send
+        }
+    }
+
+    /// The round trip of an answer arriving at `now`, if only one send was made (Karn's rule:
+    /// after a retry the answer may belong to either send).
+    #[must_use]
+    pub fn first_try_rtt(&self, now: Instant) -> Option<Duration> {
+        if self.tries == 1 {
+            self.started.map(|s| now.duration_since(s))
+        } else {
+            None
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -127,6 +226,24 @@ mod tests {
         );
         let total: u128 = waits.iter().sum();
         assert!(total > 3000, "twelve tries span {total} ms");
+    }
+
+    #[test]
+    fn a_request_is_unanswered_only_after_its_tries_and_its_least_time() {
+        let rto = Duration::from_millis(10);
+        let mut r = Retry::new(rto, 2, Duration::from_millis(500));
+        let t0 = Instant::now();
+        assert_eq!(r.send(t0), 1);
+        assert_eq!(r.deadline(), t0 + rto);
+        assert_eq!((r.step(t0), r.step(r.deadline())), (Step::Wait, Step::Send));
+        assert_eq!(r.first_try_rtt(t0 + rto), Some(rto));
+        assert_eq!(r.send(t0 + rto), 2);
+        assert_eq!(r.first_try_rtt(t0 + rto), None, "Karn's rule");
+        let least = t0 + Duration::from_millis(500);
+        assert_eq!(r.step(least - rto), Step::Send, "tries spent, time not");
+        assert_eq!(r.step(least), Step::GiveUp);
+        r.wait_until(t0 + Duration::from_secs(5));
+        assert_eq!(r.deadline(), t0 + Duration::from_secs(5));
     }
 
     #[test]

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use vtol_link::dialect::{self as apm, MavMessage, MavParamError, MavParamType};
 use vtol_link::{ComponentId, SystemId};
 
-use super::machine::{GIVE_UP_AFTER, Inbound, Machine, retry_wait};
+use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Step};
 use crate::params::{Param, stored_value};
 
 mod pull;
@@ -64,10 +64,7 @@ pub struct ParamMachine {
     name: String,
     /// `Some((value, type))` for a write; `None` for a read.
     write: Option<(f32, MavParamType)>,
-    rto: Duration,
-    tries: u8,
-    started: Instant,
-    deadline: Instant,
+    retry: Retry,
     last_echo: Option<f32>,
     refused: Option<(String, Instant)>,
     /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
@@ -105,15 +102,11 @@ impl ParamMachine {
         write: Option<(f32, MavParamType)>,
         rto: Duration,
     ) -> Self {
-        let now = Instant::now();
         Self {
             target,
             name: name.to_owned(),
             write,
-            rto,
-            tries: 0,
-            started: now,
-            deadline: now,
+            retry: Retry::new(rto, PARAM_TRIES, GIVE_UP_AFTER),
             last_echo: None,
             refused: None,
             assembler: super::statustext::TextAssembler::default(),
@@ -123,8 +116,7 @@ impl ParamMachine {
     }
 
     fn request(&mut self, now: Instant) -> MavMessage {
-        self.tries += 1;
-        self.deadline = now + retry_wait(self.rto, self.tries);
+        self.retry.send(now);
         match self.write {
             Some((value, ty)) => MavMessage::PARAM_SET(apm::PARAM_SET_DATA {
                 param_value: value,
@@ -147,7 +139,6 @@ impl Machine for ParamMachine {
     type Output = Result<Param, ParamFailure>;
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        self.started = now;
         vec![self.request(now)]
     }
 
@@ -166,8 +157,8 @@ impl Machine for ParamMachine {
                     Some((want, _)) => crate::params::same_value(p.value, stored_value(p.ty, want)),
                 };
                 if confirmed {
-                    if self.tries == 1 {
-                        self.first_try_rtt = Some(now.duration_since(self.started));
+                    if let Some(rtt) = self.retry.first_try_rtt(now) {
+                        self.first_try_rtt = Some(rtt);
                     }
                     self.done = Some(Ok(p));
                 } else {
@@ -182,7 +173,7 @@ impl Machine for ParamMachine {
                 } else if self.write.is_some() && self.refused.is_none() {
                     let reason = format!("{}: {}", self.name, param_error_text(e.error));
                     self.refused = Some((reason, now));
-                    self.deadline = now + REASON_GRACE;
+                    self.retry.wait_until(now + REASON_GRACE);
                 }
             }
             MavMessage::STATUSTEXT(t) => {
@@ -200,16 +191,17 @@ impl Machine for ParamMachine {
     }
 
     fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
-        if self.done.is_some() || now < self.deadline {
+        let step = self.retry.step(now);
+        if self.done.is_some() || step == Step::Wait {
             return Vec::new();
         }
         if let Some((reason, _)) = self.refused.take() {
             self.done = Some(Err(ParamFailure::Refused(reason)));
             return Vec::new();
         }
-        if self.tries >= PARAM_TRIES && now.duration_since(self.started) >= GIVE_UP_AFTER {
+        if step == Step::GiveUp {
             self.done = Some(Err(ParamFailure::NoAnswer {
-                tries: self.tries,
+                tries: self.retry.tries(),
                 last_echo: self.last_echo,
             }));
             return Vec::new();
@@ -218,7 +210,7 @@ impl Machine for ParamMachine {
     }
 
     fn deadline(&self) -> Instant {
-        self.deadline
+        self.retry.deadline()
     }
 
     fn result(&mut self) -> Option<Self::Output> {
