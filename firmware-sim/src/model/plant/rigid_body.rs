@@ -13,35 +13,22 @@ use crate::model::frames::Euler;
 /// Sines and cosines of η = (ψ, θ, φ), computed once and shared by R and W_n⁻¹.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EulerTrig {
-    sps: f64,
-    cps: f64,
-    sth: f64,
-    cth: f64,
-    sph: f64,
-    cph: f64,
+    /// (sin ψ, cos ψ).
+    psi: (f64, f64),
+    /// (sin θ, cos θ).
+    theta: (f64, f64),
+    /// (sin φ, cos φ).
+    phi: (f64, f64),
 }
 
 impl EulerTrig {
     /// The trigonometric functions of `e`.
     #[must_use]
     pub fn new(e: &Euler) -> Self {
-        Self::from_sin_cos(e.psi.sin_cos(), e.theta.sin_cos(), e.phi.sin_cos())
-    }
-
-    /// From the (sine, cosine) of ψ, θ and φ.
-    #[inline]
-    fn from_sin_cos(
-        (sps, cps): (f64, f64),
-        (sth, cth): (f64, f64),
-        (sph, cph): (f64, f64),
-    ) -> Self {
         Self {
-            sps,
-            cps,
-            sth,
-            cth,
-            sph,
-            cph,
+            psi: e.psi.sin_cos(),
+            theta: e.theta.sin_cos(),
+            phi: e.phi.sin_cos(),
         }
     }
 
@@ -61,11 +48,11 @@ impl EulerTrig {
         }
         // One branch for all three angles, so the common path is straight-line arithmetic.
         let short = largest <= SHIFT_SHORT_MAX_RAD;
-        Self::from_sin_cos(
-            shift(self.sps, self.cps, d[0], short),
-            shift(self.sth, self.cth, d[1], short),
-            shift(self.sph, self.cph, d[2], short),
-        )
+        Self {
+            psi: shift(self.psi, d[0], short),
+            theta: shift(self.theta, d[1], short),
+            phi: shift(self.phi, d[2], short),
+        }
     }
 
     /// [`EulerTrig::new`] out of line: the rare fallback of [`EulerTrig::shifted`].
@@ -79,11 +66,7 @@ impl EulerTrig {
     #[inline]
     #[must_use]
     pub fn rotation_body_to_inertial(&self) -> Matrix3<f64> {
-        crate::model::frames::rotation_from_sin_cos(
-            (self.sps, self.cps),
-            (self.sth, self.cth),
-            (self.sph, self.cph),
-        )
+        crate::model::frames::rotation_from_sin_cos(self.psi, self.theta, self.phi)
     }
 
     /// R_B→I v without forming R: the three elementary rotations Rz(ψ)(Ry(θ)(Rx(φ) v)), 12
@@ -92,14 +75,7 @@ impl EulerTrig {
     #[inline]
     #[must_use]
     pub fn rotate_body_to_inertial(&self, v: &Vector3<f64>) -> Vector3<f64> {
-        let Self {
-            sps,
-            cps,
-            sth,
-            cth,
-            sph,
-            cph,
-        } = *self;
+        let ((sps, cps), (sth, cth), (sph, cph)) = (self.psi, self.theta, self.phi);
         let (x, y, z) = (v[0], v[1], v[2]);
         // Rx(φ): roll about x_B.
         let (y1, z1) = (cph * y - sph * z, sph * y + cph * z);
@@ -113,9 +89,7 @@ impl EulerTrig {
     #[inline]
     #[must_use]
     pub fn euler_rates(&self, omega_body_rad_s: &Vector3<f64>) -> Vector3<f64> {
-        let Self {
-            sth, cth, sph, cph, ..
-        } = *self;
+        let ((sth, cth), (sph, cph)) = (self.theta, self.phi);
         let (q, r) = (omega_body_rad_s[1], omega_body_rad_s[2]);
         let qr_over_cth = (sph * q + cph * r) / cth;
         Vector3::new(
@@ -128,18 +102,16 @@ impl EulerTrig {
     /// cos θ cos φ: the cosine of the angle between z_B and the vertical.
     #[must_use]
     pub fn cos_tilt(&self) -> f64 {
-        self.cth * self.cph
+        let ((_, cth), (_, cph)) = (self.theta, self.phi);
+        cth * cph
     }
 
     /// Gravity in B per unit mass: Rᵀ (0, 0, −g) = −g (−sθ, sφcθ, cφcθ) ([I3]).
     #[inline]
     #[must_use]
     pub fn gravity_body_m_s2(&self, g_m_s2: f64) -> Vector3<f64> {
-        Vector3::new(
-            g_m_s2 * self.sth,
-            -g_m_s2 * self.sph * self.cth,
-            -g_m_s2 * self.cph * self.cth,
-        )
+        let ((sth, cth), (sph, cph)) = (self.theta, self.phi);
+        Vector3::new(g_m_s2 * sth, -g_m_s2 * sph * cth, -g_m_s2 * cph * cth)
     }
 }
 
@@ -160,7 +132,7 @@ const SHIFT_SHORT_MAX_RAD: f64 = 1e-3;
 /// (sin, cos) of a + δ from (sin a, cos a), for |δ| ≤ [`SHIFT_MAX_RAD`]; `short` when
 /// |δ| ≤ [`SHIFT_SHORT_MAX_RAD`]. δ = 0 returns (sin a, cos a) exactly.
 #[inline]
-fn shift(s: f64, c: f64, d: f64, short: bool) -> (f64, f64) {
+fn shift((s, c): (f64, f64), d: f64, short: bool) -> (f64, f64) {
     // Taylor series in Horner form with the reciprocal factorials as constants: a division by
     // a constant that is not a power of two stays a division, and these sit in the RK4 stages.
     // The first omitted terms, δ⁷/7! and δ⁸/8!, are below 2e-18 for |δ| ≤ SHIFT_MAX_RAD.
