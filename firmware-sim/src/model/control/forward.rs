@@ -13,6 +13,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::altitude::altitude_accel_m_s2;
 use super::forward_gains::ForwardGains;
 use super::mixer::{self, MIN_WASH_SQ_M2_S2};
 use super::tecs::{Tecs, TecsInput};
@@ -21,22 +22,54 @@ use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::frames::Euler;
 use crate::model::plant::{aero, surface_airflow};
 
-/// Damping ratio of the attitude law.
-const ATTITUDE_DAMPING: f64 = 0.8;
-/// Lowest nose angle above the horizon the law asks for, rad: the nose never goes below it in
-/// wings-level flight, which keeps the plant's Euler angles (θ = 90° − γ) off their
-/// singularity. Banking lowers θ further.
-pub const NOSE_ANGLE_MIN_RAD: f64 = 0.05;
-/// Highest angle of attack fed forward for the lift the flight needs, rad.
-const ALPHA_FF_MAX_RAD: f64 = 0.35;
-/// Smallest vertical share of the thrust axis the height-holding thrust divides by.
-const NOSE_VERTICAL_MIN: f64 = 0.25;
-/// Height loop of the transitions: ṙ_z = −kd ż + kp (h_d − h), 1/s and 1/s².
-const TRANSITION_ALT_KD: f64 = 2.0;
-const TRANSITION_ALT_KP: f64 = 1.5;
-/// Lowest thrust in any phase, as a share of the weight: the rotors keep some wash over the
-/// surfaces and never stop in the air.
-const THRUST_MIN_WEIGHTS: f64 = 0.1;
+/// The law's fixed tuning: what no parameter sets, kept together as ArduPilot keeps a
+/// controller's tuning in one parameter group.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForwardTuning {
+    /// Damping ratio of the attitude law.
+    pub attitude_damping: f64,
+    /// Lowest nose angle above the horizon the law asks for, rad: the nose never goes below
+    /// it in wings-level flight, which keeps the plant's Euler angles (θ = 90° − γ) off their
+    /// singularity. Banking lowers θ further.
+    pub nose_angle_min_rad: f64,
+    /// Highest angle of attack fed forward for the lift the flight needs, rad.
+    pub alpha_ff_max_rad: f64,
+    /// Smallest vertical share of the thrust axis the height-holding thrust divides by.
+    pub nose_vertical_min: f64,
+    /// Height loop of the transitions, the hover's altitude law (37) with these gains:
+    /// derivative gain, 1/s…
+    pub transition_alt_kd: f64,
+    /// …and proportional gain, 1/s².
+    pub transition_alt_kp: f64,
+    /// Lowest thrust in any phase, as a share of the weight: the rotors keep some wash over
+    /// the surfaces and never stop in the air.
+    pub thrust_min_weights: f64,
+}
+
+impl Default for ForwardTuning {
+    fn default() -> Self {
+        Self {
+            attitude_damping: 0.8,
+            nose_angle_min_rad: 0.05,
+            alpha_ff_max_rad: 0.35,
+            nose_vertical_min: 0.25,
+            transition_alt_kd: 2.0,
+            transition_alt_kp: 1.5,
+            thrust_min_weights: 0.1,
+        }
+    }
+}
+
+impl ForwardTuning {
+    /// Angle of attack whose lift coefficient is `cl` on the attached-flow curve
+    /// C_N ≈ C_Lα α + K_v α², clamped to [0, [`Self::alpha_ff_max_rad`]].
+    #[must_use]
+    pub fn alpha_for_lift(&self, cl: f64) -> f64 {
+        let (a, k) = (aero::LIFT_SLOPE_PER_RAD, aero::VORTEX_LIFT_K);
+        let cl = cl.max(0.0);
+        ((-a + (a * a + 4.0 * k * cl).sqrt()) / (2.0 * k)).min(self.alpha_ff_max_rad)
+    }
+}
 
 /// How the law gets its thrust and nose angle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,6 +133,7 @@ pub struct ForwardInput {
 /// The law's state.
 #[derive(Debug, Clone, Default)]
 pub struct ForwardLaw {
+    tuning: ForwardTuning,
     tecs: Tecs,
     energy_active: bool,
     pwm_residual_us: [f64; 5],
@@ -124,14 +158,6 @@ pub fn rotation_error(r: &Matrix3<f64>, r_d: &Matrix3<f64>) -> Vector3<f64> {
     0.5 * Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
 }
 
-/// Angle of attack whose lift coefficient is `cl` on the attached-flow curve
-/// C_N ≈ C_Lα α + K_v α², clamped to [0, [`ALPHA_FF_MAX_RAD`]].
-pub fn alpha_for_lift(cl: f64) -> f64 {
-    let (a, k) = (aero::LIFT_SLOPE_PER_RAD, aero::VORTEX_LIFT_K);
-    let cl = cl.max(0.0);
-    ((-a + (a * a + 4.0 * k * cl).sqrt()) / (2.0 * k)).min(ALPHA_FF_MAX_RAD)
-}
-
 /// Surface deflections (δ_e, δ_L, δ_R) for Γy, Γz with the wash and the free stream.
 fn surfaces_rad(af: &Airframe, w: [f64; 2], vs_sq: f64, gy: f64, gz: f64) -> [f64; 3] {
     let kv = af.k_wash_m_per_rad;
@@ -154,6 +180,12 @@ impl ForwardLaw {
         *self = Self::default();
     }
 
+    /// The law's fixed tuning.
+    #[must_use]
+    pub fn tuning(&self) -> &ForwardTuning {
+        &self.tuning
+    }
+
     /// One tick. The longest function of the law: the three steps (thrust and nose angle,
     /// attitude, mixing) share a dozen intermediate values.
     pub fn update(
@@ -163,6 +195,7 @@ impl ForwardLaw {
         inp: &ForwardInput,
         cmd: &ForwardCommand,
     ) -> ControlOutput {
+        let t = self.tuning;
         let (m, g) = (af.mass_kg, af.gravity_m_s2);
         let r = inp.euler.rotation_body_to_inertial();
         let v_air = inp.air_velocity_body_m_s;
@@ -178,8 +211,9 @@ impl ForwardLaw {
 
         // 1. Thrust and the nose angle above the horizon.
         let height_hold = |height: f64| {
-            let rz = TRANSITION_ALT_KP * (height - inp.pos_m.z) - TRANSITION_ALT_KD * inp.vel_m_s.z;
-            (m * (g + rz) - aero_inertial.z) / nose.z.max(NOSE_VERTICAL_MIN)
+            let (kd, kp) = (t.transition_alt_kd, t.transition_alt_kp);
+            let rz = altitude_accel_m_s2(kd, kp, inp.pos_m.z, inp.vel_m_s.z, height);
+            (m * (g + rz) - aero_inertial.z) / nose.z.max(t.nose_vertical_min)
         };
         let (thrust, nose_rad) = match cmd.longitudinal {
             Longitudinal::Energy {
@@ -210,7 +244,7 @@ impl ForwardLaw {
                 );
                 let q = 0.5 * aero::AIR_DENSITY_KG_M3 * airspeed.max(3.0).powi(2);
                 let load = m * g * out.path_angle_rad.cos() / bank.cos().max(0.3);
-                let alpha = alpha_for_lift(load / (q * aero::WING_AREA_M2));
+                let alpha = t.alpha_for_lift(load / (q * aero::WING_AREA_M2));
                 (out.thrust_n, out.path_angle_rad + alpha)
             }
             Longitudinal::NoseAngle {
@@ -226,8 +260,8 @@ impl ForwardLaw {
                 (thrust_n, nose_rad)
             }
         };
-        let thrust = thrust.clamp(THRUST_MIN_WEIGHTS * m * g, fz_max);
-        let nose_rad = nose_rad.clamp(NOSE_ANGLE_MIN_RAD, std::f64::consts::FRAC_PI_2);
+        let thrust = thrust.clamp(t.thrust_min_weights * m * g, fz_max);
+        let nose_rad = nose_rad.clamp(t.nose_angle_min_rad, std::f64::consts::FRAC_PI_2);
 
         // 2. Attitude: the nose follows the air's heading once the wing flies, the command's
         //    heading before; the coordinated turn rate g tan μ / V is fed forward.
@@ -250,7 +284,7 @@ impl ForwardLaw {
         let e_r = rotation_error(&r, &r_d);
         let e_w = inp.omega_body_rad_s - r.tr_mul(&(r_d * omega_d_body_d));
         let wn = gains.attitude_bandwidth_rad_s;
-        let accel = -(wn * wn) * e_r - 2.0 * ATTITUDE_DAMPING * wn * e_w;
+        let accel = -(wn * wn) * e_r - 2.0 * t.attitude_damping * wn * e_w;
         let inertia = Vector3::from(af.inertia_kg_m2);
         let w = inp.omega_body_rad_s;
         let iw = inertia.component_mul(&w);

@@ -7,22 +7,42 @@
 //! the flight-path angle moves Ḃ by about 2 g V Δγ and leaves Ė alone; at constant path angle
 //! thrust moves Ė by ΔT V / m.
 
-/// Largest speed-rate demand, m/s².
-const SPEED_RATE_MAX_M_S2: f64 = 2.0;
-/// Proportional gain of the thrust loop on the total-energy-rate error (fraction per s).
-const THR_KP: f64 = 0.5;
-/// Integral gain of the thrust loop, 1/s.
-const THR_KI: f64 = 0.3;
-/// Proportional gain of the pitch loop on the balance-rate error.
-const PITCH_KP: f64 = 0.5;
-/// Integral gain of the pitch loop, 1/s.
-const PITCH_KI: f64 = 0.3;
-/// Bound on the pitch integrator, rad.
-const PITCH_INTEG_MAX_RAD: f64 = 0.3;
-/// Lowest speed the loops divide by, m/s.
-const SPEED_FLOOR_M_S: f64 = 3.0;
-/// Time constant of the speed-derivative filter, s.
-const SPEED_RATE_FILTER_S: f64 = 0.2;
+/// The controller's fixed tuning: what no parameter sets (the `TECS_*` parameters are
+/// [`TecsLimits`]), kept together as ArduPlane keeps TECS's tuning in one parameter group.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TecsTuning {
+    /// Largest speed-rate demand, m/s².
+    pub speed_rate_max_m_s2: f64,
+    /// Proportional gain of the thrust loop on the total-energy-rate error (fraction per s).
+    pub thr_kp: f64,
+    /// Integral gain of the thrust loop, 1/s.
+    pub thr_ki: f64,
+    /// Proportional gain of the pitch loop on the balance-rate error.
+    pub pitch_kp: f64,
+    /// Integral gain of the pitch loop, 1/s.
+    pub pitch_ki: f64,
+    /// Bound on the pitch integrator, rad.
+    pub pitch_integ_max_rad: f64,
+    /// Lowest speed the loops divide by, m/s.
+    pub speed_floor_m_s: f64,
+    /// Time constant of the speed-derivative filter, s.
+    pub speed_rate_filter_s: f64,
+}
+
+impl Default for TecsTuning {
+    fn default() -> Self {
+        Self {
+            speed_rate_max_m_s2: 2.0,
+            thr_kp: 0.5,
+            thr_ki: 0.3,
+            pitch_kp: 0.5,
+            pitch_ki: 0.3,
+            pitch_integ_max_rad: 0.3,
+            speed_floor_m_s: 3.0,
+            speed_rate_filter_s: 0.2,
+        }
+    }
+}
 
 /// Limits and time constant (the `TECS_*` parameters).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,9 +89,10 @@ pub struct TecsOutput {
     pub path_angle_rad: f64,
 }
 
-/// The energy controller's state: two integrators and the speed-rate filter.
+/// The energy controller: its tuning, two integrators and the speed-rate filter.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Tecs {
+    tuning: TecsTuning,
     thrust_integ_n: f64,
     pitch_integ_rad: f64,
     last_speed_m_s: Option<f64>,
@@ -86,19 +107,20 @@ impl Tecs {
 
     /// One tick.
     pub fn update(&mut self, lim: &TecsLimits, i: &TecsInput) -> TecsOutput {
+        let t = self.tuning;
         let g = i.gravity_m_s2;
-        let v = i.airspeed_m_s.max(SPEED_FLOOR_M_S);
+        let v = i.airspeed_m_s.max(t.speed_floor_m_s);
         let dt = i.dt_s.max(1e-6);
         if let Some(last) = self.last_speed_m_s {
             let raw = (i.airspeed_m_s - last) / dt;
             self.speed_rate_m_s2 +=
-                (raw - self.speed_rate_m_s2) * (dt / SPEED_RATE_FILTER_S).min(1.0);
+                (raw - self.speed_rate_m_s2) * (dt / t.speed_rate_filter_s).min(1.0);
         }
         self.last_speed_m_s = Some(i.airspeed_m_s);
         let tau = lim.time_const_s.max(0.5);
         let h_dot_d = ((i.h_demand_m - i.h_m) / tau).clamp(-lim.sink_max_m_s, lim.climb_max_m_s);
         let v_dot_d = ((i.airspeed_demand_m_s - i.airspeed_m_s) / tau)
-            .clamp(-SPEED_RATE_MAX_M_S2, SPEED_RATE_MAX_M_S2);
+            .clamp(-t.speed_rate_max_m_s2, t.speed_rate_max_m_s2);
         let ste_d = g * h_dot_d + v * v_dot_d;
         let ste = g * i.h_dot_m_s + v * self.speed_rate_m_s2;
         let seb_d = g * h_dot_d - v * v_dot_d;
@@ -106,20 +128,20 @@ impl Tecs {
 
         let m_over_v = i.mass_kg / v;
         let ste_err = ste_d - ste;
-        let unsat = i.drag_n + m_over_v * (ste_d + THR_KP * ste_err) + self.thrust_integ_n;
+        let unsat = i.drag_n + m_over_v * (ste_d + t.thr_kp * ste_err) + self.thrust_integ_n;
         // Integrate only while the thrust is not pinned in the error's direction.
         let pinned = (unsat >= i.thrust_max_n && ste_err > 0.0) || (unsat <= 0.0 && ste_err < 0.0);
         if !pinned {
-            self.thrust_integ_n = (self.thrust_integ_n + THR_KI * m_over_v * ste_err * dt)
+            self.thrust_integ_n = (self.thrust_integ_n + t.thr_ki * m_over_v * ste_err * dt)
                 .clamp(-i.thrust_max_n, i.thrust_max_n);
         }
         let thrust_n = unsat.clamp(0.0, i.thrust_max_n);
 
         let seb_err = (seb_d - seb) / (g * v);
-        self.pitch_integ_rad = (self.pitch_integ_rad + PITCH_KI * seb_err * dt)
-            .clamp(-PITCH_INTEG_MAX_RAD, PITCH_INTEG_MAX_RAD);
+        self.pitch_integ_rad = (self.pitch_integ_rad + t.pitch_ki * seb_err * dt)
+            .clamp(-t.pitch_integ_max_rad, t.pitch_integ_max_rad);
         let path_angle_rad =
-            (h_dot_d / v).clamp(-0.5, 0.5) + PITCH_KP * seb_err + self.pitch_integ_rad;
+            (h_dot_d / v).clamp(-0.5, 0.5) + t.pitch_kp * seb_err + self.pitch_integ_rad;
         TecsOutput {
             thrust_n,
             path_angle_rad,

@@ -8,9 +8,7 @@
 
 use super::Vehicle;
 use crate::model::airframe::ModelMode;
-use crate::model::control::forward::{
-    self, ForwardCommand, ForwardInput, ForwardLaw, Longitudinal,
-};
+use crate::model::control::forward::{ForwardCommand, ForwardInput, ForwardLaw, Longitudinal};
 use crate::model::control::{ControlInput, ControlOutput, PilotInput, forward_gains};
 use nalgebra::{Vector2, Vector3};
 
@@ -243,9 +241,10 @@ impl Vehicle {
                 // The nose goes down to the angle of level flight at the trim airspeed.
                 let v_end = gains.airspeed_trim_m_s.max(airspeed);
                 let q = 0.5 * aero::AIR_DENSITY_KG_M3 * v_end.powi(2);
-                let level = forward::alpha_for_lift(
-                    self.config.airframe.weight_n() / (q * aero::WING_AREA_M2),
-                );
+                let level = f
+                    .law
+                    .tuning()
+                    .alpha_for_lift(self.config.airframe.weight_n() / (q * aero::WING_AREA_M2));
                 f.nose_cmd_rad = (f.nose_cmd_rad - gains.transition_rate_fw_rad_s * dt).max(level);
                 let from_vertical = std::f64::consts::FRAC_PI_2 - nose_angle_rad(&r);
                 if airspeed >= gains.airspeed_min_m_s + FW_ENTRY_MARGIN_M_S
