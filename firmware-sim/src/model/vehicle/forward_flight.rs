@@ -18,42 +18,67 @@ use crate::model::mode::{FlightMode, Guidance, VtolState};
 use crate::model::plant::aero;
 use crate::model::sensors::{ImuSample, PositionFix};
 
-/// The forward transition ends this far above `ARSPD_FBW_MIN`, m/s: the energy controller
-/// takes over with the thrust of level flight, and the airspeed dips a little as it does; with
-/// 0.5 m/s a gust just after the hand-over took it to 9.6 m/s, below `ARSPD_FBW_MIN`.
-const FW_ENTRY_MARGIN_M_S: f64 = 1.5;
-/// Time constant of CRUISE's heading hold, s.
-const HEADING_TIME_CONST_S: f64 = 2.0;
-/// Full-stick nose angle change in FBWA, rad.
-const FBWA_PITCH_RANGE_RAD: f64 = 0.35;
-/// The back transition's pull-up starts at this multiple of the stall speed: slow enough that
-/// the climb it trades the speed for stays small (½ V² / g ≈ 2 m at 7 m/s), fast enough that the
-/// wing still turns the path up with the nose, so the plate never meets the air broadside at
-/// speed.
-const PULL_UP_STALL_RATIO: f64 = 1.1;
-/// Nose angle above which the pull-up's thrust floor applies, rad.
-const PULL_UP_FLOOR_NOSE_RAD: f64 = 0.45;
-/// Lag of the nose behind its command above which the pull-up's thrust floor applies, rad.
-const PULL_UP_LAG_RAD: f64 = 0.15;
-/// Least thrust of the pull-up, in weights.
-const PULL_UP_THRUST_WEIGHTS: f64 = 0.5;
-/// Margin above the pull-up speed at which the slowing stage ends, m/s.
-const PULL_UP_SPEED_MARGIN_M_S: f64 = 0.3;
-/// Longest slowing stage, s.
-const SLOWING_MAX_S: f64 = 6.0;
-/// Time constant of the wind estimate on the wing (ground velocity less air velocity), s.
-const WIND_ESTIMATE_TIME_CONST_S: f64 = 5.0;
-/// Least wind, as estimated on the wing, for which the hover after a back transition turns its
-/// span into the wind, m/s.
-const WEATHERVANE_MIN_WIND_M_S: f64 = 1.0;
-/// Rate at which the hover turns its span into the wind, rad/s (ArduPilot's weathervaning,
-/// rate-limited): the plate passes slowly through the angles where its yaw and pitch moments
-/// are largest; 0.5 rad/s brought it down in most runs.
-const WEATHERVANE_RATE_RAD_S: f64 = 0.1;
+/// The phases' fixed tuning: what no parameter sets, kept together as ArduPilot keeps a
+/// feature's tuning in one parameter group.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhaseTuning {
+    /// The forward transition ends this far above `ARSPD_FBW_MIN`, m/s: the energy controller
+    /// takes over with the thrust of level flight, and the airspeed dips a little as it does;
+    /// with 0.5 m/s a gust just after the hand-over took it to 9.6 m/s, below `ARSPD_FBW_MIN`.
+    pub fw_entry_margin_m_s: f64,
+    /// Time constant of CRUISE's heading hold, s.
+    pub heading_time_const_s: f64,
+    /// Full-stick nose angle change in FBWA, rad.
+    pub fbwa_pitch_range_rad: f64,
+    /// The back transition's pull-up starts at this multiple of the stall speed: slow enough
+    /// that the climb it trades the speed for stays small (½ V² / g ≈ 2 m at 7 m/s), fast
+    /// enough that the wing still turns the path up with the nose, so the plate never meets
+    /// the air broadside at speed.
+    pub pull_up_stall_ratio: f64,
+    /// Nose angle above which the pull-up's thrust floor applies, rad.
+    pub pull_up_floor_nose_rad: f64,
+    /// Lag of the nose behind its command above which the pull-up's thrust floor applies, rad.
+    pub pull_up_lag_rad: f64,
+    /// Least thrust of the pull-up, in weights.
+    pub pull_up_thrust_weights: f64,
+    /// Margin above the pull-up speed at which the slowing stage ends, m/s.
+    pub pull_up_speed_margin_m_s: f64,
+    /// Longest slowing stage, s.
+    pub slowing_max_s: f64,
+    /// Time constant of the wind estimate on the wing (ground velocity less air velocity), s.
+    pub wind_estimate_time_const_s: f64,
+    /// Least wind, as estimated on the wing, for which the hover after a back transition turns
+    /// its span into the wind, m/s.
+    pub weathervane_min_wind_m_s: f64,
+    /// Rate at which the hover turns its span into the wind, rad/s (ArduPilot's weathervaning,
+    /// rate-limited): the plate passes slowly through the angles where its yaw and pitch
+    /// moments are largest; 0.5 rad/s brought it down in most runs.
+    pub weathervane_rate_rad_s: f64,
+}
+
+impl Default for PhaseTuning {
+    fn default() -> Self {
+        Self {
+            fw_entry_margin_m_s: 1.5,
+            heading_time_const_s: 2.0,
+            fbwa_pitch_range_rad: 0.35,
+            pull_up_stall_ratio: 1.1,
+            pull_up_floor_nose_rad: 0.45,
+            pull_up_lag_rad: 0.15,
+            pull_up_thrust_weights: 0.5,
+            pull_up_speed_margin_m_s: 0.3,
+            slowing_max_s: 6.0,
+            wind_estimate_time_const_s: 5.0,
+            weathervane_min_wind_m_s: 1.0,
+            weathervane_rate_rad_s: 0.1,
+        }
+    }
+}
 
 /// The forward-flight side of the vehicle: the phase, its clock and targets, and the law.
 #[derive(Debug, Clone, Default)]
 pub struct ForwardFlight {
+    tuning: PhaseTuning,
     state: VtolState,
     law: ForwardLaw,
     phase_time_s: f64,
@@ -97,11 +122,11 @@ impl ForwardFlight {
     }
 
     /// Turns the hover's heading toward the nearer of the two that put the span (y_B) into
-    /// the wind estimated on the wing, at [`WEATHERVANE_RATE_RAD_S`]: a 3 m/s wind on the
+    /// the wind estimated on the wing, at [`PhaseTuning::weathervane_rate_rad_s`]: a 3 m/s wind on the
     /// plate's face needs more lean than `Q_ANGLE_MAX`, along its span 9° (`docs/model.md`).
     fn weathervane_step(&mut self, dt_s: f64) {
         let w = self.wind_m_s;
-        if !self.weathervane || w.norm() < WEATHERVANE_MIN_WIND_M_S {
+        if !self.weathervane || w.norm() < self.tuning.weathervane_min_wind_m_s {
             return;
         }
         let toward = w.y.atan2(w.x);
@@ -109,7 +134,7 @@ impl ForwardFlight {
         let a = wrap_pi(toward + std::f64::consts::FRAC_PI_2 - h);
         let b = wrap_pi(toward - std::f64::consts::FRAC_PI_2 - h);
         let err = if a.abs() <= b.abs() { a } else { b };
-        let step = WEATHERVANE_RATE_RAD_S * dt_s;
+        let step = self.tuning.weathervane_rate_rad_s * dt_s;
         self.hover_heading_rad = wrap_pi(h + err.clamp(-step, step));
     }
 
@@ -225,13 +250,14 @@ impl Vehicle {
             return None;
         }
         let gains = self.config.gains.forward;
+        let tuning = self.forward.tuning;
         let dt = input.dt_s;
         let r = input.euler.rotation_body_to_inertial();
         let airspeed = self.telemetry.air_velocity_body_m_s.norm();
         if self.forward.state == VtolState::Fw {
             let air = r * self.telemetry.air_velocity_body_m_s;
             let w = input.vel_m_s.xy() - air.xy();
-            let k = (dt / WIND_ESTIMATE_TIME_CONST_S).min(1.0);
+            let k = (dt / tuning.wind_estimate_time_const_s).min(1.0);
             self.forward.wind_m_s += k * (w - self.forward.wind_m_s);
         }
         self.forward.phase_time_s += dt;
@@ -247,7 +273,7 @@ impl Vehicle {
                     .alpha_for_lift(self.config.airframe.weight_n() / (q * aero::WING_AREA_M2));
                 f.nose_cmd_rad = (f.nose_cmd_rad - gains.transition_rate_fw_rad_s * dt).max(level);
                 let from_vertical = std::f64::consts::FRAC_PI_2 - nose_angle_rad(&r);
-                if airspeed >= gains.airspeed_min_m_s + FW_ENTRY_MARGIN_M_S
+                if airspeed >= gains.airspeed_min_m_s + tuning.fw_entry_margin_m_s
                     && from_vertical >= gains.transition_angle_fw_rad
                 {
                     f.state = VtolState::Fw;
@@ -265,9 +291,11 @@ impl Vehicle {
                 // Slow down on the wing first: the stalled plate's moment at speed is more
                 // than the elevator can hold, so the nose comes up only near the pull-up speed.
                 let f = &mut self.forward;
-                let slow =
-                    PULL_UP_STALL_RATIO * forward_gains::stall_speed_m_s(&self.config.airframe);
-                if airspeed <= slow + PULL_UP_SPEED_MARGIN_M_S || f.phase_time_s > SLOWING_MAX_S {
+                let slow = tuning.pull_up_stall_ratio
+                    * forward_gains::stall_speed_m_s(&self.config.airframe);
+                if airspeed <= slow + tuning.pull_up_speed_margin_m_s
+                    || f.phase_time_s > tuning.slowing_max_s
+                {
                     f.slowing = false;
                     f.nose_cmd_rad = nose_angle_rad(&r);
                 }
@@ -387,10 +415,11 @@ impl Vehicle {
                 // wing's moment near the stall), the pull-up raises the thrust toward the
                 // hover's for that angle: its wash gives the elevator the authority it lacks.
                 thrust_min_n: if f.state == VtolState::TransitionToMc
-                    && nose >= PULL_UP_FLOOR_NOSE_RAD
-                    && f.nose_cmd_rad - nose > PULL_UP_LAG_RAD
+                    && nose >= f.tuning.pull_up_floor_nose_rad
+                    && f.nose_cmd_rad - nose > f.tuning.pull_up_lag_rad
                 {
-                    PULL_UP_THRUST_WEIGHTS * self.config.airframe.weight_n() / nose.sin().max(0.5)
+                    f.tuning.pull_up_thrust_weights * self.config.airframe.weight_n()
+                        / nose.sin().max(0.5)
                 } else {
                     0.0
                 },
@@ -408,7 +437,7 @@ impl Vehicle {
         let g = self.config.airframe.gravity_m_s2;
         let course = input.vel_m_s.y.atan2(input.vel_m_s.x);
         let heading_hold = |target: f64| {
-            let lateral = airspeed * wrap_pi(target - course) / HEADING_TIME_CONST_S;
+            let lateral = airspeed * wrap_pi(target - course) / f.tuning.heading_time_const_s;
             -(lateral / g).atan()
         };
         let energy = |height_m: f64, airspeed_m_s: f64| Longitudinal::Energy {
@@ -423,7 +452,7 @@ impl Vehicle {
                     * self.config.airframe.rotor_speed_max_rad_s.powi(2);
                 ForwardCommand {
                     longitudinal: Longitudinal::Manual {
-                        nose_rad: 0.1 + FBWA_PITCH_RANGE_RAD * p.pitch,
+                        nose_rad: 0.1 + f.tuning.fbwa_pitch_range_rad * p.pitch,
                         thrust_n: p.throttle * fz_max,
                     },
                     bank_rad: gains.roll_limit_rad * p.roll,
