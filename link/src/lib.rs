@@ -6,6 +6,8 @@
 //! - [`signing`]: MAVLink 2 signing: [`SigningKey`], signing and verifying frames with the
 //!   spec's replay rules, the timestamp source and the persisted key and timestamp.
 //! - [`url`]: [`LinkUrl`], pymavlink-style link addresses.
+//! - [`text_file`]: the text files both programs keep (parameter files, missions), written
+//!   atomically and refused with the file and line of the first problem.
 //! - [`transport`]: tokio endpoints (udpin, udpout, tcpin, tcp, serial, in-memory streams)
 //!   reporting [`LinkEvent`]s, each link with a bounded egress queue.
 //!
@@ -17,6 +19,7 @@ pub mod frame;
 pub mod ids;
 pub mod protocol;
 pub mod signing;
+pub mod text_file;
 pub mod tlog;
 pub mod transport;
 pub mod url;

@@ -15,6 +15,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::{MavParamType, Param, ParamSet, valid_name};
+use vtol_link::text_file::{self, TextFileError};
 use vtol_link::{ComponentId, SystemId};
 
 /// A parameter file format.
@@ -31,24 +32,10 @@ pub enum Format {
 /// A file that cannot be used. Nothing is sent to a vehicle from a file with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
-    /// Reading or writing failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// A line is wrong.
-    #[error("{path}:{line}: {reason}")]
-    Line {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong with it.
-        reason: String,
-    },
+    /// Reading or writing failed, or a line is wrong (the same errors as the twin's
+    /// parameter and mission files).
+    #[error(transparent)]
+    File(#[from] TextFileError),
     /// The file holds no parameter.
     #[error("{path}: no parameters in the file")]
     Empty {
@@ -76,23 +63,18 @@ impl ParamFile {
     /// # Errors
     /// [`FileError`] naming the file and line.
     pub fn load(path: &Path) -> Result<Self, FileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = text_file::read_text(path)?;
         Self::parse(&text, path)
     }
 
     /// Parses file text; `path` only names the file in errors.
     ///
     /// # Errors
-    /// [`FileError::Line`] for the first bad line, [`FileError::Empty`] for a file without values.
+    /// [`TextFileError::Line`] for the first bad line, [`FileError::Empty`] for a file without
+    /// values.
     pub fn parse(text: &str, path: &Path) -> Result<Self, FileError> {
-        let err = |line: usize, reason: String| FileError::Line {
-            path: path.to_owned(),
-            line,
-            reason,
-        };
+        let err =
+            |line: usize, reason: String| FileError::from(TextFileError::line(path, line, reason));
         let mut format = None;
         let mut params = ParamSet::new();
         let mut lines = BTreeMap::new();
@@ -254,27 +236,21 @@ pub fn render(params: &ParamSet, format: Format, vehicle: (SystemId, ComponentId
     out
 }
 
-/// Writes a file atomically (a temporary beside it, then a rename), so an interrupted save
-/// never leaves half a file.
+/// Writes a file atomically (a temporary beside it, flushed, then a rename), so an interrupted
+/// save never leaves half a file.
 ///
 /// # Errors
-/// [`FileError::Io`].
+/// [`TextFileError::Io`].
 pub fn save(
     path: &Path,
     params: &ParamSet,
     format: Format,
     vehicle: (SystemId, ComponentId),
 ) -> Result<(), FileError> {
-    let io = |source| FileError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let text = render(params, format, vehicle);
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    Ok(text_file::write_text(
+        path,
+        &render(params, format, vehicle),
+    )?)
 }
 
 #[cfg(test)]
@@ -288,7 +264,7 @@ mod tests {
 
     fn line_of(e: FileError) -> (usize, String) {
         match e {
-            FileError::Line { line, reason, .. } => (line, reason),
+            FileError::File(TextFileError::Line { line, reason, .. }) => (line, reason),
             other => panic!("expected a line error, got {other}"),
         }
     }

@@ -486,11 +486,7 @@ impl Mission {
     /// # Errors
     /// [`TextFileError::Line`](crate::atomic_file::TextFileError::Line) naming the first bad line.
     pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
-        let err = |line: usize, reason: String| MissionFileError::Line {
-            path: path.to_owned(),
-            line,
-            reason,
-        };
+        let err = |line: usize, reason: String| MissionFileError::line(path, line, reason);
         let mut lines = text.lines().enumerate();
         match lines.next() {
             Some((_, h)) if h.trim().starts_with("QGC WPL") => {}

@@ -543,11 +543,7 @@ impl Params {
     pub fn from_parm_str(text: &str, path: &Path) -> Result<Self, ParamFileError> {
         let mut params = Self::new();
         let line_err = |line: usize, reason: String| {
-            ParamFileError::from(TextFileError::Line {
-                path: path.to_owned(),
-                line,
-                reason,
-            })
+            ParamFileError::from(TextFileError::line(path, line, reason))
         };
         let mut seen = BTreeMap::new();
         for (n, raw) in text.lines().enumerate() {
