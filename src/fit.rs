@@ -656,4 +656,4 @@ async fn ask(
 
 #[cfg(test)]
 #[path = "fit_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -96,13 +96,19 @@ fn hz(asked: &[(u32, Change)], msgid: u32) -> Option<f64> {
         .map(|(_, c)| 1e6 / f64::from(c.interval_us(None)))
 }
 
-#[test]
-fn a_full_link_gets_rates_that_fit_and_keeps_them_once_the_loss_stops() {
+/// Three seconds of the vehicle's default streams (ATTITUDE 100 Hz, SERVO_OUTPUT_RAW 50 Hz) with
+/// every `lose_every`-th frame lost (0: none): the start, the feed and a fresh fit.
+fn three_seconds(lose_every: u64) -> (Instant, Feed, Fitter) {
     let t0 = Instant::now();
     let mut feed = Feed::new(t0);
-    feed.lose_every = 5; // 20 % lost: the radio's queue overflows
+    feed.lose_every = lose_every;
     feed.run(t0, 3, 100, 50);
-    let mut fit = Fitter::default();
+    (t0, feed, Fitter::default())
+}
+
+#[test]
+fn a_full_link_gets_rates_that_fit_and_keeps_them_once_the_loss_stops() {
+    let (t0, mut feed, mut fit) = three_seconds(5); // 20 % lost: the radio's queue overflows
     let now = t0 + Duration::from_secs(3);
     let asked = fit.tick(&feed.state, V, now);
     let att = hz(&asked, id::ATTITUDE).expect("ATTITUDE re-rated");
@@ -150,11 +156,7 @@ fn a_full_link_gets_rates_that_fit_and_keeps_them_once_the_loss_stops() {
 
 #[test]
 fn loss_that_does_not_stop_with_the_rates_gives_the_defaults_back() {
-    let t0 = Instant::now();
-    let mut feed = Feed::new(t0);
-    feed.lose_every = 4;
-    feed.run(t0, 3, 100, 50);
-    let mut fit = Fitter::default();
+    let (t0, mut feed, mut fit) = three_seconds(4);
     let now = t0 + Duration::from_secs(3);
     let asked = fit.tick(&feed.state, V, now);
     assert_eq!(asked.len(), 2, "{asked:?}");
@@ -179,10 +181,7 @@ fn loss_that_does_not_stop_with_the_rates_gives_the_defaults_back() {
 
 #[test]
 fn a_clean_link_is_left_alone() {
-    let t0 = Instant::now();
-    let mut feed = Feed::new(t0);
-    feed.run(t0, 3, 100, 50);
-    let mut fit = Fitter::default();
+    let (t0, feed, mut fit) = three_seconds(0);
     assert!(
         fit.tick(&feed.state, V, t0 + Duration::from_secs(3))
             .is_empty()
@@ -199,31 +198,31 @@ fn a_clean_link_is_left_alone() {
     );
 }
 
+/// A SiK radio's RADIO_STATUS (it speaks as system 51, component 68) with `txbuf` percent of
+/// its transmit buffer free.
+pub(crate) fn radio_status(txbuf: u8, seq: u8) -> Frame {
+    let m = MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
+        rxerrors: 0,
+        fixed: 0,
+        rssi: 200,
+        remrssi: 190,
+        txbuf,
+        noise: 40,
+        remnoise: 41,
+    });
+    Frame::encode_v2(SystemId(51), ComponentId(68), seq, &m)
+}
+
 #[test]
 fn a_radio_reporting_its_buffer_filling_is_a_full_link_before_any_loss() {
-    let t0 = Instant::now();
-    let mut feed = Feed::new(t0);
-    feed.run(t0, 3, 100, 50);
-    let radio = |txbuf| {
-        MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
-            rxerrors: 0,
-            fixed: 0,
-            rssi: 200,
-            remrssi: 190,
-            txbuf,
-            noise: 40,
-            remnoise: 41,
-        })
-    };
-    // A SiK radio speaks as system 51, component 68.
+    let (t0, mut feed, mut fit) = three_seconds(0);
     let at = t0 + Duration::from_millis(2_900);
-    let plenty = Frame::encode_v2(SystemId(51), ComponentId(68), 0, &radio(90));
+    let plenty = radio_status(90, 0);
     feed.state.apply(L, Side::Vehicle, &plenty, at);
-    let mut fit = Fitter::default();
     let now = t0 + Duration::from_secs(3);
     assert!(fit.tick(&feed.state, V, now).is_empty());
     assert_eq!(fit.report().expect("a report").radio_txbuf, Some(90));
-    let low = Frame::encode_v2(SystemId(51), ComponentId(68), 1, &radio(30));
+    let low = radio_status(30, 1);
     feed.state.apply(L, Side::Vehicle, &low, now);
     let asked = fit.tick(&feed.state, V, now + FIT_PERIOD);
     let att = hz(&asked, id::ATTITUDE).expect("ATTITUDE re-rated");
@@ -233,11 +232,7 @@ fn a_radio_reporting_its_buffer_filling_is_a_full_link_before_any_loss() {
 
 #[test]
 fn a_fit_that_halves_the_loss_goes_again_from_the_rates_then_flowing() {
-    let t0 = Instant::now();
-    let mut feed = Feed::new(t0);
-    feed.lose_every = 3;
-    feed.run(t0, 3, 100, 50);
-    let mut fit = Fitter::default();
+    let (t0, mut feed, mut fit) = three_seconds(3);
     let now = t0 + Duration::from_secs(3);
     assert!(!fit.tick(&feed.state, V, now).is_empty());
     fit.asked(now);
@@ -418,24 +413,12 @@ fn a_step_that_fills_the_link_is_taken_back_and_the_steps_after_it_stay_below_it
 #[test]
 fn a_radio_buffer_that_is_not_mostly_empty_holds_the_rates() {
     let mut l = Loop::new(None);
-    let radio = |txbuf, seq| {
-        let m = MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
-            rxerrors: 0,
-            fixed: 0,
-            rssi: 200,
-            remrssi: 190,
-            txbuf,
-            noise: 40,
-            remnoise: 41,
-        });
-        Frame::encode_v2(SystemId(51), ComponentId(68), seq, &m)
-    };
     let mut seq = 0u8;
     let mut say = |l: &mut Loop, txbuf| {
         seq = seq.wrapping_add(1);
         l.feed
             .state
-            .apply(L, Side::Vehicle, &radio(txbuf, seq), l.now);
+            .apply(L, Side::Vehicle, &radio_status(txbuf, seq), l.now);
     };
     l.second();
     say(&mut l, 30);

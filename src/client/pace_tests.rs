@@ -8,6 +8,7 @@ use vtol_link::{ComponentId, Frame, LinkEvent, LinkOptions, LinkSender, SystemId
 
 use super::*;
 use crate::client::{ClientConfig, ClientHandle};
+use crate::fit::tests::radio_status;
 
 const MS: Duration = Duration::from_millis(1);
 
@@ -110,19 +111,6 @@ async fn vehicle_and_client(cancel: &CancellationToken) -> (Arrivals, LinkSender
         }
     });
     (arrivals, sender, client)
-}
-
-fn radio_status(txbuf: u8, seq: u8) -> Frame {
-    let m = MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
-        rxerrors: 0,
-        fixed: 0,
-        rssi: 200,
-        remrssi: 200,
-        txbuf,
-        noise: 40,
-        remnoise: 40,
-    });
-    Frame::encode_v2(SystemId(51), ComponentId(68), seq, &m)
 }
 
 fn statustext(seq: u8) -> MavMessage {
