@@ -275,6 +275,8 @@ async fn find_vehicle(c: &ClientHandle, link: &LinkArgs, keyed: bool) -> Result<
         let settle = VEHICLES_SETTLE.saturating_sub(started.elapsed());
         let heard = c.wait_heard(settle, |h| h.vehicles.len() > 1).await;
         if heard.vehicles.len() > 1 {
+            // The wait ends at the second vehicle: one more heartbeat period names them all.
+            let heard = c.wait_heard(VEHICLES_SETTLE, |_| false).await;
             return Err(usage(format!(
                 "several vehicles answer ({}): give --target",
                 list(&heard.vehicles)
