@@ -16,7 +16,9 @@
 //! `ZENOH_FLEET_SECONDS=S` (the measured window), `ZENOH_FLEET_CHURN=P` (the chance that a
 //! vehicle leaves in a given second; default 0.01, 0 for UDP), `ZENOH_FLEET_SEED=N` (default 38),
 //! `ZENOH_FLEET_TRANSPORT=udp`, `ZENOH_FLEET_DAEMON_RUNTIME=R` (the daemons' `ZENOH_RUNTIME`,
-//! e.g. `(rx: (worker_threads: 1))`).
+//! e.g. `(rx: (worker_threads: 1))`), `ZENOH_FLEET_DAEMON_WRAP='CMD ARGS'` (the daemons run as
+//! `CMD ARGS vtol-gcs run ...`, e.g. `env LD_PRELOAD=... DUMP_HEAPTRACK_OUTPUT=FIFO` for a heap
+//! profile: `env` keeps the daemon's process id, so its footprint is still the daemon's).
 //!
 //! MAVLink system ids stop at 255, so a fleet larger than that is served by several daemons,
 //! each selecting its part by key expression: daemon K runs `--vehicle 'zenoh:bench-dK/*'`

@@ -125,7 +125,18 @@ fn start_ground(
         } else {
             format!("zenoh:bench-d{d}/*")
         };
-        let mut dcmd = Command::new(env!("CARGO_BIN_EXE_vtol-gcs"));
+        // A command the daemons run under (a heap profiler's environment, for finding where
+        // memory goes); one that execs the daemon (`env`) keeps its footprint the daemon's.
+        let wrap = std::env::var("ZENOH_FLEET_DAEMON_WRAP").unwrap_or_default();
+        let mut wrap = wrap.split_whitespace();
+        let mut dcmd = match wrap.next() {
+            Some(w) => {
+                let mut c = Command::new(w);
+                c.args(wrap).arg(env!("CARGO_BIN_EXE_vtol-gcs"));
+                c
+            }
+            None => Command::new(env!("CARGO_BIN_EXE_vtol-gcs")),
+        };
         dcmd.args(["run", "--vehicle", &vehicle]);
         if !setup.udp {
             dcmd.args(["--zenoh-mode", "client", "--zenoh-connect", endpoint]);

@@ -22,6 +22,10 @@ pub const KEEP: Duration = Duration::from_secs(120);
 pub const MAX_FRAMES: usize = 4096;
 /// Most typed samples kept per series (120 s at 50 Hz).
 const MAX_SAMPLES: usize = 6000;
+/// Most bytes of raw frames kept per message id and sender: [`MAX_FRAMES`] of the longest.
+const MAX_FRAME_BYTES: usize = MAX_FRAMES * vtol_link::frame::MAX_FRAME_LEN;
+/// The smallest room a ring keeps.
+const MIN_ROOM: usize = 16;
 
 /// The history, shared by the tracker (writer) and the UI (reader).
 pub type SharedHistory = Arc<Mutex<History>>;
@@ -52,7 +56,7 @@ pub struct TimedFrame {
 }
 
 /// Where one recorded frame's bytes are in its ring.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 struct Slot {
     index: u64,
     t_s: f64,
@@ -130,6 +134,8 @@ impl FrameRing {
             self.first_byte += n as u64;
         }
         let len = u32::try_from(frame.len()).expect("a MAVLink frame is under 300 bytes");
+        make_room(&mut self.slots, 1, MAX_FRAMES);
+        make_room(&mut self.bytes, frame.len(), MAX_FRAME_BYTES);
         self.slots.push_back(Slot {
             index,
             t_s,
@@ -154,12 +160,47 @@ pub struct History {
     last_at: Option<(Instant, f64)>,
 }
 
-fn push<T>(q: &mut VecDeque<Sample<T>>, t_s: f64, v: T) {
+fn push<T: Copy + Default>(q: &mut VecDeque<Sample<T>>, t_s: f64, v: T) {
     let oldest = t_s - KEEP.as_secs_f64();
     while q.len() >= MAX_SAMPLES || q.front().is_some_and(|(t, _)| *t < oldest) {
         q.pop_front();
     }
+    make_room(q, 1, MAX_SAMPLES);
     q.push_back((t_s, v));
+}
+
+/// Gives a ring (already pruned) room for `more` items, sized by what it holds now, not by the
+/// most it ever held, and never past `bound`; all of its room is written once when it is made.
+///
+/// A `VecDeque` doubles its buffer when full and never gives it back, and a ring that holds
+/// fewer items than its buffer walks through the whole buffer as it goes round. With vehicles
+/// coming and going, a vehicle's 120 s hold more or fewer samples from one minute to the next:
+/// the buffers followed the most each had ever held, and the pages of their spare room became
+/// resident one by one as the rings went round into them, so a daemon's resident memory rose
+/// for minutes after its history held its full 120 s. Here a ring grows to half as much again as
+/// it holds (and to its bound exactly), shrinks to that when it holds under a third of its room,
+/// and its room is resident from the start: resident memory follows what the history holds.
+fn make_room<T: Copy + Default>(q: &mut VecDeque<T>, more: usize, bound: usize) {
+    let (len, cap) = (q.len(), q.capacity());
+    let need = len + more;
+    let roomy = need + need / 2;
+    let room = if need > cap {
+        roomy.clamp(MIN_ROOM, bound.max(need))
+    } else if cap > MIN_ROOM && need < cap / 3 {
+        roomy.max(MIN_ROOM)
+    } else {
+        return;
+    };
+    if room > cap {
+        q.reserve_exact(room - len);
+    } else {
+        q.shrink_to(room);
+    }
+    // Write the spare room once, so that its pages are resident now rather than when the ring
+    // first goes round into them.
+    let cap = q.capacity();
+    q.resize(cap, T::default());
+    q.truncate(len);
 }
 
 impl History {
@@ -203,6 +244,25 @@ impl History {
         } else {
             self.record(frame, decoded, at.at());
         }
+    }
+
+    /// Bytes the history holds allocated (its rings' capacities).
+    #[must_use]
+    pub fn allocated_bytes(&self) -> usize {
+        fn deque<T>(q: &VecDeque<T>) -> usize {
+            q.capacity() * std::mem::size_of::<T>()
+        }
+        let typed: usize = self
+            .vehicles
+            .values()
+            .map(|v| deque(&v.attitude) + deque(&v.servo) + deque(&v.position))
+            .sum();
+        let raw: usize = self
+            .frames
+            .values()
+            .map(|r| deque(&r.slots) + deque(&r.bytes))
+            .sum();
+        typed + raw
     }
 
     fn record_t(&mut self, frame: &Frame, decoded: Option<&MavMessage>, t_s: f64) {
@@ -262,6 +322,72 @@ mod tests {
             pitchspeed: 0.0,
             yawspeed: 0.0,
         })
+    }
+
+    /// Every ring's room against what it holds: at most three times as much, and its bound.
+    fn assert_room_follows_content(h: &History) {
+        let check = |what: &str, len: usize, cap: usize, bound: usize| {
+            assert!(
+                cap <= (3 * len).max(MIN_ROOM),
+                "{what}: room {cap} for {len}"
+            );
+            assert!(cap <= bound, "{what}: room {cap} over its bound {bound}");
+        };
+        for v in h.vehicles.values() {
+            check(
+                "attitude",
+                v.attitude.len(),
+                v.attitude.capacity(),
+                MAX_SAMPLES,
+            );
+            check("servo", v.servo.len(), v.servo.capacity(), MAX_SAMPLES);
+        }
+        for r in h.frames.values() {
+            check("slots", r.slots.len(), r.slots.capacity(), MAX_FRAMES);
+            check("bytes", r.bytes.len(), r.bytes.capacity(), MAX_FRAME_BYTES);
+        }
+    }
+
+    #[test]
+    fn memory_follows_what_is_held_as_a_vehicle_comes_and_goes() {
+        let t0 = Instant::now();
+        let mut h = History::new(t0);
+        let servo = MavMessage::SERVO_OUTPUT_RAW(dialect::SERVO_OUTPUT_RAW_DATA {
+            servo1_raw: 1500,
+            ..Default::default()
+        });
+        let record = |h: &mut History, tick: u64| {
+            let at = t0 + Duration::from_millis(tick * 20);
+            let seq = (tick % 256) as u8;
+            let id = (vtol_link::SystemId(1), vtol_link::ComponentId(1));
+            let att = attitude(tick as f32);
+            h.record(&Frame::encode_v2(id.0, id.1, seq, &att), Some(&att), at);
+            if tick.is_multiple_of(5) {
+                h.record(&Frame::encode_v2(id.0, id.1, seq, &servo), Some(&servo), at);
+            }
+        };
+        // 150 s flying: 120 s of attitude (6 000 samples), outputs and their frames.
+        for tick in 0..7500 {
+            record(&mut h, tick);
+        }
+        assert_room_follows_content(&h);
+        let full = h.allocated_bytes();
+        // Then 240 s of coming and going: 1 s heard, 4 s away. Its 120 s hold a fifth as much,
+        // and its memory follows (what a fleet's churn did: the rings kept the room of the most
+        // they had ever held, 8 192 samples of attitude, while they held 1 200).
+        for tick in 7500..19_500 {
+            if tick % 250 < 50 {
+                record(&mut h, tick);
+            }
+        }
+        let att = &h.vehicles[&(vtol_link::SystemId(1), vtol_link::ComponentId(1))].attitude;
+        assert!((1150..=1250).contains(&att.len()), "{}", att.len());
+        assert_room_follows_content(&h);
+        assert!(
+            h.allocated_bytes() < full / 2,
+            "{} of {full} bytes",
+            h.allocated_bytes()
+        );
     }
 
     #[test]
