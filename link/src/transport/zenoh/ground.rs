@@ -44,6 +44,18 @@ pub(crate) const LEAVE_GRACE: Duration = Duration::from_millis(500);
 /// a grace, not one that lasts until a token goes away).
 pub(crate) const GONE_MEMORY: Duration = Duration::from_secs(60);
 
+/// Most vehicles whose data key the ground end declares in the session.
+///
+/// Each declaration takes one of the session's key ids, which are 16-bit on the wire and which
+/// Zenoh hands out from a counter that never reuses a freed one: past 65 535 declarations it
+/// wraps onto ids that are still in use. A vehicle's key is therefore declared once, when it
+/// is first seen, and kept for the ground end's life (a returning vehicle's link finds it
+/// declared), and no more than this many: declared per link, a fleet's departures and returns
+/// would use the ids up in hours (the thousand's soak: about 2.5 a second per daemon). The
+/// vehicles past it are matched against the subscription, as every sample was before keys
+/// were declared.
+pub(crate) const MAX_DECLARED_KEYS: usize = 1024;
+
 /// One vehicle as the ground end sees it.
 struct GroundLink {
     id: LinkId,
@@ -52,9 +64,6 @@ struct GroundLink {
     stop: CancellationToken,
     /// Its token went away: the link goes down at this time.
     leaving: Option<Instant>,
-    /// Its data key, declared in the session: a sample on a declared key takes the session's
-    /// cached route to the subscriber instead of matching the key against every subscription.
-    key: Option<KeyExpr<'static>>,
 }
 
 /// The ground end's vehicles, shared by the sample handler and the liveliness task.
@@ -71,6 +80,10 @@ struct Ground {
     gone: HashMap<String, Instant>,
     /// Samples that came after their vehicle's link went down (each brought it back up).
     late: u64,
+    /// Vehicles' data keys declared in the session, by vehicle, for the ground end's life (at
+    /// most [`MAX_DECLARED_KEYS`]): a sample on a declared key takes the session's cached
+    /// route to the subscriber instead of matching the key against every subscription.
+    declared: HashMap<String, KeyExpr<'static>>,
     /// Wakes the ground task when a sample handler set a grace (an earlier expiry).
     wake: Arc<tokio::sync::Notify>,
 }
@@ -89,11 +102,18 @@ impl Ground {
             rx,
             stats.clone(),
         );
-        let key = self
-            .session
-            .declare_keyexpr(from_vehicle_key(&self.fleet, vehicle))
-            .wait()
-            .ok();
+        if !self.declared.contains_key(vehicle) && self.declared.len() < MAX_DECLARED_KEYS {
+            match self
+                .session
+                .declare_keyexpr(from_vehicle_key(&self.fleet, vehicle))
+                .wait()
+            {
+                Ok(k) => {
+                    self.declared.insert(vehicle.to_string(), k);
+                }
+                Err(e) => tracing::debug!(%vehicle, "data key not declared: {e}"),
+            }
+        }
         let s = stop.clone();
         self.runtime.spawn(async move {
             tokio::select! {
@@ -109,7 +129,6 @@ impl Ground {
                 decoder: crate::decoder::FrameDecoder::new(),
                 stop,
                 leaving: None,
-                key,
             },
         );
         LinkEvent::Up {
@@ -192,9 +211,6 @@ impl Ground {
         for v in over {
             if let Some(l) = self.links.remove(&v) {
                 l.stop.cancel();
-                if let Some(k) = l.key {
-                    let _ = self.session.undeclare(k).wait();
-                }
                 let reason = format!(
                     "{}/{v} left the fleet (its liveliness token is gone)",
                     self.fleet
@@ -274,6 +290,7 @@ pub(crate) async fn spawn_ground_end(
         links: HashMap::new(),
         gone: HashMap::new(),
         late: 0,
+        declared: HashMap::new(),
         wake: wake.clone(),
     }));
     // The owner gone (an inline handler said so): the ground task stops.

@@ -22,6 +22,7 @@ async fn ground() -> Ground {
         links: HashMap::new(),
         gone: HashMap::new(),
         late: 0,
+        declared: HashMap::new(),
         wake: Arc::new(tokio::sync::Notify::new()),
     }
 }
@@ -75,6 +76,8 @@ async fn vehicles_leaving_and_rejoining_leave_the_ground_at_its_steady_size() {
     assert_eq!(ups_downs(&events), (50 * names.len(), 50 * names.len()));
     assert_eq!(g.late, 0);
     assert!(sizes.iter().all(|s| *s == (0, names.len())), "{sizes:?}");
+    // Each vehicle's data key declared once, not once per link (Zenoh's key ids would run out).
+    assert_eq!(g.declared.len(), names.len());
     // A departure is remembered for a while only.
     g.expire(Instant::now() + LEAVE_GRACE + GONE_MEMORY, &mut events);
     assert!(g.gone.is_empty());
@@ -134,4 +137,23 @@ async fn samples_in_the_grace_extend_it() {
     g.expire(extended, &mut events);
     assert_eq!(ups_downs(&events), (1, 1));
     assert_eq!(frames.len(), 1);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn no_more_keys_are_declared_than_the_session_can_number() {
+    let mut g = ground().await;
+    let (mut events, mut frames) = (Vec::new(), Vec::new());
+    for i in 0..MAX_DECLARED_KEYS + 8 {
+        let v = format!("v{i}");
+        g.data(&data(&v, 1, 0), &mut events, &mut frames);
+        g.liveliness(&token(&v, SampleKind::Delete), &mut events);
+        g.expire(Instant::now() + LEAVE_GRACE, &mut events);
+    }
+    assert_eq!(g.declared.len(), MAX_DECLARED_KEYS);
+    // The vehicles past the bound are served all the same.
+    assert_eq!(frames.len(), MAX_DECLARED_KEYS + 8);
+    assert_eq!(
+        ups_downs(&events),
+        (MAX_DECLARED_KEYS + 8, MAX_DECLARED_KEYS + 8)
+    );
 }
