@@ -252,6 +252,18 @@ fn report(s: &Setup, results: &[RunResult]) {
             d.fds.1
         );
     }
+    // The footprint samples (a soak's): whether memory levels off or keeps rising.
+    if last.samples.len() > 2 {
+        println!("\nResident memory through the window (MB):\n");
+        for d in 0..last.daemons.len() {
+            let mb: Vec<String> = last
+                .samples
+                .iter()
+                .map(|s| format!("{:.0} s {:.1}", s.t_s, s.rss_kb[d] as f64 / 1024.0))
+                .collect();
+            println!("- daemon {d}: {}", mb.join(", "));
+        }
+    }
 }
 
 /// Every run: the telemetry arrives. A soak: descriptors, sessions and memory flat and no frame
