@@ -178,15 +178,16 @@ fn push<T: Copy + Default>(q: &mut VecDeque<Sample<T>>, t_s: f64, v: T) {
 /// the buffers followed the most each had ever held, and the pages of their spare room became
 /// resident one by one as the rings went round into them, so a daemon's resident memory rose
 /// for minutes after its history held its full 120 s. Here a ring grows to half as much again as
-/// it holds (and to its bound exactly), shrinks to that when it holds under a third of its room,
-/// and its room is resident from the start: resident memory follows what the history holds.
+/// it holds (and to its bound exactly), shrinks to that when it holds under half of its room, and
+/// its room is resident from the start: resident memory follows what the history holds, and
+/// is never more than twice it.
 fn make_room<T: Copy + Default>(q: &mut VecDeque<T>, more: usize, bound: usize) {
     let (len, cap) = (q.len(), q.capacity());
     let need = len + more;
     let roomy = need + need / 2;
     let room = if need > cap {
         roomy.clamp(MIN_ROOM, bound.max(need))
-    } else if cap > MIN_ROOM && need < cap / 3 {
+    } else if cap > MIN_ROOM && need < cap / 2 {
         roomy.max(MIN_ROOM)
     } else {
         return;
@@ -324,11 +325,11 @@ mod tests {
         })
     }
 
-    /// Every ring's room against what it holds: at most three times as much, and its bound.
+    /// Every ring's room against what it holds: at most twice as much, and its bound.
     fn assert_room_follows_content(h: &History) {
         let check = |what: &str, len: usize, cap: usize, bound: usize| {
             assert!(
-                cap <= (3 * len).max(MIN_ROOM),
+                cap <= (2 * len).max(MIN_ROOM),
                 "{what}: room {cap} for {len}"
             );
             assert!(cap <= bound, "{what}: room {cap} over its bound {bound}");
