@@ -4,6 +4,7 @@ transitions to the wing, the roll stick turns the aircraft, QLOITER brings it ba
 """
 
 import math
+import time
 
 import pytest
 from pymavlink import mavutil
@@ -21,18 +22,39 @@ def ack_of(m, command):
     return ack.result
 
 
+def record(msg, seen: dict) -> None:
+    if msg.get_type() == "EXTENDED_SYS_STATE":
+        seen["states"].append(msg.vtol_state)
+    elif msg.get_type() == "GLOBAL_POSITION_INT":
+        seen["course"].append(math.atan2(msg.vy, msg.vx))
+        seen["alt"].append(msg.relative_alt / 1000.0)
+
+
+def sync(m, seen: dict) -> None:
+    """Asks the twin for a parameter and reads up to its answer, recording what comes before it:
+    the twin has then taken everything sent before (the sticks have no answer of their own),
+    and every frame it sent before has arrived."""
+    m.mav.param_request_read_send(1, 1, b"SYSID_THISMAV", -1)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        msg = m.recv_match(blocking=True, timeout=0.5)
+        if msg is None:
+            continue
+        if msg.get_type() == "PARAM_VALUE" and msg.param_id == "SYSID_THISMAV":
+            return
+        record(msg, seen)
+    raise AssertionError("no PARAM_VALUE for SYSID_THISMAV in 10 s")
+
+
 def fly(vtol_twin, m, seconds: int, roll_us: int) -> dict:
-    """Flies `seconds` on the sticks (sent every second); what the ground station saw."""
+    """Flies `seconds` on the sticks (sent every second, each taken before the twin flies on);
+    what the ground station saw in those seconds."""
     seen = {"states": [], "course": [], "alt": []}
     for _ in range(seconds):
         m.mav.rc_channels_override_send(1, 1, roll_us, 1500, THROTTLE_US, 1500, 0, 0, 0, 0)
+        sync(m, {"states": [], "course": [], "alt": []})
         vtol_twin.advance(1)
-        while (msg := m.recv_match(blocking=False)) is not None:
-            if msg.get_type() == "EXTENDED_SYS_STATE":
-                seen["states"].append(msg.vtol_state)
-            elif msg.get_type() == "GLOBAL_POSITION_INT":
-                seen["course"].append(math.atan2(msg.vy, msg.vx))
-                seen["alt"].append(msg.relative_alt / 1000.0)
+        sync(m, seen)
     return seen
 
 
