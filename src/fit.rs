@@ -125,8 +125,13 @@ enum Phase {
     /// Rates fitted (or a step taken back, or up: `step`), being asked for (one command after
     /// another, each with its retries); the loss when they were fitted.
     Asking { loss_before: f64, step: bool },
-    /// Rates fitted and asked for; judged at `until`.
-    Settling { until: Instant, loss_before: f64 },
+    /// Rates fitted and asked for; judged at `until`. `unasked`: some of the requests never
+    /// got their answer, so a loss that did not halve says nothing of the link.
+    Settling {
+        until: Instant,
+        loss_before: f64,
+        unasked: bool,
+    },
     /// Rates fitted, the loss stopped: stepped back up while the link stays clear.
     Fitted,
     /// A step up asked for: taken back at the first congestion before `until`.
@@ -203,6 +208,8 @@ pub struct Fitter {
     failures: u32,
     /// Frame bytes per second of the changed streams at the last step that failed, and when.
     ceiling: Option<(f64, Instant)>,
+    /// A request of the round being asked went unanswered.
+    unasked: bool,
 }
 
 impl Default for Fitter {
@@ -218,6 +225,7 @@ impl Default for Fitter {
             stepped: false,
             failures: 0,
             ceiling: None,
+            unasked: false,
         }
     }
 }
@@ -277,10 +285,14 @@ impl Fitter {
             Phase::Watching | Phase::Fitted if full => {
                 self.fit_now(state, vehicle, loss, delivered, now)
             }
-            Phase::Settling { until, loss_before } if now >= until => self.judge_fit(
+            Phase::Settling {
+                until,
+                loss_before,
+                unasked,
+            } if now >= until => self.judge_fit(
                 state,
                 vehicle,
-                (loss, loss_before),
+                (loss, loss_before, unasked),
                 delivered,
                 radio_full,
                 now,
@@ -306,7 +318,7 @@ impl Fitter {
         &mut self,
         state: &VehicleState,
         vehicle: (SystemId, ComponentId),
-        (loss, loss_before): (f64, f64),
+        (loss, loss_before, unasked): (f64, f64, bool),
         delivered: f64,
         radio_full: bool,
         now: Instant,
@@ -316,8 +328,9 @@ impl Fitter {
             return Vec::new();
         }
         // Still full, but the fit helped (or the radio says its buffer is full): the first
-        // estimate of what the link carries was high. Fit again from here.
-        if radio_full || loss < loss_before / 2.0 {
+        // estimate of what the link carries was high. Fit again from here. So too when some
+        // of the fit's requests were lost on the full link: it was not all tried.
+        if radio_full || unasked || loss < loss_before / 2.0 {
             return self.fit_now(state, vehicle, loss, delivered, now);
         }
         self.phase = Phase::RandomLoss {
@@ -483,6 +496,11 @@ impl Fitter {
             .collect()
     }
 
+    /// A request of the last [`Fitter::tick`]'s went unanswered (given up on the full link).
+    pub fn unanswered(&mut self) {
+        self.unasked = true;
+    }
+
     /// The intervals the last [`Fitter::tick`] returned have all been asked for (or given up):
     /// their effect is judged [`SETTLE`] from `now`.
     pub fn asked(&mut self, now: Instant) {
@@ -495,6 +513,7 @@ impl Fitter {
                 Phase::Settling {
                     until: now + SETTLE,
                     loss_before,
+                    unasked: std::mem::take(&mut self.unasked),
                 }
             };
             self.hold_from = Some(now);
@@ -611,6 +630,7 @@ pub async fn run(
             };
             if let Err(e) = outcome {
                 tracing::warn!("stream rate of message {msgid}: {e}");
+                fitter.unanswered();
             }
         }
         fitter.asked(crate::tracker::now());

@@ -179,6 +179,24 @@ fn loss_that_does_not_stop_with_the_rates_gives_the_defaults_back() {
     );
 }
 
+/// The same loss, but one of the fit's requests went unanswered on the full link: the fit was
+/// not all tried, so it goes again instead of calling the loss random.
+#[test]
+fn a_fit_whose_requests_went_unanswered_goes_again() {
+    let (t0, mut feed, mut fit) = three_seconds(4);
+    let now = t0 + Duration::from_secs(3);
+    assert_eq!(fit.tick(&feed.state, V, now).len(), 2);
+    fit.unanswered();
+    fit.asked(now);
+    feed.run(now, 4, 50, 25);
+    let again = fit.tick(&feed.state, V, now + Duration::from_secs(4));
+    assert!(!again.is_empty(), "fitted again");
+    assert!(
+        again.iter().all(|(_, c)| matches!(c, Change::Scale { .. })),
+        "{again:?}"
+    );
+}
+
 #[test]
 fn a_clean_link_is_left_alone() {
     let (t0, feed, mut fit) = three_seconds(0);

@@ -87,12 +87,12 @@ def test_the_daemon_fits_the_stream_rates_to_the_radio_by_itself_and_shows_its_c
     # The fit judges the loss of 2 s and then 3 s after it (src/fit.rs): a few seconds.
     radio.status(r"streams fitted", timeout=20, since=mark)
     assert radio.bed.rate_limit_drops() > 0, "the radio's queue never overflowed: the test says nothing"
-    # The queue drains within a second; then the tracker's loss window fills with fitted traffic.
-    listen(radio, g, 1.0)
-    dropped = radio.bed.rate_limit_drops()
-    figures = listen(radio, g, LOSS_WINDOW_S)
-    assert float(figures[-1]["loss"]) < 1.0, figures[-1].group(0)
-    assert radio.bed.rate_limit_drops() == dropped, "the radio's queue still overflows"
+    # Then a status line whose 10 s loss window holds only fitted traffic. The fit may take a
+    # second round (the first estimate too high); once the link has been clear for a while it
+    # probes upward (src/fit.rs), which may overflow the queue again, so the test waits for the
+    # settled figure rather than watching a fixed window after the first fit.
+    settled = radio.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.\d%.*streams fitted", timeout=40, since=mark)
+    figures = [STATUS_RE.search(settled.string)]
     lines = radio.daemon.lines_since(mark)
     capacity = [float(m["kb"]) for line in lines if (m := CAPACITY_RE.search(line))]
     assert capacity, lines[-1:]
@@ -113,7 +113,9 @@ def test_a_radio_that_reports_its_buffer_filling_gets_streams_it_can_carry(tmp_p
         g.wait_vehicle_heartbeat(timeout=20)
         mark = s.daemon.mark()
         s.status(r"\| radio txbuf [0-4]?\d%", timeout=10, since=mark)
-        s.status(r"streams fitted", timeout=30, since=mark)
+        # An upper bound: the fit's requests and their answers cross the full radio (answers
+        # lost at about 60 %, retried), which on a loaded machine took more than 30 s.
+        s.status(r"streams fitted", timeout=60, since=mark)
         # The fit may take a second round (the radio's buffer still filling after the first).
         s.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.0%.*\| radio txbuf (100|[5-9]\d)%", timeout=40, since=mark)
         figures = listen(s, g, 3.0)
@@ -153,7 +155,9 @@ def test_a_radio_whose_rate_limit_is_lifted_gets_the_default_rates_back(tmp_path
         default = interval_us(g, MAV.MAVLINK_MSG_ID_ATTITUDE)
         mark = s.daemon.mark()
         s.bed.rate_limit(BITS_PER_S, QUEUE_BYTES)
-        s.status(r"streams fitted", timeout=30, since=mark)
+        # An upper bound: the fit's requests and their answers cross the full radio (answers
+        # lost at about 60 %, retried), which on a loaded machine took more than 30 s.
+        s.status(r"streams fitted", timeout=60, since=mark)
         fitted = interval_us(g, MAV.MAVLINK_MSG_ID_ATTITUDE)
         assert fitted > default, (fitted, default)
         lifted = s.daemon.mark()
