@@ -15,7 +15,8 @@
 //! Environment: `ZENOH_FLEET_VEHICLES=N`, `ZENOH_FLEET_DAEMONS=D` (at most 250 vehicles each),
 //! `ZENOH_FLEET_SECONDS=S` (the measured window), `ZENOH_FLEET_CHURN=P` (the chance that a
 //! vehicle leaves in a given second; default 0.01, 0 for UDP), `ZENOH_FLEET_SEED=N` (default 38),
-//! `ZENOH_FLEET_TRANSPORT=udp`, `ZENOH_FLEET_DAEMON_RUNTIME=R` (the daemons' `ZENOH_RUNTIME`,
+//! `ZENOH_FLEET_TRANSPORT=udp`, `ZENOH_FLEET_ALIGNED=1` (every vehicle's 10 Hz and 1 Hz frames
+//! in the same tick, the worst case), `ZENOH_FLEET_DAEMON_RUNTIME=R` (the daemons' `ZENOH_RUNTIME`,
 //! e.g. `(rx: (worker_threads: 1))`), `ZENOH_FLEET_DAEMON_WRAP='CMD ARGS'` (the daemons run as
 //! `CMD ARGS vtol-gcs run ...`, e.g. `env LD_PRELOAD=... DUMP_HEAPTRACK_OUTPUT=FIFO` for a heap
 //! profile: `env` keeps the daemon's process id, so its footprint is still the daemon's).
@@ -38,7 +39,9 @@
 //!   `vtol/bench-dK/vN/from_vehicle` (what `vtol-gcs run --serve zenoh:bench-dK/vN` declares).
 //!   Each vehicle (system id N) publishes ATTITUDE at 50 Hz, SERVO_OUTPUT_RAW at 10 Hz and
 //!   HEARTBEAT at 1 Hz, one frame per publication, on a fixed schedule with the vehicles spread
-//!   over each 20 ms tick. During the window, each second each vehicle leaves with the churn's
+//!   over each 20 ms tick and each vehicle's SERVO_OUTPUT_RAW and HEARTBEAT at a phase of its
+//!   own (fleet index N sends them in the ticks where tick + N is a multiple of 5 and of 50), as
+//!   vehicles started at different times do. During the window, each second each vehicle leaves with the churn's
 //!   chance (its last publication, then its token dropped 20 ms later) and comes back 1 to 5 s
 //!   later (a new token, then its publications from the next tick), from a seeded generator;
 //! - the clients: one UDP socket per daemon in this process (its own MAVLink client), where that
@@ -113,6 +116,7 @@ fn setup(args: &[String]) -> (Setup, usize, bool) {
         // The daemons' chart history keeps 120 s (src/tracker/history.rs): a soak measures
         // from 10 s after it is full.
         fill: env("ZENOH_FLEET_FILL").unwrap_or(if soak { 130.0 } else { 0.0 }),
+        aligned: std::env::var("ZENOH_FLEET_ALIGNED").is_ok_and(|a| a == "1"),
     };
     (s, runs, soak)
 }

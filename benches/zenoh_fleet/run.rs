@@ -34,6 +34,9 @@ pub struct Setup {
     /// Seconds of traffic between the warm-up and the window: the soak's, long enough for the
     /// daemons' chart history (120 s, bounded) to fill, so that their memory is at its level.
     pub fill: f64,
+    /// Every vehicle sends its 10 Hz and 1 Hz frames in the same 20 ms tick (the worst case)
+    /// instead of at a phase of its own, as vehicles started at different times do.
+    pub aligned: bool,
 }
 
 /// One ground daemon's figures over the window.
@@ -280,13 +283,17 @@ async fn publish(
     sent: &Sent,
     window: Option<(u64, u64)>,
     published: &mut [u64],
+    aligned: bool,
 ) {
     let t_ms = u32::try_from(ticks * 20).unwrap_or(u32::MAX);
     let mut frames = vec![(true, measure::attitude(t_ms))];
-    if ticks.is_multiple_of(5) {
+    // A vehicle's own phase in the second: its 10 Hz and 1 Hz frames fall in tick `phase`
+    // of every 5 and every 50 (all in tick 0 when aligned).
+    let phase = if aligned { 0 } else { index as u64 % 50 };
+    if (ticks + phase).is_multiple_of(5) {
         frames.push((true, measure::servo(t_ms)));
     }
-    if ticks.is_multiple_of(50) {
+    if (ticks + phase).is_multiple_of(50) {
         frames.push((false, measure::heartbeat()));
     }
     for (telemetry, msg) in frames {
@@ -426,7 +433,7 @@ async fn schedule(
             let (a, b) = (slot * vs.len() / slots, (slot + 1) * vs.len() / slots);
             for (i, v) in vs.iter_mut().enumerate().take(b).skip(a) {
                 if v.active {
-                    publish(v, i, ticks, sent, window, &mut published).await;
+                    publish(v, i, ticks, sent, window, &mut published, setup.aligned).await;
                 }
             }
         }
