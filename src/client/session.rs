@@ -38,8 +38,25 @@ const WANTED: [u32; 8] = [
 
 /// MAV_COMP_ID_AUTOPILOT1.
 const AUTOPILOT1: u8 = 1;
-/// Messages only an autopilot streams (SYS_STATUS, ATTITUDE).
-const TELEMETRY: [u32; 2] = [1, 30];
+/// Messages only an autopilot streams, any of which finds the vehicle: on a lossy link the
+/// first of its many streams to get through, not the next heartbeat or SYS_STATUS, ends the
+/// wait (a ground station or a companion never sends these as component 1).
+const TELEMETRY: [u32; 14] = [
+    1,   // SYS_STATUS
+    24,  // GPS_RAW_INT
+    26,  // SCALED_IMU
+    27,  // RAW_IMU
+    29,  // SCALED_PRESSURE
+    30,  // ATTITUDE
+    32,  // LOCAL_POSITION_NED
+    33,  // GLOBAL_POSITION_INT
+    36,  // SERVO_OUTPUT_RAW
+    62,  // NAV_CONTROLLER_OUTPUT
+    65,  // RC_CHANNELS
+    74,  // VFR_HUD
+    147, // BATTERY_STATUS
+    245, // EXTENDED_SYS_STATE
+];
 
 /// Whether the session reads `frame`: the message types its machines use and, while the
 /// vehicle is not known yet, the autopilot telemetry that finds it. The rest is never looked
@@ -310,4 +327,55 @@ fn is_vehicle(autopilot: MavAutopilot, mavtype: MavType) -> bool {
             mavtype,
             MavType::MAV_TYPE_GCS | MavType::MAV_TYPE_ONBOARD_CONTROLLER | MavType::MAV_TYPE_GIMBAL
         )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vtol_link::dialect as apm;
+
+    fn frame(comp: u8, msg: &MavMessage) -> Frame {
+        Frame::encode_v2(SystemId(1), ComponentId(comp), 0, msg)
+    }
+
+    fn position() -> MavMessage {
+        MavMessage::GLOBAL_POSITION_INT(apm::GLOBAL_POSITION_INT_DATA::default())
+    }
+
+    /// Any of the autopilot's streams finds the vehicle, not only its heartbeat: on a lossy
+    /// link the first to get through ends the wait.
+    #[test]
+    fn the_autopilots_position_finds_the_vehicle() {
+        let (target, _) = watch::channel(None);
+        let (heard, _) = watch::channel(Heard::default());
+        let finder = Finder {
+            fixed_target: false,
+            target: &target,
+            heard: &heard,
+        };
+        // A companion's (component 191) position is not the autopilot's.
+        finder.take(&frame(191, &position()), &mut None);
+        assert!(heard.borrow().vehicles.is_empty());
+        assert_eq!(*target.borrow(), None);
+        finder.take(&frame(AUTOPILOT1, &position()), &mut None);
+        assert!(heard.borrow().vehicles.contains(&1));
+        assert_eq!(
+            *target.borrow(),
+            Some((SystemId(1), ComponentId(AUTOPILOT1)))
+        );
+    }
+
+    /// An in-process client is handed the autopilot's telemetry only until it knows its
+    /// vehicle; the messages its machines read, always.
+    #[test]
+    fn telemetry_is_read_only_until_the_vehicle_is_known() {
+        let f = frame(AUTOPILOT1, &position());
+        assert!(reads(&f, false));
+        assert!(!reads(&f, true));
+        let hb = frame(
+            AUTOPILOT1,
+            &MavMessage::HEARTBEAT(apm::HEARTBEAT_DATA::default()),
+        );
+        assert!(reads(&hb, true));
+    }
 }
