@@ -70,9 +70,9 @@ def mission_item(seq: int, command: int, lat: float, lon: float, alt: float,
 
 
 def test_mavsdk_flies_the_twin_as_documented(target):
-    # The flows run in a process of their own that ends without MAVSDK's teardown:
-    # `Mavsdk.destroy()` (the C library's mavsdk_destroy) can abort the whole process while its
-    # threads stop (MAVSDK issue #2075), which would take the test worker with it.
+    # The flows run in a process of their own: MAVSDK aborts the whole process when its Mavsdk
+    # instance goes before a System or plugin obtained from it ("must not outlive the Mavsdk
+    # instance"), which would take the test worker with it.
     r = subprocess.run([sys.executable, "-c", f"import test_mavsdk; test_mavsdk.fly_in_child({target.mavsdk_url!r})"],
                        cwd=HERE, capture_output=True, text=True, timeout=260)
     assert r.returncode == 0 and FLOWN in r.stdout, f"exit {r.returncode}\n{r.stdout}\n{r.stderr}"
@@ -83,14 +83,16 @@ FLOWN = "the documented flows flew"
 
 def fly_in_child(url: str) -> None:
     """The child's whole work: connect, fly every flow (an assertion that fails exits 1 with
-    its traceback), say so, and exit at once."""
+    its traceback), say so, and exit at once. The Mavsdk instance is held to the end, past the
+    System and the plugins, which go with the coroutine that used them."""
     async def fly():
-        _mavsdk, drone = await connect(url)
+        mavsdk, drone = await connect(url)
         await fly_documented_flows(drone)
+        return mavsdk
 
-    asyncio.run(asyncio.wait_for(fly(), timeout=200))
+    mavsdk = asyncio.run(asyncio.wait_for(fly(), timeout=200))
     print(FLOWN, flush=True)
-    os._exit(0)
+    os._exit(0 if mavsdk is not None else 1)
 
 
 async def fly_documented_flows(drone):
