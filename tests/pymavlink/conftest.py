@@ -68,6 +68,31 @@ def f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
+# ATTITUDE is in ArduPilot's fixed-wing body frame (x the nose, z the belly), as ArduPlane reports
+# a tailsitter: hovering, the pitch is near 90° and roll and yaw are near gimbal lock. These
+# read a hover from it.
+
+
+def tilt_rad(a) -> float:
+    """How far the nose (the thrust axis) leans from vertical, rad."""
+    return math.pi / 2 - a.pitch
+
+
+def nose_lean_rad(a, bearing_rad: float) -> float:
+    """How far the nose leans from vertical toward the horizontal bearing `bearing_rad`, rad."""
+    n, e = math.cos(a.pitch) * math.cos(a.yaw), math.cos(a.pitch) * math.sin(a.yaw)
+    return math.asin(max(-1.0, min(1.0, n * math.cos(bearing_rad) + e * math.sin(bearing_rad))))
+
+
+def belly_heading_rad(a) -> float:
+    """The heading of the belly (the fixed-wing z axis), rad: a hover's heading, well defined
+    while the nose is near vertical."""
+    sr, cr = math.sin(a.roll), math.cos(a.roll)
+    sp = math.sin(a.pitch)
+    sy, cy = math.sin(a.yaw), math.cos(a.yaw)
+    return math.atan2(cr * sp * sy - sr * cy, cr * sp * cy + sr * sy)
+
+
 # --------------------------------------------------------------------------------------------
 # The twin as a subprocess
 # --------------------------------------------------------------------------------------------

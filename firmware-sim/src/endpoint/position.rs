@@ -10,7 +10,7 @@
 use mavlink::dialects::ardupilotmega as apm;
 use nalgebra::Vector3;
 
-use crate::model::frames::{euler_to_ned_rpy, paper_to_ned};
+use crate::model::frames::{fixed_wing, paper_to_ned};
 use crate::model::plant::battery::{BatteryState, CELLS};
 use crate::model::vehicle::{SystemState, Telemetry};
 use crate::nav::globe::{Origin, bearing_deg, horizontal_distance_m};
@@ -55,9 +55,10 @@ fn clamp_u16(v: f64) -> u16 {
     v.round().clamp(0.0, f64::from(u16::MAX)) as u16
 }
 
-/// Heading (NED yaw) in degrees, [0, 360).
+/// Heading in degrees, [0, 360): the yaw of the fixed-wing body frame, as ArduPlane reports a
+/// tailsitter's (the course on the wing).
 fn heading_deg(t: &Telemetry) -> f64 {
-    euler_to_ned_rpy(&t.euler)[2].to_degrees().rem_euclid(360.0)
+    fixed_wing::attitude(&t.euler).heading_deg()
 }
 
 /// Whether the position solution is ready (a 3D fix).
@@ -182,7 +183,8 @@ impl GlobeView<'_> {
 
     fn nav_controller_output(&self) -> apm::MavMessage {
         let t = self.t;
-        let [roll, pitch, _] = euler_to_ned_rpy(&t.euler_est);
+        let est = fixed_wing::attitude(&t.euler_est);
+        let (roll, pitch) = (est.roll_rad, est.pitch_rad);
         let here = self.pos_ned();
         let (bearing, dist, alt_err) = match self.target_ned_m {
             Some(tg) => (
@@ -308,7 +310,8 @@ mod tests {
             t_us: 12_345_000,
             pos_m: Vector3::new(-5.0, 3.0, 2.0),
             vel_m_s: Vector3::new(-1.0, 0.5, 0.25),
-            euler: Euler::new(-std::f64::consts::FRAC_PI_2, 0.0, 0.0),
+            // On the wing, nose 5° above the horizon toward the east.
+            euler: Euler::new(std::f64::consts::FRAC_PI_2, 85_f64.to_radians(), 0.0),
             state: SystemState::Active,
             ..Telemetry::default()
         };
@@ -327,8 +330,18 @@ mod tests {
         );
         assert_eq!((g.alt, g.relative_alt), (586_000, 2_000));
         assert_eq!((g.vx, g.vy, g.vz), (100, 50, -25));
-        assert_eq!(g.hdg, 9000, "ψ = −π/2 is NED yaw +90°: east");
+        assert_eq!(g.hdg, 9000, "the nose east");
         assert_eq!(g.time_boot_ms, 12_345);
+        // On the tail the heading is the belly's, which faces the hover frame's back.
+        let t = Telemetry {
+            euler: Euler::new(-std::f64::consts::FRAC_PI_2, 0.0, 0.0),
+            ..t
+        };
+        let Some(apm::MavMessage::GLOBAL_POSITION_INT(g)) = view(&t).build(GLOBAL_POSITION_INT)
+        else {
+            panic!()
+        };
+        assert_eq!(g.hdg, 27000, "hover frame yaw 90° (east): the belly west");
     }
 
     #[test]

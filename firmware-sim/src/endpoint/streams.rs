@@ -1,6 +1,6 @@
 //! Telemetry: which messages the twin can produce, how each is built from a [`Telemetry`]
-//! snapshot (NED/FRD at the wire, converted here through [`crate::model::frames`]), and the per-link
-//! schedule of rates.
+//! snapshot (NED at the wire, attitudes and body axes in ArduPilot's fixed-wing body frame,
+//! converted here through [`crate::model::frames`]), and the per-link schedule of rates.
 //!
 //! A message's rate on a link is, in order of precedence: a `SET_MESSAGE_INTERVAL` for that
 //! message on that link; the rate of its ArduPlane stream group, set on that link by
@@ -12,7 +12,8 @@ use mavlink::dialects::ardupilotmega as apm;
 use mavlink::types::CharArray;
 use nalgebra::Vector3;
 
-use crate::model::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
+use crate::model::frames::fixed_wing::{self, body_vector};
+use crate::model::frames::paper_to_ned;
 use crate::model::mode::VtolState;
 use crate::model::vehicle::Telemetry;
 
@@ -400,8 +401,8 @@ fn sensors() -> apm::MavSysStatusSensor {
 pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMessage> {
     use apm::MavMessage as M;
     let ms = time_boot_ms(t);
-    let [roll, pitch, yaw] = euler_to_ned_rpy(&t.euler_est);
-    let [p, q, r] = body_rates_to_frd(&t.omega_est_rad_s);
+    // ArduPlane reports a tailsitter in its fixed-wing body frame (nose up on the tail).
+    let [p, q, r] = body_vector(&t.omega_est_rad_s);
     Some(match msgid {
         id::SYS_STATUS => {
             use apm::MavSysStatusSensor as S;
@@ -442,17 +443,20 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
             time_unix_usec: 0,
             time_boot_ms: ms,
         }),
-        id::ATTITUDE => M::ATTITUDE(apm::ATTITUDE_DATA {
-            time_boot_ms: ms,
-            roll: roll as f32,
-            pitch: pitch as f32,
-            yaw: yaw as f32,
-            rollspeed: p as f32,
-            pitchspeed: q as f32,
-            yawspeed: r as f32,
-        }),
+        id::ATTITUDE => {
+            let a = fixed_wing::attitude(&t.euler_est);
+            M::ATTITUDE(apm::ATTITUDE_DATA {
+                time_boot_ms: ms,
+                roll: a.roll_rad as f32,
+                pitch: a.pitch_rad as f32,
+                yaw: a.yaw_rad as f32,
+                rollspeed: p as f32,
+                pitchspeed: q as f32,
+                yawspeed: r as f32,
+            })
+        }
         id::ATTITUDE_QUATERNION => {
-            let qn = quaternion_from_rpy(roll, pitch, yaw);
+            let qn = fixed_wing::attitude(&t.euler_est).quaternion;
             M::ATTITUDE_QUATERNION(apm::ATTITUDE_QUATERNION_DATA {
                 time_boot_ms: ms,
                 q1: qn[0] as f32,
@@ -518,16 +522,17 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
             })
         }
         id::SCALED_IMU => {
-            // Sensor axes are the paper's body axes; FRD at the wire. The ADXL203 has no z axis.
-            let acc = body_rates_to_frd(&Vector3::new(t.accel_m_s2[0], t.accel_m_s2[1], 0.0));
-            let gyro = body_rates_to_frd(&Vector3::from(t.gyro_rad_s));
+            // Sensor axes are the paper's body axes; the fixed-wing frame at the wire. The
+            // ADXL203 has no z_B axis: no axis along the nose, the fixed-wing x.
+            let acc = body_vector(&Vector3::new(t.accel_m_s2[0], t.accel_m_s2[1], 0.0));
+            let gyro = body_vector(&Vector3::from(t.gyro_rad_s));
             let mg = |a: f64| clamp_i16(a / G_M_S2 * 1000.0);
             let mrad = |w: f64| clamp_i16(w * 1000.0);
             M::SCALED_IMU(apm::SCALED_IMU_DATA {
                 time_boot_ms: ms,
-                xacc: mg(acc[0]),
+                xacc: 0,
                 yacc: mg(acc[1]),
-                zacc: 0,
+                zacc: mg(acc[2]),
                 xgyro: mrad(gyro[0]),
                 ygyro: mrad(gyro[1]),
                 zgyro: mrad(gyro[2]),
@@ -578,20 +583,6 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
         }
         _ => return None,
     })
-}
-
-/// Quaternion (w, x, y, z) of NED roll, pitch, yaw (ZYX).
-#[must_use]
-pub fn quaternion_from_rpy(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
-    let (sr, cr) = (roll / 2.0).sin_cos();
-    let (sp, cp) = (pitch / 2.0).sin_cos();
-    let (sy, cy) = (yaw / 2.0).sin_cos();
-    [
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ]
 }
 
 /// A STATUSTEXT (single chunk; text cut to 50 bytes).
@@ -678,12 +669,5 @@ mod tests {
         for t in [6, 1_000_000, u64::MAX / 2] {
             assert!(!s.due(t).contains(&id::ATTITUDE), "due again at {t}");
         }
-    }
-
-    #[test]
-    fn quaternion_identity_and_yaw() {
-        assert_eq!(quaternion_from_rpy(0.0, 0.0, 0.0), [1.0, 0.0, 0.0, 0.0]);
-        let q = quaternion_from_rpy(0.0, 0.0, std::f64::consts::PI);
-        assert!((q[3] - 1.0).abs() < 1e-12);
     }
 }

@@ -3,7 +3,10 @@
 //! Inside the twin everything is in the paper's frames: the inertial frame has **z up**, the body
 //! frame has thrust along +z_B, the span along y_B and x_B normal to the wing. Euler angles are
 //! η = (ψ, θ, φ) with R_B→I = Rz(ψ)·Ry(θ)·Rx(φ). MAVLink's NED frame appears only at the wire,
-//! through [`paper_to_ned`] and [`ned_to_paper`].
+//! through [`paper_to_ned`] and [`ned_to_paper`]; attitudes and body vectors are reported in
+//! ArduPilot's fixed-wing body frame, through [`fixed_wing`].
+
+pub mod fixed_wing;
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -144,13 +147,14 @@ pub fn wrap_pi(a: f64) -> f64 {
     }
 }
 
-/// The one place where the paper's frames meet MAVLink's.
+/// The paper's inertial frame (z up) to NED: positions and velocities at the wire.
 ///
 /// In hover the vehicle's "forward" (where a pilot behind it looks) is −x_B, its right is +y_B
 /// (rotor 1 and aileron R of `PHYSICS.md` §1, so the paper's R/L names are right and left as a
 /// pilot sees them) and its down is −z_B. That is a rotation of π about y: FRD = (−x, y, −z).
-/// The same rotation maps the inertial frame (z up) to NED, so a level vehicle heading north
-/// reports roll = pitch = yaw = 0. Being a half-turn, the map is its own inverse.
+/// The same rotation maps the inertial frame (z up) to NED, so in this hover frame a level
+/// vehicle heading north has roll = pitch = yaw = 0. Being a half-turn, the map is its own
+/// inverse.
 #[must_use]
 pub fn paper_to_ned(v: &Vector3<f64>) -> Vector3<f64> {
     Vector3::new(-v[0], v[1], -v[2])
@@ -162,7 +166,9 @@ pub fn ned_to_paper(v: &Vector3<f64>) -> Vector3<f64> {
     paper_to_ned(v)
 }
 
-/// MAVLink attitude (roll, pitch, yaw) in NED/FRD from the paper's angles. Conjugating
+/// The hover frame's attitude (roll, pitch, yaw) in NED/FRD from the paper's angles: the axes a
+/// pilot behind the hovering vehicle sees, in which `SIM_PUSH_*` and `simulate` push. What the
+/// twin reports is in the fixed-wing frame ([`fixed_wing::attitude`]). Conjugating
 /// Rz(ψ)·Ry(θ)·Rx(φ) by the half-turn about y gives Rz(−ψ)·Ry(θ)·Rx(−φ), so roll = −φ,
 /// pitch = θ, yaw = −ψ.
 #[must_use]
@@ -170,7 +176,8 @@ pub fn euler_to_ned_rpy(e: &Euler) -> [f64; 3] {
     [-e.phi, e.theta, wrap_pi(-e.psi)]
 }
 
-/// A body-frame vector (rates, torques, specific force) in FRD: (−x, y, −z). Its own inverse,
+/// A body-frame vector (rates, torques, specific force) in the hover frame's FRD: (−x, y, −z)
+/// (reported vectors are in the fixed-wing frame: [`fixed_wing::body_vector`]). Its own inverse,
 /// so it also maps FRD vectors back to the paper's body frame.
 #[must_use]
 pub fn body_rates_to_frd(omega: &Vector3<f64>) -> [f64; 3] {

@@ -13,9 +13,9 @@
 //! ([`Gains::validate`]).
 //!
 //! Perturbations (ArduPilot SITL style): writing a non-zero `SIM_PUSH_ROLL`/`PITCH`/`YAW` (N·m,
-//! about the FRD body axes a GCS shows) applies that torque for `SIM_PUSH_MS`, like the pushes
-//! of the paper's experiments (Figs 8–10); the parameter then resets itself to 0 and is never
-//! saved. `SIM_WIND_SPD`/`SIM_WIND_DIR` (direction the wind comes from) set a steady wind and
+//! about the hover frame's FRD body axes, as a pilot behind the hovering vehicle sees them)
+//! applies that torque for `SIM_PUSH_MS`, like the pushes of the paper's experiments
+//! (Figs 8–10); the parameter then resets itself to 0 and is never saved. `SIM_WIND_SPD`/`SIM_WIND_DIR` (direction the wind comes from) set a steady wind and
 //! `SIM_WIND_TURB` the gust intensity.
 //!
 //! Servo outputs (the `SERVOn_FUNCTION` values use ArduPilot's `SRV_Channel` function numbers):
@@ -177,9 +177,9 @@ pub static TABLE: &[ParamDef] = &[
     def("SERVO3_FUNCTION", I16, "", (0.0, 200.0), 4.0, RO, "SERVO3 = left aileron (Aileron)"),
     def("SERVO4_FUNCTION", I16, "", (0.0, 200.0), 4.0, RO, "SERVO4 = right aileron (Aileron)"),
     def("SERVO5_FUNCTION", I16, "", (0.0, 200.0), 19.0, RO, "SERVO5 = elevator (Elevator)"),
-    def("SIM_PUSH_ROLL", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the FRD roll axis for SIM_PUSH_MS"),
-    def("SIM_PUSH_PITCH", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the FRD pitch axis for SIM_PUSH_MS"),
-    def("SIM_PUSH_YAW", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the FRD yaw axis for SIM_PUSH_MS"),
+    def("SIM_PUSH_ROLL", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the hover FRD roll axis for SIM_PUSH_MS"),
+    def("SIM_PUSH_PITCH", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the hover FRD pitch axis for SIM_PUSH_MS"),
+    def("SIM_PUSH_YAW", F32, "N.m", (-2.0, 2.0), 0.0, VOL, "Non-zero: push about the hover FRD yaw axis for SIM_PUSH_MS"),
     def("SIM_PUSH_MS", I16, "ms", (1.0, 10000.0), 200.0, RW, "Duration of a SIM_PUSH_* push"),
     def("SIM_WIND_SPD", F32, "m/s", (0.0, 30.0), 0.0, RW, "Steady wind speed"),
     def("SIM_WIND_DIR", F32, "deg", (0.0, 360.0), 0.0, RW, "Direction the wind blows from (0 = north)"),

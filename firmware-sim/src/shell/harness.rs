@@ -11,7 +11,7 @@
 //! | request | reply |
 //! |---|---|
 //! | `advance SECONDS` | `{"t_us":N}` once the twin has flown SECONDS more of sim time (rounded to whole 1 ms physics steps) and every frame that became due on the way is queued on its link. Lockstep only. |
-//! | `state` | the true state: `{"t_us", "armed", "mode", "system_status", "landed", "position_ned_m": [n, e, d], "altitude_m", "velocity_ned_m_s": [..], "roll_rad", "pitch_rad", "yaw_rad", "rates_frd_rad_s": [p, q, r], "pwm_us": [5]}`, MAVLink's frames (NED, FRD) |
+//! | `state` | the true state: `{"t_us", "armed", "mode", "system_status", "landed", "position_ned_m": [n, e, d], "altitude_m", "velocity_ned_m_s": [..], "roll_rad", "pitch_rad", "yaw_rad", "rates_frd_rad_s": [p, q, r], "pwm_us": [5]}`, MAVLink's frames: NED, and ArduPilot's fixed-wing body frame for the attitude and rates (nose x, right wing y, belly z; pitch 90° on the tail), as ATTITUDE reports them |
 //! | `param NAME VALUE` | `{"name", "value"}`: the value stored, after the same checks and effects as a PARAM_SET; every GCS link gets its PARAM_VALUE |
 //!
 //! Anything else, a bad number or a refused value gets `{"error": "why"}`, and the connection
@@ -35,7 +35,8 @@ use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
-use crate::model::frames::{body_rates_to_frd, euler_to_ned_rpy, paper_to_ned};
+use crate::model::frames::fixed_wing::{self, body_vector};
+use crate::model::frames::paper_to_ned;
 use crate::model::vehicle::{SystemState, Telemetry};
 
 /// Longest request line accepted, bytes.
@@ -97,7 +98,8 @@ pub fn parse_request(line: &str) -> Result<Request, String> {
     }
 }
 
-/// The vehicle's true state, in MAVLink's frames (NED position, FRD rates), as `state` replies.
+/// The vehicle's true state, in MAVLink's frames (NED position; attitude and rates in the
+/// fixed-wing body frame, FRD), as `state` replies.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TrueState {
     /// Sim time, µs since start.
@@ -122,7 +124,7 @@ pub struct TrueState {
     pub pitch_rad: f64,
     /// True yaw, rad.
     pub yaw_rad: f64,
-    /// True body rates, FRD, rad/s.
+    /// True body rates (roll, pitch, yaw: about the nose, the right wing, the belly), rad/s.
     pub rates_frd_rad_s: [f64; 3],
     /// PWM outputs, µs (ESC 1, ESC 2, left aileron, right aileron, elevator).
     pub pwm_us: [u16; 5],
@@ -139,7 +141,8 @@ impl TrueState {
     pub fn of(t: &Telemetry) -> Self {
         let pos = paper_to_ned(&t.pos_m).map(unsigned_zero);
         let vel = paper_to_ned(&t.vel_m_s).map(unsigned_zero);
-        let [roll, pitch, yaw] = euler_to_ned_rpy(&t.euler).map(unsigned_zero);
+        let a = fixed_wing::attitude(&t.euler);
+        let [roll, pitch, yaw] = [a.roll_rad, a.pitch_rad, a.yaw_rad].map(unsigned_zero);
         Self {
             t_us: t.t_us,
             armed: t.armed,
@@ -158,7 +161,7 @@ impl TrueState {
             roll_rad: roll,
             pitch_rad: pitch,
             yaw_rad: yaw,
-            rates_frd_rad_s: body_rates_to_frd(&t.omega_body_rad_s).map(unsigned_zero),
+            rates_frd_rad_s: body_vector(&t.omega_body_rad_s).map(unsigned_zero),
             pwm_us: t.pwm_us,
         }
     }

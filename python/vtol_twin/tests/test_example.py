@@ -20,12 +20,13 @@ def ack_of(m, command):
 
 
 def attitude_until(m, end_ms):
-    """(time_boot_ms, roll) of every ATTITUDE up to sim time end_ms."""
+    """(time_boot_ms, tilt) of every ATTITUDE up to sim time end_ms. ATTITUDE is in ArduPilot's
+    fixed-wing body frame (x the nose): hovering, the pitch is 90° less the nose's tilt."""
     out = []
     while not out or out[-1][0] < end_ms:
         a = m.recv_match(type="ATTITUDE", blocking=True, timeout=5)
         assert a is not None, f"ATTITUDE stopped at {out[-1:]}"
-        out.append((a.time_boot_ms, a.roll))
+        out.append((a.time_boot_ms, math.pi / 2 - a.pitch))
     return out
 
 
@@ -49,10 +50,10 @@ def test_take_off_push_recover_land(vtol_twin):
     attitude_until(m, 9_950)
     vtol_twin.push(roll=0.1)
     vtol_twin.advance(4)
-    rolls = attitude_until(m, 13_950)
-    peak = max(abs(r) for _, r in rolls)
+    tilts = attitude_until(m, 13_950)
+    peak = max(tilt for _, tilt in tilts)
     assert peak > math.radians(5), f"the push tilted the vehicle only {math.degrees(peak):.1f}°"
-    settled = [abs(r) for t, r in rolls if t >= 13_000]
+    settled = [tilt for t, tilt in tilts if t >= 13_000]
     assert settled and max(settled) < math.radians(2), f"still {math.degrees(max(settled)):.1f}° off level"
 
     m.set_mode("QLAND")

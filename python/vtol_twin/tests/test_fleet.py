@@ -18,9 +18,12 @@ def test_a_fleet_has_one_system_id_each(vtol_fleet):
 @pytest.mark.vtol_twin(initial={"x": 2.0, "y": -1.0, "psi": 0.5}, seed=4, speed="lockstep")
 def test_the_marker_sets_the_start(vtol_twin):
     s = vtol_twin.state()
-    # Paper frame (x, y, z up; psi) → NED: (−x, y, −z), yaw = −psi.
+    # Paper frame (x, y, z up; psi) → NED: (−x, y, −z). The attitude is ArduPilot's fixed-wing
+    # frame: on its tail the pitch is 90° and the yaw the belly's heading, the hover's (−psi)
+    # turned half a turn.
     assert s.position_ned_m[:2] == (-2.0, -1.0)
-    assert math.isclose(s.yaw_rad, -0.5)
+    assert math.isclose(s.pitch_rad, math.pi / 2) and s.roll_rad == 0.0
+    assert math.isclose(s.yaw_rad, math.pi - 0.5)
     assert s.system_status == "STANDBY" and s.t_us == 0, "ready to arm at once"
 
 

@@ -153,7 +153,8 @@ class TwinOptions:
 @dataclass(frozen=True)
 class TrueState:
     """The vehicle's true state (not what its sensors or estimator say), in MAVLink's frames:
-    NED position and velocity, FRD body rates, roll/pitch/yaw in radians."""
+    NED position and velocity; roll/pitch/yaw (radians) and body rates in ArduPilot's fixed-wing
+    body frame, as ATTITUDE reports them (x the nose, z the belly: pitch 90° on the tail)."""
 
     t_us: int
     armed: bool
@@ -359,8 +360,9 @@ class VtolTwin:
         return self._call(f"param {name} {float(value)!r}")["value"]
 
     def push(self, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0, ms: float = 200.0) -> None:
-        """A torque push on the FRD body axes, N·m, for `ms` milliseconds (SIM_PUSH_*), like the
-        paper's hover experiments."""
+        """A torque push on the hover frame's FRD body axes (as a pilot behind the hovering
+        vehicle sees them), N·m, for `ms` milliseconds (SIM_PUSH_*), like the paper's hover
+        experiments."""
         if not (roll or pitch or yaw):
             raise TwinError("push needs a non-zero torque on some axis")
         self.set_param("SIM_PUSH_MS", ms)
