@@ -1,4 +1,5 @@
-"""The controller on the wire (NAMED_VALUE_FLOAT) and the reboot command clearing a crash."""
+"""The controller on the wire (NAMED_VALUE_FLOAT) and the reboot command clearing a crash, the
+battery drawn as it was."""
 
 import time
 
@@ -36,8 +37,15 @@ def test_controller_outputs_and_reboot_after_a_crash(twin_factory, gcs_factory):
     assert ack.result == MAV_RESULT_ACCEPTED, ack
     g.wait_vehicle_heartbeat(timeout=20, pred=lambda h: h.system_status == MAV_STATE_EMERGENCY)
 
+    drawn = g.recv("BATTERY_STATUS", timeout=10)
+    assert drawn.current_consumed > 0, drawn
+
     ack = g.command(MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
     assert ack.result == MAV_RESULT_ACCEPTED, ack
     # Back on the ground, calibrated, ready to arm again: the crash is cleared.
     g.wait_ready(timeout=30)
+    # A reboot does not refill the pack: the charge drawn in the flight stays drawn.
+    after = g.recv("BATTERY_STATUS", timeout=10)
+    assert after.current_consumed >= drawn.current_consumed, (drawn, after)
+    assert after.battery_remaining <= drawn.battery_remaining, (drawn, after)
     g.arm()

@@ -296,7 +296,8 @@ impl Endpoint {
 
     /// Restarts the vehicle as the reboot command does: on the ground, level, disarmed, where
     /// it was (horizontally), with the parameters as they stand (`CTRL_RATE_HZ` and
-    /// `SYSID_THISMAV` take effect here), then silent for [`REBOOT_SILENCE_US`]. Clears a crash.
+    /// `SYSID_THISMAV` take effect here), the battery drawn as it was, then silent for
+    /// [`REBOOT_SILENCE_US`]. Clears a crash.
     pub(crate) fn reboot(&mut self) {
         let mut config = self.vehicle.config().clone();
         let here = self.vehicle.telemetry().pos_m;
@@ -312,7 +313,11 @@ impl Endpoint {
         config.gains = self.params.gains();
         config.control_rate_hz = self.params.value("CTRL_RATE_HZ");
         config.battery = self.params.battery();
+        // The pack is not the firmware's: it stays drawn as it was (a process restart is a
+        // fresh pack).
+        let pack = self.vehicle.battery().restarted(config.battery);
         self.vehicle = Vehicle::new(config);
+        self.vehicle.replace_battery(pack);
         self.origin = self.params.origin();
         self.home_ned_m = crate::model::frames::paper_to_ned(&self.vehicle.telemetry().pos_m);
         self.navigator = Navigator::new();

@@ -500,6 +500,8 @@ fn reboot_clears_a_crash_after_a_silence() {
     ep.add_link(GCS);
     let _ = ep.tick(2_000_000);
     assert_eq!(ep.vehicle().telemetry().state, SystemState::Emergency);
+    let drawn_mah = ep.vehicle().telemetry().battery.consumed_mah;
+    assert!(drawn_mah > 0.1, "the avionics draw: {drawn_mah} mAh");
     let reboot = |p1: f32| {
         v2(&command_long(
             apm::MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN,
@@ -526,6 +528,12 @@ fn reboot_clears_a_crash_after_a_silence() {
     let t = ep.vehicle().telemetry();
     assert_eq!(t.state, SystemState::Standby);
     assert!(t.landed && !t.armed);
+    // The pack is not refilled: what was drawn stays drawn.
+    assert!(
+        t.battery.consumed_mah >= drawn_mah && t.battery.remaining < 1.0,
+        "{:?} after {drawn_mah} mAh",
+        t.battery
+    );
     assert!(
         (t.pos_m.x - 0.3).abs() < 0.1 && t.pos_m.z == 0.0,
         "{:?}",

@@ -36,6 +36,7 @@ use crate::model::sensors::{self, Sensors};
 
 mod arming;
 mod forward_flight;
+mod power;
 mod telemetry;
 mod wind;
 

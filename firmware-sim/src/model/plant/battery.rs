@@ -110,6 +110,25 @@ impl Battery {
         b
     }
 
+    /// The same pack after a restart of the firmware: the charge drawn stays drawn (a reboot
+    /// does not refill a pack), no current flows yet, and the size is `config` (the parameters
+    /// as they stand at the restart).
+    #[must_use]
+    pub fn restarted(&self, config: BatteryConfig) -> Self {
+        let mut b = Self {
+            config,
+            state: BatteryState {
+                consumed_mah: self.state.consumed_mah,
+                consumed_j: self.state.consumed_j,
+                ..BatteryState::default()
+            },
+        };
+        let soc = 1.0 - b.state.consumed_mah / b.config.capacity_mah.max(1.0);
+        b.state.remaining = soc.clamp(0.0, 1.0);
+        b.state.voltage_v = b.open_circuit_v(soc);
+        b
+    }
+
     /// Open-circuit voltage of the pack at a state of charge, V; below 0 (drawn past empty) the
     /// cells collapse linearly to 0 V at −[`OVER_DISCHARGE`].
     fn open_circuit_v(&self, soc: f64) -> f64 {
@@ -253,5 +272,31 @@ mod tests {
         // Absurd power never gives a NaN: the sag is capped at the open-circuit voltage.
         b.step(1.0, [1e6, 1e6], 0.15, 1.25e-6);
         assert!(b.state().current_a.is_finite() && b.state().voltage_v >= 0.0);
+    }
+
+    #[test]
+    fn a_restart_keeps_the_charge_drawn() {
+        let mut b = Battery::new(BatteryConfig::default());
+        for _ in 0..60 {
+            b.step(1.0, [400.0, 400.0], 0.15, 1.25e-6);
+        }
+        let drawn = *b.state();
+        assert!(drawn.consumed_mah > 50.0, "{drawn:?}");
+        let r = b.restarted(BatteryConfig::default());
+        let s = *r.state();
+        assert_eq!(
+            (s.consumed_mah, s.consumed_j),
+            (drawn.consumed_mah, drawn.consumed_j)
+        );
+        assert_eq!(s.remaining, drawn.remaining);
+        assert_eq!(s.current_a, 0.0);
+        // At rest: the open-circuit voltage of the charge left, above the loaded one, below full.
+        assert!(s.voltage_v > drawn.voltage_v && s.voltage_v < 12.6, "{s:?}");
+        // A larger pack set before the restart leaves more in proportion.
+        let big = b.restarted(BatteryConfig {
+            capacity_mah: 2600.0,
+            ..BatteryConfig::default()
+        });
+        assert!((big.state().remaining - (1.0 - s.consumed_mah / 2600.0)).abs() < 1e-12);
     }
 }
