@@ -1,6 +1,8 @@
 """FBWA flown on the sticks by a ground station's joystick (RC_CHANNELS_OVERRIDE), with
 pymavlink against the twin in lockstep (`docs/forward-flight.md`): a GUIDED take-off, FBWA
 transitions to the wing, the roll stick turns the aircraft, QLOITER brings it back to a hover.
+Attitude and heading are ArduPlane's for a tailsitter, in the fixed-wing body frame: pitch 90° on
+the tail, the angle of attack and the course on the wing, the bank as the roll.
 """
 
 import math
@@ -28,6 +30,12 @@ def record(msg, seen: dict) -> None:
     elif msg.get_type() == "GLOBAL_POSITION_INT":
         seen["course"].append(math.atan2(msg.vy, msg.vx))
         seen["alt"].append(msg.relative_alt / 1000.0)
+    elif msg.get_type() == "ATTITUDE":
+        seen["roll"].append(math.degrees(msg.roll))
+        seen["pitch"].append(math.degrees(msg.pitch))
+    elif msg.get_type() == "VFR_HUD" and seen["course"]:
+        # The heading against the latest course, degrees in [−180, 180).
+        seen["heading_off"].append((msg.heading - math.degrees(seen["course"][-1]) + 180) % 360 - 180)
 
 
 def sync(m, seen: dict) -> None:
@@ -49,10 +57,10 @@ def sync(m, seen: dict) -> None:
 def fly(vtol_twin, m, seconds: int, roll_us: int) -> dict:
     """Flies `seconds` on the sticks (sent every second, each taken before the twin flies on);
     what the ground station saw in those seconds."""
-    seen = {"states": [], "course": [], "alt": []}
+    seen = {key: [] for key in ("states", "course", "alt", "roll", "pitch", "heading_off")}
     for _ in range(seconds):
         m.mav.rc_channels_override_send(1, 1, roll_us, 1500, THROTTLE_US, 1500, 0, 0, 0, 0)
-        sync(m, {"states": [], "course": [], "alt": []})
+        sync(m, {key: [] for key in seen})
         vtol_twin.advance(1)
         sync(m, seen)
     return seen
@@ -77,6 +85,8 @@ def test_fbwa_on_the_sticks_turns_with_the_roll_stick(vtol_twin):
         if vtol_twin.state().altitude_m > 19.8:
             break
     assert vtol_twin.state().altitude_m > 19.8, vtol_twin.state()
+    hover = fly(vtol_twin, m, 1, 1500)
+    assert min(hover["pitch"]) > 80, f"on the tail the pitch is near 90°: {min(hover['pitch']):.1f}°"
 
     m.mav.rc_channels_override_send(1, 1, 1500, 1500, THROTTLE_US, 1500, 0, 0, 0, 0)
     m.set_mode("FBWA")
@@ -90,6 +100,17 @@ def test_fbwa_on_the_sticks_turns_with_the_roll_stick(vtol_twin):
     fly(vtol_twin, m, 3, 1500)
     left = fly(vtol_twin, m, 8, 1250)
     assert abs(turned(straight["course"])) < 0.1, turned(straight["course"])
+    # Level on the wing: the pitch is the angle of attack, the heading the course, the wings level.
+    print(f"on the wing: pitch {min(straight['pitch']):.1f}° to {max(straight['pitch']):.1f}°, "
+          f"heading off the course by at most {max(map(abs, straight['heading_off'])):.1f}°, "
+          f"roll within {max(map(abs, straight['roll'])):.1f}°; banked right up to "
+          f"{max(right['roll']):.1f}°, left {min(left['roll']):.1f}°")
+    assert 0 < min(straight["pitch"]) and max(straight["pitch"]) < 20, straight["pitch"]
+    assert max(map(abs, straight["heading_off"])) < 10, straight["heading_off"]
+    assert max(map(abs, straight["roll"])) < 5, straight["roll"]
+    # The roll stick banks right (positive roll), within LIM_ROLL_CD (45°), and left.
+    assert 10 < max(right["roll"]) <= 46, right["roll"]
+    assert -46 <= min(left["roll"]) < -10, left["roll"]
     assert turned(right["course"]) > 1.5, turned(right["course"])
     assert turned(left["course"]) < -1.5, turned(left["course"])
     alts = straight["alt"] + right["alt"] + left["alt"]
