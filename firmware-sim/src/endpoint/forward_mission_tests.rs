@@ -96,9 +96,24 @@ fn rectangle_mission() -> Vec<MissionItem> {
     ]
 }
 
+/// The same rectangle without the DO_VTOL_TRANSITION item: ArduPlane flies the waypoints after
+/// a VTOL take-off on the wing all the same.
+fn rectangle_mission_without_the_transition_item() -> Vec<MissionItem> {
+    let mut m = rectangle_mission();
+    m.remove(2);
+    m
+}
+
 #[test]
 fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
     fly_rectangle(endpoint(), &[]);
+}
+
+#[test]
+fn without_a_transition_item_the_waypoints_after_the_take_off_are_flown_on_the_wing_too() {
+    let mut ep = endpoint();
+    upload(&mut ep, &rectangle_mission_without_the_transition_item());
+    fly_uploaded_rectangle(ep);
 }
 
 #[test]
@@ -123,6 +138,10 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
         ep.handle(GCS, &v2(&param_set(name, *value)));
     }
     upload(&mut ep, &rectangle_mission());
+    fly_uploaded_rectangle(ep);
+}
+
+fn fly_uploaded_rectangle(mut ep: Endpoint) {
     ep.handle(GCS, &set_mode(FlightMode::Auto));
     // The gyros calibrate for 1 s after power-up.
     let mut t = 0u64;
@@ -220,6 +239,8 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
 #[test]
 fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
+    // RTL lands vertically at home (not ArduPlane's default, which circles home).
+    ep.handle(GCS, &v2(&param_set("Q_RTL_MODE", 1.0)));
     let mut loiter = item(mcmd::NAV_LOITER_TIME, -100.0, 0.0, 20.0);
     loiter.params[0] = 20.0;
     let [home, takeoff] = home_and_vtol_takeoff(20.0);
@@ -247,7 +268,7 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
         if ep.navigator.current() == 3 && circled_from.is_none() {
             let p = ep.vehicle().telemetry().pos_m;
             let d = (p.xy() - nalgebra::Vector2::new(100.0, 0.0)).norm();
-            if (20.0..40.0).contains(&d) && ep.vehicle().vtol_state() == VtolState::Fw {
+            if (50.0..70.0).contains(&d) && ep.vehicle().vtol_state() == VtolState::Fw {
                 circled_from = Some(t);
             }
         }
@@ -280,5 +301,50 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
         tel.pos_m.xy().norm() < 2.0,
         "landed at home: {:?}",
         tel.pos_m
+    );
+}
+
+/// ArduPlane's defaults (`Q_RTL_MODE` 0): a mission that ends on the wing changes to RTL, which
+/// flies home and circles it on the wing at `WP_LOITER_RAD` (60 m) without landing.
+#[test]
+fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
+    let mut ep = endpoint();
+    let [home, takeoff] = home_and_vtol_takeoff(20.0);
+    upload(
+        &mut ep,
+        &[home, takeoff, item(mcmd::NAV_WAYPOINT, -150.0, 0.0, 20.0)],
+    );
+    ep.handle(GCS, &set_mode(FlightMode::Auto));
+    let mut t = 0u64;
+    while t < 2_000_000 {
+        t += 20_000;
+        ep.tick(t);
+    }
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+        vec![(400, 0)]
+    );
+    while ep.vehicle().telemetry().mode == FlightMode::Auto {
+        t += 20_000;
+        ep.tick(t);
+        assert!(t < 200_000_000, "the mission never ended");
+    }
+    assert_eq!(ep.vehicle().telemetry().mode, FlightMode::Rtl);
+    let end = t + 150_000_000;
+    let (mut near, mut far) = (f64::INFINITY, 0.0_f64);
+    while t < end {
+        t += 20_000;
+        ep.tick(t);
+        let tel = ep.vehicle().telemetry();
+        assert!(tel.armed && tel.mode == FlightMode::Rtl, "{:?}", tel.mode);
+        if t + 60_000_000 > end {
+            assert_eq!(tel.vtol_state, VtolState::Fw);
+            let d = tel.pos_m.xy().norm();
+            (near, far) = (near.min(d), far.max(d));
+        }
+    }
+    assert!(
+        near > 45.0 && far < 80.0,
+        "circling home at {near:.1}..{far:.1} m"
     );
 }

@@ -68,7 +68,7 @@ impl Endpoint {
             pos_ned_m: paper_to_ned(&t.pos_m),
             mission: &self.mission,
             limits: &limits,
-            wp_radius_m: self.params.value("WP_RADIUS"),
+            wp_radius_m: self.params.value("Q_WP_RADIUS") / 100.0,
             speed_up_m_s: self.params.value("WP_SPEED_UP"),
             speed_dn_m_s: self.params.value("WP_SPEED_DN"),
             fixed_wing: FixedWingInput {
@@ -79,9 +79,14 @@ impl Endpoint {
                     period_s: self.params.value("NAVL1_PERIOD"),
                     damping: self.params.value("NAVL1_DAMPING"),
                 },
-                loiter_radius_m: self.params.value("WP_LOITER_RAD"),
+                loiter_radius_m: match self.params.value("RTL_RADIUS").abs() {
+                    r if t.mode == FlightMode::Rtl && r > 0.0 => r,
+                    _ => self.params.value("WP_LOITER_RAD"),
+                },
+                wp_radius_m: self.params.value("WP_RADIUS"),
                 gravity_m_s2: self.vehicle.config().airframe.gravity_m_s2,
-                rtl_vtol_land: self.params.value("Q_RTL_MODE") >= 1.0,
+                rtl_vtol_land: matches!(self.params.value("Q_RTL_MODE") as i32, 1 | 2),
+                trans_decel_m_s2: self.params.value("Q_TRANS_DECEL"),
             },
         };
         let r = f(&mut self.navigator, &inp, &mut events);

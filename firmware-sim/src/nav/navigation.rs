@@ -159,6 +159,9 @@ pub struct Navigator {
     hold_until_us: Option<u64>,
     /// Sim time of the last step, µs (the climb rate's time base).
     last_step_us: Option<u64>,
+    /// AUTO flies its position items in a hover (ArduPlane's `auto_state.vtol_mode`): set by a
+    /// DO_VTOL_TRANSITION to MC, cleared by one to FW and whenever AUTO is entered.
+    vtol_mode: bool,
 }
 
 impl Default for Navigator {
@@ -172,6 +175,7 @@ impl Default for Navigator {
             state: MissionState::NotStarted,
             hold_until_us: None,
             last_step_us: None,
+            vtol_mode: false,
         }
     }
 }
@@ -248,6 +252,10 @@ impl Navigator {
         if entered && self.mode == Some(FlightMode::Auto) && self.state == MissionState::Active {
             self.state = MissionState::Paused;
         }
+        if entered && inp.mode == FlightMode::Auto {
+            // ArduPlane's ModeAuto::_enter (Q_ENABLE 1): position items are flown on the wing.
+            self.vtol_mode = false;
+        }
         self.mode = Some(inp.mode);
         self.armed = inp.armed;
         if !inp.mode.is_autonomous() {
@@ -281,7 +289,7 @@ impl Navigator {
                     }
                 };
             }
-            FlightMode::QRtl | FlightMode::Rtl => self.start_return(inp),
+            FlightMode::QRtl | FlightMode::Rtl => self.start_return(inp, events),
             FlightMode::Auto => {
                 // Resume where the mission was; a completed one starts over (ArduPilot).
                 let seq = if self.state == MissionState::Complete {
@@ -318,8 +326,12 @@ impl Navigator {
         self.last_step_us = None;
     }
 
-    fn start_return(&mut self, inp: &NavInput<'_>) {
+    fn start_return(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
         let here = inp.pos_ned_m;
+        if inp.mode == FlightMode::Rtl && !inp.landed && inp.fixed_wing.vtol == VtolState::Mc {
+            // RTL is a fixed-wing mode: a hovering vehicle goes to the wing to fly home.
+            events.push(NavEvent::Transition(true));
+        }
         self.leg = if inp.landed {
             landing_here(&here)
         } else {
@@ -352,16 +364,33 @@ impl Navigator {
                 xy: here.xy(),
                 z: t.z_ned_m,
             },
-            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => Leg::Goto { xy, z: t.z_ned_m },
+            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => {
+                self.to_the_wing(inp, events);
+                Leg::Goto { xy, z: t.z_ned_m }
+            }
             cmd::NAV_LAND | cmd::NAV_VTOL_LAND => {
                 if inp.landed {
                     landing_here(&here)
                 } else {
+                    // ArduPlane's poscontrol_init_approach: a landing point farther than the
+                    // transition threshold is approached on the wing (in VTOL mode too).
+                    let dist = (xy - here.xy()).norm();
+                    if inp.fixed_wing.vtol == VtolState::Mc {
+                        if dist >= inp.fixed_wing.transition_threshold_m() {
+                            events.push(NavEvent::Info(format!("VTOL approach d={dist:.1}")));
+                            if inp.mode == FlightMode::Auto && inp.armed {
+                                events.push(NavEvent::Transition(true));
+                            }
+                        } else {
+                            events.push(NavEvent::Info(format!("VTOL Position1 d={dist:.1}")));
+                        }
+                    }
                     Leg::LandAt { xy, z: here.z }
                 }
             }
             cmd::DO_VTOL_TRANSITION => {
                 let forward = item.params[0] as u8 == mav_vtol_state::FW;
+                self.vtol_mode = !forward;
                 events.push(NavEvent::Transition(forward));
                 self.item_done(inp, events, "Transition");
                 return;
@@ -370,6 +399,7 @@ impl Navigator {
                 if inp.landed {
                     landing_here(&here)
                 } else {
+                    self.to_the_wing(inp, events);
                     Leg::LandAt {
                         xy: inp.limits.home_ned_m.xy(),
                         z: here.z.min(self.z_cmd),
@@ -382,6 +412,26 @@ impl Navigator {
                 return;
             }
         };
+    }
+
+    /// AUTO outside VTOL mode flies its position items on the wing, as ArduPlane does (its
+    /// `in_vtol_auto` is false for them): a vehicle hovering in the air starts a forward
+    /// transition (the `paper` model has none, and keeps flying them in a hover).
+    fn to_the_wing(&self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        if inp.mode == FlightMode::Auto
+            && !self.vtol_mode
+            && inp.armed
+            && !inp.landed
+            && inp.fixed_wing.vtol == VtolState::Mc
+        {
+            events.push(NavEvent::Transition(true));
+        }
+    }
+
+    /// MAV_CMD_DO_VTOL_TRANSITION taken in AUTO: to MC, the mission's position items are
+    /// flown in a hover from now on; to FW, on the wing (ArduPlane's `handle_do_vtol_transition`).
+    pub fn set_vtol_mode(&mut self, hover: bool) {
+        self.vtol_mode = hover;
     }
 
     fn complete_mission(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
@@ -507,18 +557,29 @@ impl Navigator {
                 }
             }
             Leg::Approach { xy, z, .. } => {
+                let fw = &inp.fixed_wing;
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                let on_wing = inp.fixed_wing.vtol == VtolState::Fw;
-                if close <= fixed_wing::APPROACH_DISTANCE_M && on_wing {
-                    if inp.mode != FlightMode::Rtl {
+                if fw.vtol != VtolState::Fw {
+                    return;
+                }
+                if inp.mode != FlightMode::Rtl {
+                    if close <= fixed_wing::APPROACH_DISTANCE_M {
                         events.push(NavEvent::Transition(false));
-                    } else if inp.fixed_wing.rtl_vtol_land {
-                        // Q_RTL_MODE 1: home reached on the wing, land as QRTL does.
+                    }
+                } else if fw.rtl_vtol_land {
+                    // Q_RTL_MODE 1: within the larger of the RTL radius and the stopping
+                    // distance of home, land as QRTL does (ArduPlane's ModeRTL::switch_QRTL).
+                    let stop = fixed_wing::stopping_distance_m(
+                        fw.vel_ned_m_s.xy().norm(),
+                        fw.trans_decel_m_s2,
+                    );
+                    if close <= fw.loiter_radius_m.max(stop) {
                         events.push(NavEvent::Info("RTL: switching to QRTL".into()));
                         events.push(NavEvent::SetMode(FlightMode::QRtl));
-                    } else if close <= inp.fixed_wing.loiter_radius_m {
-                        self.leg = Leg::Circle { xy, z };
                     }
+                } else if close <= fw.loiter_radius_m {
+                    // Q_RTL_MODE 0: circle home on the wing.
+                    self.leg = Leg::Circle { xy, z };
                 }
             }
             _ => {}
@@ -543,15 +604,25 @@ impl Navigator {
         }
     }
 
+    /// The radius an item is reached within: a waypoint's `param2`, else in a hover
+    /// `Q_WP_RADIUS`, on the wing `WP_RADIUS` but at most the L1 distance (ArduPlane's
+    /// `turn_distance` for a square turn).
     fn item_radius(&self, inp: &NavInput<'_>) -> f64 {
+        let fw = &inp.fixed_wing;
+        let default = if fw.on_the_wing() {
+            let l1 = fw.l1.distance_m(fw.vel_ned_m_s.xy().norm());
+            fw.wp_radius_m.min(l1)
+        } else {
+            inp.wp_radius_m
+        };
         if inp.mode != FlightMode::Auto {
-            return inp.wp_radius_m;
+            return default;
         }
         match inp.mission.get(self.current) {
             Some(i) if i.command == cmd::NAV_WAYPOINT && i.params[1] > 0.0 => {
                 f64::from(i.params[1])
             }
-            _ => inp.wp_radius_m,
+            _ => default,
         }
     }
 
