@@ -457,6 +457,9 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
 #[test]
 fn guided_take_off_reposition_and_auto_mission() {
     let mut ep = endpoint_in_a_small_envelope();
+    // The reposition held in a hover (Q_GUIDED_MODE 1; ArduPlane's default circles it on the
+    // wing).
+    ep.set_param("Q_GUIDED_MODE", 1.0).unwrap();
     // A DO_VTOL_TRANSITION to MC after the take-off: AUTO flies the waypoints in a hover (without
     // it they are flown on the wing, as ArduPlane does).
     let mut plan = flight_plan();
@@ -593,6 +596,8 @@ fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
 #[test]
 fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
     let mut ep = endpoint_in_a_small_envelope();
+    // Targets held in a hover (ArduPlane's default, 0, circles them on the wing).
+    ep.set_param("Q_GUIDED_MODE", 1.0).unwrap();
     run_until(&mut ep, 200_000);
     // Not in GUIDED: refused with the reason, as ArduPlane refuses it.
     let out = ep.handle(GCS, &guided_waypoint(3.0, 2.0));
@@ -627,6 +632,45 @@ fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
     assert_eq!(
         mission_acks(&out),
         vec![apm::MavMissionResult::MAV_MISSION_ERROR]
+    );
+}
+
+/// ArduPlane's default `Q_GUIDED_MODE` 0: a guided waypoint (DroneKit's `simple_goto`) after a
+/// VTOL take-off is flown on the wing and circled at `WP_LOITER_RAD` (60 m).
+#[test]
+fn a_guided_waypoint_is_circled_on_the_wing_by_default() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 200_000);
+    set_mode(&mut ep, FlightMode::Guided);
+    ep.handle(GCS, &command(400, [1.0; 7]));
+    ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0]));
+    run_until(&mut ep, 30_000_000);
+    assert_eq!(
+        ep.vehicle().vtol_state(),
+        crate::model::mode::VtolState::Mc,
+        "the take-off hovers"
+    );
+    let out = ep.handle(GCS, &guided_waypoint(200.0, 20.0));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    run_until(&mut ep, 90_000_000);
+    // Paper frame: x is south, so the point is at x = -200.
+    let centre = nalgebra::Vector2::new(-200.0, 0.0);
+    let (mut near, mut far) = (f64::INFINITY, 0.0_f64);
+    let mut t = 90_000_000;
+    while t < 120_000_000 {
+        t += 500_000;
+        run_until(&mut ep, t);
+        let tel = ep.vehicle().telemetry();
+        assert_eq!(tel.vtol_state, crate::model::mode::VtolState::Fw);
+        let d = (tel.pos_m.xy() - centre).norm();
+        (near, far) = (near.min(d), far.max(d));
+    }
+    assert!(
+        near > 45.0 && far < 80.0,
+        "circling at {near:.1}..{far:.1} m"
     );
 }
 

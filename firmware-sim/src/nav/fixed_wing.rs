@@ -36,6 +36,9 @@ pub struct FixedWingInput {
     pub rtl_vtol_land: bool,
     /// `Q_TRANS_DECEL`, m/s²: the deceleration the VTOL landing distances assume.
     pub trans_decel_m_s2: f64,
+    /// `Q_GUIDED_MODE` 0: a GUIDED target in the air is flown to on the wing and circled at
+    /// `WP_LOITER_RAD`; 1: flown to and held in a hover.
+    pub guided_on_the_wing: bool,
 }
 
 impl Default for FixedWingInput {
@@ -53,6 +56,7 @@ impl Default for FixedWingInput {
             gravity_m_s2: crate::model::airframe::GRAVITY_M_S2,
             rtl_vtol_land: false,
             trans_decel_m_s2: 2.0,
+            guided_on_the_wing: true,
         }
     }
 }

@@ -544,7 +544,15 @@ impl Navigator {
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
                 let loiter =
                     inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
-                if inp.mode == FlightMode::Auto
+                if inp.mode == FlightMode::Guided {
+                    // A GUIDED target on the wing is circled once reached (ArduPlane's guided
+                    // loiter at WP_LOITER_RAD).
+                    if close <= inp.fixed_wing.loiter_radius_m
+                        || fixed_wing::passed(&from, &xy, &here.xy())
+                    {
+                        self.leg = Leg::Circle { xy, z };
+                    }
+                } else if inp.mode == FlightMode::Auto
                     && (close <= radius || fixed_wing::passed(&from, &xy, &here.xy()))
                 {
                     if loiter {
@@ -729,6 +737,10 @@ impl Navigator {
             .map_err(|r| {
                 Refused::Invalid(format!("Reposition refused: {}", strip_what(&r.reason)))
             })?;
+        if inp.fixed_wing.guided_on_the_wing && inp.fixed_wing.vtol == VtolState::Mc {
+            // Q_GUIDED_MODE 0: ArduPlane flies a GUIDED target as a plane, circling it.
+            events.push(NavEvent::Transition(true));
+        }
         self.leg = Leg::Goto {
             xy: target_ned_m.xy(),
             z: target_ned_m.z,
