@@ -418,17 +418,21 @@ impl Endpoint {
         }
     }
 
+    /// The mode RTL is flown as: RTL, home as a plane (a hovering vehicle transitions first), as
+    /// ArduPlane's; with Q_RTL_MODE 3 (QRTL always) QRTL, and so in the `paper` model, which has
+    /// no forward flight.
+    pub(super) fn rtl_or_qrtl(&self) -> FlightMode {
+        let paper = self.vehicle.config().model == crate::model::airframe::ModelMode::Paper;
+        if paper || self.params.value("Q_RTL_MODE") as i32 == 3 {
+            FlightMode::QRtl
+        } else {
+            FlightMode::Rtl
+        }
+    }
+
     pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
         let wanted = if custom_mode == RTL_MODE {
-            // RTL flies home as a plane (a hovering vehicle transitions first), as ArduPlane's
-            // does; with Q_RTL_MODE 3 (QRTL always) it is QRTL, and so in the `paper` model,
-            // which has no forward flight.
-            let paper = self.vehicle.config().model == crate::model::airframe::ModelMode::Paper;
-            if paper || self.params.value("Q_RTL_MODE") as i32 == 3 {
-                FlightMode::QRtl.custom_mode()
-            } else {
-                RTL_MODE
-            }
+            self.rtl_or_qrtl().custom_mode()
         } else {
             custom_mode
         };

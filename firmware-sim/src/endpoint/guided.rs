@@ -103,7 +103,14 @@ impl Endpoint {
                     let m = self.mission_current();
                     self.broadcast(&m);
                 }
-                NavEvent::SetMode(m) => self.vehicle.set_mode(m),
+                NavEvent::SetMode(m) => {
+                    let m = if m == FlightMode::Rtl {
+                        self.rtl_or_qrtl()
+                    } else {
+                        m
+                    };
+                    self.vehicle.set_mode(m);
+                }
                 NavEvent::Info(text) => self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, &text),
                 NavEvent::Transition(forward) => {
                     if forward {

@@ -17,10 +17,11 @@
 //!   `param1` seconds there; VTOL_LAND flies to its point and lands; RETURN_TO_LAUNCH flies home
 //!   and lands. An item is reached within `WP_RADIUS` (or a waypoint's `param2`) of its point, a
 //!   take-off at its altitude, a landing when the vehicle has touched down and disarmed. When
-//!   the last item is done in the air, the mode changes to QRTL ("Mission complete"), as
-//!   ArduPlane changes to RTL and, with `Q_RTL_MODE` set to QRTL, on to QRTL.
-//! - QRTL flies home at its altitude, then lands and disarms. RTL requests become QRTL (the twin
-//!   cannot fly as a plane).
+//!   the last item is done in the air, the mode changes to RTL ("Mission complete"), as
+//!   ArduPlane's does. Outside VTOL mode (a DO_VTOL_TRANSITION to MC sets it) the position items
+//!   are flown on the wing, as ArduPlane flies them (see [`fixed_wing`]).
+//! - QRTL flies home at its altitude, then lands and disarms. RTL flies home on the wing, then
+//!   circles home or lands by `Q_RTL_MODE`.
 //!
 //! Altitude changes are flown at `WP_SPEED_UP`/`WP_SPEED_DN`: the altitude the controller holds
 //! moves towards the target at that rate, so a take-off does not overshoot the way a step in the
@@ -439,17 +440,13 @@ impl Navigator {
         // Nothing of AUTO is left to fly: a leg started in another mode (a GUIDED take-off
         // still climbing) must not complete as if it were a mission item.
         self.leg = Leg::Idle;
-        if inp.armed && !inp.landed && inp.fixed_wing.on_the_wing() {
-            // On the wing, home as a plane (ArduPlane's RTL), then Q_RTL_MODE.
+        if inp.armed && !inp.landed {
+            // ArduPlane's exit_mission_callback: RTL, home as a plane, then Q_RTL_MODE (the
+            // endpoint makes it QRTL where RTL is: Q_RTL_MODE 3, the `paper` model).
             events.push(NavEvent::Info(
                 "Mission complete, changing mode to RTL".into(),
             ));
             events.push(NavEvent::SetMode(FlightMode::Rtl));
-        } else if inp.armed && !inp.landed {
-            events.push(NavEvent::Info(
-                "Mission complete, changing mode to QRTL".into(),
-            ));
-            events.push(NavEvent::SetMode(FlightMode::QRtl));
         } else {
             events.push(NavEvent::Info("Mission complete".into()));
         }
