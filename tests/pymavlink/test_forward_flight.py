@@ -77,6 +77,38 @@ def test_vtol_take_off_rectangle_on_the_wing_and_vtol_landing(vtol_twin):
     fly_rectangle(vtol_twin)
 
 
+def test_without_the_transition_item_the_waypoints_are_flown_on_the_wing(vtol_twin):
+    """ArduPlane flies the waypoints after a VTOL take-off on the wing with or without a
+    DO_VTOL_TRANSITION item: the same phases, the same rectangle."""
+    fly_rectangle(vtol_twin, transition_item=False)
+
+
+def test_a_vtol_landing_too_short_stops_arming_and_item_0_is_home(vtol_twin):
+    """ArduPlane's pre-arm mission check (a VTOL landing under 0.75 v² / (2 Q_TRANS_DECEL), 27 m,
+    after its waypoint) and its home slot: item 0 downloads as home, whatever was uploaded there."""
+    m = vtol_twin.connect()
+    start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+    assert start is not None
+    items = rectangle_mission(start.lat / 1e7, start.lon / 1e7)
+    # The last waypoint, then the landing 20 m from it.
+    last = items[6]
+    land = (MAV.MAV_CMD_NAV_VTOL_LAND, last[1], (0, 0, 0, 0), last[3] + round(math.degrees(
+        20.0 / EARTH_RADIUS_M) * 1e7), last[4], 0.0)
+    upload(m, items[:7] + [land])
+    vtol_twin.advance(2)
+    m.set_mode("AUTO")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
+    m.arducopter_arm()
+    assert ack_of(m, MAV.MAV_CMD_COMPONENT_ARM_DISARM).result == MAV.MAV_RESULT_FAILED
+    text = m.recv_match(type="STATUSTEXT", condition="'VTOL land' in STATUSTEXT.text",
+                        blocking=True, timeout=5)
+    assert text is not None and text.text == "PreArm: VTOL land too short, min 27m", text
+    m.mav.mission_request_int_send(1, 1, 0, MAV.MAV_MISSION_TYPE_MISSION)
+    home = m.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=5)
+    assert home is not None and home.seq == 0
+    assert home.frame == MAV.MAV_FRAME_GLOBAL and home.z == pytest.approx(584.0, abs=0.01), home
+
+
 def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     """3 m/s from 45° with 0.5 m/s gusts: after the back transition the hover turns its span
     into the wind estimated on the wing, where the wind needs 9° of lean, not 34° on the face."""
@@ -84,12 +116,16 @@ def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     fly_rectangle(vtol_twin)
 
 
-def fly_rectangle(vtol_twin) -> None:
-    """Flies the rectangle mission and checks what a ground station sees of it."""
+def fly_rectangle(vtol_twin, transition_item: bool = True) -> None:
+    """Flies the rectangle mission (without its DO_VTOL_TRANSITION item if not
+    `transition_item`) and checks what a ground station sees of it."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
     assert start is not None
-    upload(m, rectangle_mission(start.lat / 1e7, start.lon / 1e7))
+    items = rectangle_mission(start.lat / 1e7, start.lon / 1e7)
+    if not transition_item:
+        del items[2]
+    upload(m, items)
 
     m.set_mode("AUTO")
     assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
