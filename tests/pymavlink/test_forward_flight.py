@@ -99,10 +99,15 @@ def test_a_vtol_landing_too_short_stops_arming_and_item_0_is_home(vtol_twin):
     m.set_mode("AUTO")
     assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
     m.arducopter_arm()
-    assert ack_of(m, MAV.MAV_CMD_COMPONENT_ARM_DISARM).result == MAV.MAV_RESULT_FAILED
-    text = m.recv_match(type="STATUSTEXT", condition="'VTOL land' in STATUSTEXT.text",
-                        blocking=True, timeout=5)
-    assert text is not None and text.text == "PreArm: VTOL land too short, min 27m", text
+    texts = []  # the refusal's reason comes before its ACK
+    while (msg := m.recv_match(type=["STATUSTEXT", "COMMAND_ACK"], blocking=True, timeout=5)) is not None:
+        if msg.get_type() == "STATUSTEXT":
+            texts.append(msg.text)
+        elif msg.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM:
+            assert msg.result == MAV.MAV_RESULT_FAILED, msg
+            break
+    assert msg is not None, "no COMMAND_ACK for the arming"
+    assert "PreArm: VTOL land too short, min 27m" in texts, texts
     m.mav.mission_request_int_send(1, 1, 0, MAV.MAV_MISSION_TYPE_MISSION)
     home = m.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=5)
     assert home is not None and home.seq == 0
