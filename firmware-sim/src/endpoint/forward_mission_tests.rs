@@ -332,6 +332,7 @@ fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
     assert_eq!(ep.vehicle().telemetry().mode, FlightMode::Rtl);
     let end = t + 150_000_000;
     let (mut near, mut far) = (f64::INFINITY, 0.0_f64);
+    let (mut low, mut high) = (f64::INFINITY, 0.0_f64);
     while t < end {
         t += 20_000;
         ep.tick(t);
@@ -341,10 +342,13 @@ fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
             assert_eq!(tel.vtol_state, VtolState::Fw);
             let d = tel.pos_m.xy().norm();
             (near, far) = (near.min(d), far.max(d));
+            (low, high) = (low.min(tel.pos_m.z), high.max(tel.pos_m.z));
         }
     }
     assert!(
         near > 45.0 && far < 80.0,
         "circling home at {near:.1}..{far:.1} m"
     );
+    // At RTL_ALTITUDE, 100 m above home.
+    assert!(low > 95.0 && high < 105.0, "at {low:.1}..{high:.1} m");
 }

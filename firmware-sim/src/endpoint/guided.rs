@@ -88,6 +88,7 @@ impl Endpoint {
                 rtl_vtol_land: matches!(self.params.value("Q_RTL_MODE") as i32, 1 | 2),
                 trans_decel_m_s2: self.params.value("Q_TRANS_DECEL"),
                 guided_on_the_wing: self.params.value("Q_GUIDED_MODE") == 0.0,
+                rtl_altitude_m: Some(self.params.value("RTL_ALTITUDE")).filter(|a| *a >= 0.0),
             },
         };
         let r = f(&mut self.navigator, &inp, &mut events);

@@ -39,6 +39,8 @@ pub struct FixedWingInput {
     /// `Q_GUIDED_MODE` 0: a GUIDED target in the air is flown to on the wing and circled at
     /// `WP_LOITER_RAD`; 1: flown to and held in a hover.
     pub guided_on_the_wing: bool,
+    /// `RTL_ALTITUDE`, m above home; `None` (a negative value): RTL keeps its altitude.
+    pub rtl_altitude_m: Option<f64>,
 }
 
 impl Default for FixedWingInput {
@@ -57,6 +59,7 @@ impl Default for FixedWingInput {
             rtl_vtol_land: false,
             trans_decel_m_s2: 2.0,
             guided_on_the_wing: true,
+            rtl_altitude_m: Some(100.0),
         }
     }
 }

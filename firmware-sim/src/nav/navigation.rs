@@ -333,12 +333,18 @@ impl Navigator {
             // RTL is a fixed-wing mode: a hovering vehicle goes to the wing to fly home.
             events.push(NavEvent::Transition(true));
         }
+        // RTL flies home at RTL_ALTITUDE above home (negative: where it is), as ArduPlane's
+        // get_RTL_altitude_cm; QRTL at its altitude.
+        let z = match inp.fixed_wing.rtl_altitude_m {
+            Some(alt) if inp.mode == FlightMode::Rtl => inp.limits.home_ned_m.z - alt,
+            _ => here.z.min(self.z_cmd),
+        };
         self.leg = if inp.landed {
             landing_here(&here)
         } else {
             Leg::LandAt {
                 xy: inp.limits.home_ned_m.xy(),
-                z: here.z.min(self.z_cmd),
+                z,
             }
         };
     }
