@@ -352,3 +352,46 @@ fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
     // At RTL_ALTITUDE, 100 m above home.
     assert!(low > 95.0 && high < 105.0, "at {low:.1}..{high:.1} m");
 }
+
+/// ArduPlane's battery failsafe action 1 is RTL: from a hover the vehicle goes to the wing and
+/// flies home (with Q_RTL_MODE 3 it is QRTL).
+#[test]
+fn a_battery_failsafe_rtl_flies_home_on_the_wing() {
+    for (q_rtl_mode, want) in [(0.0, FlightMode::Rtl), (3.0, FlightMode::QRtl)] {
+        let mut ep = endpoint();
+        ep.handle(GCS, &v2(&param_set("Q_RTL_MODE", q_rtl_mode)));
+        let mut t = 0u64;
+        while t < 2_000_000 {
+            t += 20_000;
+            ep.tick(t);
+        }
+        ep.handle(GCS, &set_mode(FlightMode::Guided));
+        assert_eq!(
+            acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+            vec![(400, 0)]
+        );
+        ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0]));
+        while ep.vehicle().telemetry().pos_m.z < 19.0 {
+            t += 20_000;
+            ep.tick(t);
+            assert!(t < 60_000_000, "never climbed");
+        }
+        // Low at 1 mAh used: RTL at once.
+        ep.handle(GCS, &v2(&param_set("BATT_LOW_MAH", 1299.0)));
+        ep.handle(GCS, &v2(&param_set("BATT_FS_LOW_ACT", 1.0)));
+        let end = t + 20_000_000;
+        while t < end {
+            t += 20_000;
+            ep.tick(t);
+        }
+        let tel = ep.vehicle().telemetry();
+        assert_eq!(tel.mode, want);
+        let wing = want == FlightMode::Rtl;
+        assert_eq!(
+            tel.vtol_state == VtolState::Fw,
+            wing,
+            "{:?}",
+            tel.vtol_state
+        );
+    }
+}

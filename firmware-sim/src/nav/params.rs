@@ -200,7 +200,7 @@ pub static TABLE: &[ParamDef] = &[
     def("BATT_LOW_MAH", F32, "mAh", (0.0, 100_000.0), 0.0, RW, "Low battery below this remaining capacity; 0 = off"),
     def("BATT_CRT_MAH", F32, "mAh", (0.0, 100_000.0), 0.0, RW, "Critical battery below this remaining capacity; 0 = off"),
     def("BATT_LOW_TIMER", I8, "s", (0.0, 120.0), 10.0, RW, "Seconds the voltage must stay low before the failsafe"),
-    def("BATT_FS_LOW_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Low battery action: 0 none, 1 RTL (QRTL), 2 Land, 3 Terminate, 4 QLand, 6 Loiter to QLand"),
+    def("BATT_FS_LOW_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Low battery action: 0 none, 1 RTL, 2 Land, 3 Terminate, 4 QLand, 6 Loiter to QLand"),
     def("BATT_FS_CRT_ACT", I8, "", (0.0, 6.0), 0.0, RW, "Critical battery action: as BATT_FS_LOW_ACT"),
     def("ARMING_CHECK", I32, "", (0.0, 1.0), 1.0, RO, "Pre-arm checks (calibration, crash, mode, landed, level): 1 = all, always on"),
     def("ARSPD_FBW_MIN", I16, "m/s", (1.0, 50.0), 10.0, RW, "Lowest fixed-wing airspeed; the forward transition ends here; above the stall speed"),
