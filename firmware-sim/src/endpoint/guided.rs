@@ -89,6 +89,7 @@ impl Endpoint {
                 trans_decel_m_s2: self.params.value("Q_TRANS_DECEL"),
                 guided_on_the_wing: self.params.value("Q_GUIDED_MODE") == 0.0,
                 rtl_altitude_m: Some(self.params.value("RTL_ALTITUDE")).filter(|a| *a >= 0.0),
+                vtol_auto: self.params.value("Q_ENABLE") == 2.0,
             },
         };
         let r = f(&mut self.navigator, &inp, &mut events);

@@ -41,6 +41,8 @@ pub struct FixedWingInput {
     pub guided_on_the_wing: bool,
     /// `RTL_ALTITUDE`, m above home; `None` (a negative value): RTL keeps its altitude.
     pub rtl_altitude_m: Option<f64>,
+    /// `Q_ENABLE` 2 (VTOL AUTO): AUTO starts in VTOL mode, its position items flown in a hover.
+    pub vtol_auto: bool,
 }
 
 impl Default for FixedWingInput {
@@ -60,6 +62,7 @@ impl Default for FixedWingInput {
             trans_decel_m_s2: 2.0,
             guided_on_the_wing: true,
             rtl_altitude_m: Some(100.0),
+            vtol_auto: false,
         }
     }
 }

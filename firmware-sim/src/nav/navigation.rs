@@ -254,8 +254,9 @@ impl Navigator {
             self.state = MissionState::Paused;
         }
         if entered && inp.mode == FlightMode::Auto {
-            // ArduPlane's ModeAuto::_enter (Q_ENABLE 1): position items are flown on the wing.
-            self.vtol_mode = false;
+            // ArduPlane's ModeAuto::_enter: position items are flown on the wing, or in a hover
+            // with Q_ENABLE 2 (VTOL AUTO).
+            self.vtol_mode = inp.fixed_wing.vtol_auto;
         }
         self.mode = Some(inp.mode);
         self.armed = inp.armed;

@@ -13,6 +13,7 @@ struct World {
     pos: Vector3<f64>,
     now_us: u64,
     events: Vec<NavEvent>,
+    vtol_auto: bool,
 }
 
 impl World {
@@ -26,6 +27,7 @@ impl World {
             pos: Vector3::zeros(),
             now_us: 0,
             events: Vec::new(),
+            vtol_auto: false,
         }
     }
 
@@ -41,7 +43,10 @@ impl World {
             wp_radius_m: 0.3,
             speed_up_m_s: 1.0,
             speed_dn_m_s: 0.5,
-            fixed_wing: crate::nav::fixed_wing::FixedWingInput::default(),
+            fixed_wing: crate::nav::fixed_wing::FixedWingInput {
+                vtol_auto: self.vtol_auto,
+                ..Default::default()
+            },
         }
     }
 
@@ -264,6 +269,33 @@ fn auto_goes_to_the_wing_for_the_waypoints_after_a_vtol_take_off() {
     assert_eq!(w.reached()[0], 1);
     // Item 2 starts: to the wing (then the end of the mission, RTL, asks again).
     assert_eq!(transitions(&w).first(), Some(&true));
+}
+
+/// With `Q_ENABLE` 2 (VTOL AUTO) AUTO starts in VTOL mode: no transition for the waypoints.
+#[test]
+fn with_vtol_auto_the_waypoints_stay_in_a_hover() {
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+    ]);
+    let mut w = World::new(m);
+    w.vtol_auto = true;
+    w.mode = FlightMode::Auto;
+    w.armed = true;
+    w.fly(4.0);
+    assert_eq!(w.reached()[..2], [1, 2]);
+    // Only the end of the mission (RTL) asks for the wing.
+    let end = w
+        .events
+        .iter()
+        .position(|e| matches!(e, NavEvent::Info(t) if t.starts_with("Mission complete")))
+        .expect("mission complete");
+    assert!(
+        !w.events[..end].contains(&NavEvent::Transition(true)),
+        "{:?}",
+        w.events
+    );
 }
 
 /// A DO_VTOL_TRANSITION to MC puts AUTO in VTOL mode: the waypoints after it are flown in a

@@ -235,6 +235,7 @@ pub static TABLE: &[ParamDef] = &[
     def("RTL_RADIUS", I16, "m", (-32767.0, 32767.0), 0.0, RW, "RTL's loiter radius (0: WP_LOITER_RAD); with Q_RTL_MODE 1 QRTL starts within it"),
     def("RTL_ALTITUDE", F32, "m", (-1.0, 1000.0), 100.0, RW, "RTL flies home this high above home; negative: at the altitude it starts at"),
     def("Q_GUIDED_MODE", I8, "", (0.0, 1.0), 0.0, RW, "GUIDED targets in the air: 0 flown on the wing, circled at WP_LOITER_RAD; 1 flown and held in a hover"),
+    def("Q_ENABLE", I8, "", (1.0, 2.0), 1.0, RW, "QuadPlane: 1 enabled, 2 VTOL AUTO (AUTO flies its position items in a hover)"),
     def("Q_TAILSIT_ENABLE", I8, "", (0.0, 2.0), 1.0, RO, "The twin is a tailsitter"),
 ];
 
