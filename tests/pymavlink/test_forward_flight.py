@@ -179,8 +179,9 @@ def fly_rectangle(vtol_twin, transition_item: bool = True) -> None:
     # The whole rectangle is flown on the wing (the turns swing out past its corners).
     for reach, side in zip(fw_reach, (RECT_LONG_M, RECT_SHORT_M)):
         assert side - 5.0 < reach < side + 30.0, f"the rectangle reached {fw_reach} m (south, east)"
-    print(f"on the wing: airspeed >= {min(fw_airspeeds, default=0):.1f} m/s; transitions moved the "
-          f"altitude {worst['TRANSITION_TO_FW']:.2f} m and {worst['TRANSITION_TO_MC']:.2f} m")
+    print(f"on the wing: reached {fw_reach[0]:.1f} m south, {fw_reach[1]:.1f} m east; airspeed >= "
+          f"{min(fw_airspeeds, default=0):.1f} m/s; transitions moved the altitude "
+          f"{worst['TRANSITION_TO_FW']:.2f} m and {worst['TRANSITION_TO_MC']:.2f} m")
     assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
     # AOA_SSA: the wing flies at a small positive angle of attack.
     assert fw_aoa, "no AOA_SSA on the wing"
