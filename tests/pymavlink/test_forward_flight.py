@@ -84,22 +84,23 @@ def test_without_the_transition_item_the_waypoints_are_flown_on_the_wing(vtol_tw
 
 
 def test_a_vtol_landing_too_short_stops_arming_and_item_0_is_home(vtol_twin):
-    """ArduPlane's pre-arm mission check (a VTOL landing under 0.75 v² / (2 Q_TRANS_DECEL), 27 m,
-    after its waypoint) and its home slot: item 0 downloads as home, whatever was uploaded there."""
+    """ArduPlane's pre-arm mission check (a VTOL landing under 0.75 v² / (2 Q_TRANS_DECEL), 9 m at
+    12 m/s and 6 m/s², after its waypoint) and its home slot: item 0 downloads as home, whatever was
+    uploaded there."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
     assert start is not None
     items = rectangle_mission(start.lat / 1e7, start.lon / 1e7)
-    # The last waypoint, then the landing 20 m from it.
+    # The last waypoint, then the landing 5 m from it.
     last = items[6]
     land = (MAV.MAV_CMD_NAV_VTOL_LAND, last[1], (0, 0, 0, 0), last[3] + round(math.degrees(
-        20.0 / EARTH_RADIUS_M) * 1e7), last[4], 0.0)
+        5.0 / EARTH_RADIUS_M) * 1e7), last[4], 0.0)
     upload(m, items[:7] + [land])
     vtol_twin.advance(2)
     m.set_mode("AUTO")
     assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
     m.arducopter_arm()
-    texts = []  # the refusal's reason comes before its ACK
+    texts = []  # the refusal's reason ("Arm:", as ArduPilot's arming command says) before its ACK
     while (msg := m.recv_match(type=["STATUSTEXT", "COMMAND_ACK"], blocking=True, timeout=5)) is not None:
         if msg.get_type() == "STATUSTEXT":
             texts.append(msg.text)
@@ -107,7 +108,7 @@ def test_a_vtol_landing_too_short_stops_arming_and_item_0_is_home(vtol_twin):
             assert msg.result == MAV.MAV_RESULT_FAILED, msg
             break
     assert msg is not None, "no COMMAND_ACK for the arming"
-    assert "PreArm: VTOL land too short, min 27m" in texts, texts
+    assert "Arm: VTOL land too short, min 9m" in texts, texts
     m.mav.mission_request_int_send(1, 1, 0, MAV.MAV_MISSION_TYPE_MISSION)
     home = m.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=5)
     assert home is not None and home.seq == 0

@@ -386,7 +386,8 @@ impl Endpoint {
             }
             match self.mission_prearm() {
                 Some(why) if !force && self.vehicle.pre_arm_check().is_ok() => {
-                    let text = format!("PreArm: {why}");
+                    // ArduPilot's arming command says "Arm:", its periodic report "PreArm:".
+                    let text = format!("Arm: {why}");
                     self.say(link, apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
                     return result::FAILED;
                 }

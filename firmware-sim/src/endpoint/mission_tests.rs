@@ -694,9 +694,10 @@ fn auto_with_no_mission_reaches_nothing() {
     );
 }
 
-/// ArduPlane's pre-arm mission check: a VTOL landing 20 m after the waypoint before it (under
-/// 0.75 v² / (2 Q_TRANS_DECEL) = 27 m at 12 m/s) stops arming with ArduPlane's text, and
-/// SYS_STATUS shows the pre-arm check failing; 30 m arms.
+/// ArduPlane's pre-arm mission check: a VTOL landing 5 m after the waypoint before it (under
+/// 0.75 v² / (2 Q_TRANS_DECEL) = 9 m at 12 m/s and 6 m/s²) stops arming with ArduPlane's texts
+/// ("Arm:" to the arming command, "PreArm:" while it fails), and SYS_STATUS shows the pre-arm
+/// check failing; 10 m arms.
 #[test]
 fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
     let prearm_healthy = |out: &[Outbound]| {
@@ -708,7 +709,7 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
             _ => None,
         })
     };
-    for (leg_m, arms) in [(20.0, false), (30.0, true)] {
+    for (leg_m, arms) in [(5.0, false), (10.0, true)] {
         let mut ep = endpoint();
         let [home, takeoff] = home_and_vtol_takeoff(20.0);
         let plan = [
@@ -720,6 +721,10 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
         upload(&mut ep, &plan);
         let out = run_until(&mut ep, 3_000_000);
         assert_eq!(prearm_healthy(&out), Some(arms), "{leg_m} m");
+        let reported = texts(&out)
+            .iter()
+            .any(|t| t.text.to_str().unwrap() == "PreArm: VTOL land too short, min 9m");
+        assert_eq!(reported, !arms);
         let out = ep.handle(GCS, &command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
         if arms {
             assert_eq!(acks(&out), vec![(400, 0)]);
@@ -727,7 +732,7 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
             assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
             assert_eq!(
                 texts(&out)[0].text.to_str().unwrap(),
-                "PreArm: VTOL land too short, min 27m"
+                "Arm: VTOL land too short, min 9m"
             );
             assert!(!ep.vehicle().telemetry().armed);
         }

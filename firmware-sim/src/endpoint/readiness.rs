@@ -13,7 +13,7 @@
 //!   failure starts or changes and then every [`PREARM_TEXT_PERIOD_US`] of sim time, ArduPilot's
 //!   30 s.
 //! - ArduPlane's pre-arm mission check: a VTOL landing too close after the waypoint before it
-//!   stops arming ("PreArm: VTOL land too short, min 27m").
+//!   stops arming ("PreArm: VTOL land too short, min 9m").
 
 use mavlink::dialects::ardupilotmega as apm;
 

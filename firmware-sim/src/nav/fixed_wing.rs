@@ -59,7 +59,7 @@ impl Default for FixedWingInput {
             wp_radius_m: 90.0,
             gravity_m_s2: crate::model::airframe::GRAVITY_M_S2,
             rtl_vtol_land: false,
-            trans_decel_m_s2: 2.0,
+            trans_decel_m_s2: 6.0,
             guided_on_the_wing: true,
             rtl_altitude_m: Some(100.0),
             vtol_auto: false,
@@ -236,10 +236,15 @@ mod mission_check_tests {
             Some("VTOL land too short, min 27m")
         );
         assert_eq!(vtol_land_too_short(&mission(30.0), &o, 12.0, 2.0), None);
+        // What ArduPlane SITL's tailsitter answers for a 29 m leg (AIRSPEED_CRUISE 22,
+        // Q_TRANS_DECEL 6), and the twin's defaults (12 m/s, 6 m/s²).
         assert_eq!(
-            vtol_land_too_short(&mission(30.0), &o, 22.0, 2.0).as_deref(),
-            Some("VTOL land too short, min 91m"),
-            "ArduPlane SITL's tailsitter cruises at 22 m/s"
+            vtol_land_too_short(&mission(29.0), &o, 22.0, 6.0).as_deref(),
+            Some("VTOL land too short, min 30m")
+        );
+        assert_eq!(
+            vtol_land_too_short(&mission(5.0), &o, 12.0, 6.0).as_deref(),
+            Some("VTOL land too short, min 9m")
         );
         // NAV_LAND counts too; a DO item between them, or a landing "here", does not.
         let mut m = mission(20.0).items().to_vec();

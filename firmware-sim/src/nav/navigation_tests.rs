@@ -332,11 +332,11 @@ fn a_transition_to_mc_item_keeps_the_waypoints_in_a_hover() {
     );
 }
 
-/// A VTOL landing point farther than 1.5 stopping distances at the cruise airspeed (54 m at
-/// 12 m/s and 2 m/s²) is approached on the wing, a nearer one in a hover.
+/// A VTOL landing point farther than 1.5 stopping distances at the cruise airspeed (18 m at
+/// 12 m/s and 6 m/s²) is approached on the wing, a nearer one in a hover.
 #[test]
 fn a_far_vtol_landing_is_approached_on_the_wing() {
-    for (north, wing) in [(60.0, true), (40.0, false)] {
+    for (north, wing) in [(20.0, true), (16.0, false)] {
         let mut to_mc = item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 3.0);
         to_mc.frame = crate::nav::mission::frame::MISSION;
         let m = Mission::new(vec![

@@ -190,7 +190,7 @@ fn shared_parameters_have_ardupilots_types_and_defaults() {
         ("SIM_WIND_TURB", F32, Some(0.0)), ("SIM_BATT_VOLTAGE", F32, Some(12.6)),
         ("WP_RADIUS", I16, Some(90.0)), ("WP_LOITER_RAD", I16, Some(60.0)),
         ("RTL_RADIUS", I16, Some(0.0)), ("RTL_ALTITUDE", F32, Some(100.0)), ("Q_RTL_MODE", I8, Some(0.0)),
-        ("Q_GUIDED_MODE", I8, Some(0.0)), ("Q_TRANS_DECEL", F32, Some(2.0)),
+        ("Q_GUIDED_MODE", I8, Some(0.0)), ("Q_TRANS_DECEL", F32, Some(6.0)),
         ("Q_WP_RADIUS", F32, Some(200.0)), ("Q_TAILSIT_ENABLE", I8, Some(1.0)), ("Q_ENABLE", I8, Some(1.0)),
         ("BATT_CAPACITY", I32, None), ("BATT_LOW_VOLT", F32, Some(10.5)),
         ("BATT_CRT_VOLT", F32, Some(0.0)), ("BATT_LOW_MAH", F32, Some(0.0)),
