@@ -40,7 +40,17 @@ async fn the_flight_view_shows_the_vehicles_live_target_in_guided_and_qrtl() {
     // QHOVER flies to no point: the vehicle sends no target.
     assert!(target(&running.state.borrow()).is_none());
 
-    // GUIDED, then a point 1 m north, 0.5 m east, 1.5 m up: the vehicle's own word on it.
+    // GUIDED, then a point 1 m north, 0.5 m east, 1.5 m up: the vehicle's own word on it. The
+    // point is held in a hover (Q_GUIDED_MODE 1; ArduPlane's default flies it on the wing).
+    run(
+        &mut app,
+        &control,
+        vec![Request::ParamSet {
+            name: "Q_GUIDED_MODE".into(),
+            value: 1.0,
+        }],
+    )
+    .await;
     run(&mut app, &control, vec![Request::SetMode("GUIDED")]).await;
     let want = [1.0, 0.5, -1.5];
     run(&mut app, &control, vec![Request::PositionTarget(want)]).await;

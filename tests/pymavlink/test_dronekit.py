@@ -71,10 +71,18 @@ def fly_documented_flows(vehicle):
 
     # Parameters: all of them came with wait_ready=True; one written and read back.
     assert len(vehicle.parameters) >= 50
-    assert vehicle.parameters["WP_RADIUS"] == pytest.approx(0.3, abs=1e-6)
-    vehicle.parameters["WP_RADIUS"] = 0.5
-    vehicle.wait_for(lambda: abs(vehicle.parameters["WP_RADIUS"] - 0.5) < 1e-6,
-                     timeout=STEP_TIMEOUT, errmsg="WP_RADIUS not written")
+    assert vehicle.parameters["WP_RADIUS"] == 90  # ArduPlane's INT16, in metres
+    assert vehicle.parameters["Q_WP_RADIUS"] == pytest.approx(200.0, abs=1e-6)  # a float, cm
+    vehicle.parameters["Q_WP_RADIUS"] = 50.0
+    vehicle.wait_for(lambda: abs(vehicle.parameters["Q_WP_RADIUS"] - 50.0) < 1e-6,
+                     timeout=STEP_TIMEOUT, errmsg="Q_WP_RADIUS not written")
+    # Fly as a VTOL-only QuadPlane is set up on ArduPlane: GUIDED targets held in a hover
+    # (Q_GUIDED_MODE 1) and RTL as QRTL (Q_RTL_MODE 3); the defaults fly both on the wing.
+    vehicle.parameters["Q_GUIDED_MODE"] = 1
+    vehicle.parameters["Q_RTL_MODE"] = 3
+    vehicle.wait_for(lambda: vehicle.parameters["Q_GUIDED_MODE"] == 1
+                     and vehicle.parameters["Q_RTL_MODE"] == 3,
+                     timeout=STEP_TIMEOUT, errmsg="Q_GUIDED_MODE, Q_RTL_MODE not written")
 
     arm_and_takeoff(vehicle, TAKEOFF_ALT)
     assert vehicle.mode.name == "GUIDED"
@@ -98,6 +106,11 @@ def fly_documented_flows(vehicle):
     wp2 = offset(home.lat, home.lon, 0.0, 2.0)
     cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0,
                      0, 0, TAKEOFF_ALT))
+    # ArduPlane flies the waypoints after a take-off on the wing; a transition to MC keeps
+    # them in a hover.
+    cmds.add(Command(0, 0, 0, mavutil.mavlink.MAV_FRAME_MISSION,
+                     mavutil.mavlink.MAV_CMD_DO_VTOL_TRANSITION, 0, 0,
+                     mavutil.mavlink.MAV_VTOL_STATE_MC, 0, 0, 0, 0, 0, 0))
     cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0,
                      wp1[0], wp1[1], TAKEOFF_ALT))
     cmds.add(Command(0, 0, 0, frame, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0,
@@ -105,14 +118,14 @@ def fly_documented_flows(vehicle):
     cmds.upload(timeout=STEP_TIMEOUT)
     cmds.download()
     cmds.wait_ready(timeout=STEP_TIMEOUT)
-    assert cmds.count == 3
-    assert [c.command for c in cmds] == [22, 16, 16]
+    assert cmds.count == 4
+    assert [c.command for c in cmds] == [22, 3000, 16, 16]
 
     vehicle.commands.next = 0
     vehicle.mode = VehicleMode("AUTO")
     vehicle.wait_for(lambda: vehicle.mode.name == "AUTO", timeout=STEP_TIMEOUT,
                      errmsg="never in AUTO")
-    # To the end: the last waypoint flown, then ArduPlane's end of mission (QRTL here). The
+    # To the end: the last waypoint flown, then ArduPlane's end of mission (RTL, QRTL here). The
     # closest approach to it is tracked while waiting: QRTL heads home (2 m away) at once, and
     # DroneKit hears the mode change up to a heartbeat later.
     closest = [float("inf")]
@@ -124,9 +137,9 @@ def fly_documented_flows(vehicle):
         return vehicle.mode.name != "AUTO"
 
     vehicle.wait_for(mission_over, timeout=STEP_TIMEOUT, errmsg="mission never ended")
-    assert closest[0] <= 1.0, f"closest to the last waypoint: {closest[0]:.2f} m"  # WP_RADIUS 0.5 m
+    assert closest[0] <= 1.0, f"closest to the last waypoint: {closest[0]:.2f} m"  # Q_WP_RADIUS 50 cm
 
-    # RTL (flown as QRTL, ArduPlane's Q_RTL_MODE) to landed and disarmed.
+    # RTL (flown as QRTL, Q_RTL_MODE 3) to landed and disarmed.
     vehicle.mode = VehicleMode("RTL")
     vehicle.wait_for(lambda: vehicle.mode.name == "QRTL", timeout=STEP_TIMEOUT,
                      errmsg="never in QRTL")

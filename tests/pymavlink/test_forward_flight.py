@@ -77,6 +77,44 @@ def test_vtol_take_off_rectangle_on_the_wing_and_vtol_landing(vtol_twin):
     fly_rectangle(vtol_twin)
 
 
+def test_without_the_transition_item_the_waypoints_are_flown_on_the_wing(vtol_twin):
+    """ArduPlane flies the waypoints after a VTOL take-off on the wing with or without a
+    DO_VTOL_TRANSITION item: the same phases, the same rectangle."""
+    fly_rectangle(vtol_twin, transition_item=False)
+
+
+def test_a_vtol_landing_too_short_stops_arming_and_item_0_is_home(vtol_twin):
+    """ArduPlane's pre-arm mission check (a VTOL landing under 0.75 v² / (2 Q_TRANS_DECEL), 9 m at
+    12 m/s and 6 m/s², after its waypoint) and its home slot: item 0 downloads as home, whatever was
+    uploaded there."""
+    m = vtol_twin.connect()
+    start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+    assert start is not None
+    items = rectangle_mission(start.lat / 1e7, start.lon / 1e7)
+    # The last waypoint, then the landing 5 m from it.
+    last = items[6]
+    land = (MAV.MAV_CMD_NAV_VTOL_LAND, last[1], (0, 0, 0, 0), last[3] + round(math.degrees(
+        5.0 / EARTH_RADIUS_M) * 1e7), last[4], 0.0)
+    upload(m, items[:7] + [land])
+    vtol_twin.advance(2)
+    m.set_mode("AUTO")
+    assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
+    m.arducopter_arm()
+    texts = []  # the refusal's reason ("Arm:", as ArduPilot's arming command says) before its ACK
+    while (msg := m.recv_match(type=["STATUSTEXT", "COMMAND_ACK"], blocking=True, timeout=5)) is not None:
+        if msg.get_type() == "STATUSTEXT":
+            texts.append(msg.text)
+        elif msg.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM:
+            assert msg.result == MAV.MAV_RESULT_FAILED, msg
+            break
+    assert msg is not None, "no COMMAND_ACK for the arming"
+    assert "Arm: VTOL land too short, min 9m" in texts, texts
+    m.mav.mission_request_int_send(1, 1, 0, MAV.MAV_MISSION_TYPE_MISSION)
+    home = m.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=5)
+    assert home is not None and home.seq == 0
+    assert home.frame == MAV.MAV_FRAME_GLOBAL and home.z == pytest.approx(584.0, abs=0.01), home
+
+
 def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     """3 m/s from 45° with 0.5 m/s gusts: after the back transition the hover turns its span
     into the wind estimated on the wing, where the wind needs 9° of lean, not 34° on the face."""
@@ -84,12 +122,16 @@ def test_the_same_mission_in_a_3_m_s_wind_with_gusts(vtol_twin):
     fly_rectangle(vtol_twin)
 
 
-def fly_rectangle(vtol_twin) -> None:
-    """Flies the rectangle mission and checks what a ground station sees of it."""
+def fly_rectangle(vtol_twin, transition_item: bool = True) -> None:
+    """Flies the rectangle mission (without its DO_VTOL_TRANSITION item if not
+    `transition_item`) and checks what a ground station sees of it."""
     m = vtol_twin.connect()
     start = m.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
     assert start is not None
-    upload(m, rectangle_mission(start.lat / 1e7, start.lon / 1e7))
+    items = rectangle_mission(start.lat / 1e7, start.lon / 1e7)
+    if not transition_item:
+        del items[2]
+    upload(m, items)
 
     m.set_mode("AUTO")
     assert ack_of(m, MAV.MAV_CMD_DO_SET_MODE).result == MAV.MAV_RESULT_ACCEPTED
@@ -135,11 +177,13 @@ def fly_rectangle(vtol_twin) -> None:
     assert not truth.armed and truth.landed, f"still flying: {truth}"
     assert truth.system_status != "EMERGENCY", truth
     assert states == ["MC", "TRANSITION_TO_FW", "FW", "TRANSITION_TO_MC", "MC"], states
-    # The whole rectangle is flown on the wing (the turns swing out past its corners).
+    # The whole rectangle is flown on the wing (each turn starts up to the L1 distance, 28.6 m,
+    # short of its corner, and swings out past the line).
     for reach, side in zip(fw_reach, (RECT_LONG_M, RECT_SHORT_M)):
-        assert side - 5.0 < reach < side + 30.0, f"the rectangle reached {fw_reach} m (south, east)"
-    print(f"on the wing: airspeed >= {min(fw_airspeeds, default=0):.1f} m/s; transitions moved the "
-          f"altitude {worst['TRANSITION_TO_FW']:.2f} m and {worst['TRANSITION_TO_MC']:.2f} m")
+        assert side - 30.0 < reach < side + 30.0, f"the rectangle reached {fw_reach} m (south, east)"
+    print(f"on the wing: reached {fw_reach[0]:.1f} m south, {fw_reach[1]:.1f} m east; airspeed >= "
+          f"{min(fw_airspeeds, default=0):.1f} m/s; transitions moved the altitude "
+          f"{worst['TRANSITION_TO_FW']:.2f} m and {worst['TRANSITION_TO_MC']:.2f} m")
     assert fw_airspeeds and min(fw_airspeeds) >= 10.0, f"airspeed on the wing down to {min(fw_airspeeds):.1f}"
     # AOA_SSA: the wing flies at a small positive angle of attack.
     assert fw_aoa, "no AOA_SSA on the wing"

@@ -25,10 +25,12 @@ WARNING = re.compile(r"breach|unhealthy|checks disabled|fail|error|timed? ?out|s
 MISSION = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t-35.3632610\t149.1652300\t584.000000\t1
 1\t0\t3\t84\t0\t0\t0\t0\t0\t0\t2.000000\t1
-2\t0\t3\t19\t60\t0\t0\t0\t-35.3632340\t149.1652300\t2.000000\t1
-3\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
+2\t0\t2\t3000\t3\t0\t0\t0\t0\t0\t0\t1
+3\t0\t3\t19\t60\t0\t0\t0\t-35.3632340\t149.1652300\t2.000000\t1
+4\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
 """
-LOITER = (-353632340, 1491652300)  # item 2: 3 m north of home, held for 60 s
+# Item 2 (DO_VTOL_TRANSITION to MC) keeps the loiter in a hover, as on ArduPlane.
+LOITER = (-353632340, 1491652300)  # item 3: 3 m north of home, held for 60 s
 
 
 def metres(lat: int, lon: int, ref: tuple[int, int]) -> float:
@@ -60,11 +62,11 @@ def test_mavproxy_wp_list_load_auto_rtl(twin_factory, gcs_factory, tmp_path):
         assert not warnings, f"MAVProxy warned at connect: {warnings}"
 
         child.sendline(f"wp load {plan}")
-        expect(child, r"Loaded 4 waypoints")
+        expect(child, r"Loaded 5 waypoints")
         expect(child, r"Got MISSION_ACK: TYPE_MISSION: ACCEPTED")
         child.sendline("wp list")
-        expect(child, r"Requesting 4 waypoints")
-        expect(child, r"Saved 4 waypoints")
+        expect(child, r"Requesting 5 waypoints")
+        expect(child, r"Saved 5 waypoints")
 
         observer.wait_ready()
         child.sendline("mode AUTO")
@@ -76,6 +78,10 @@ def test_mavproxy_wp_list_load_auto_rtl(twin_factory, gcs_factory, tmp_path):
         observer.recv("GLOBAL_POSITION_INT", lambda p: metres(p.lat, p.lon, LOITER) < 0.5, timeout=30,
                       what="at the loiter point")
 
+        # RTL as QRTL always (Q_RTL_MODE 3; ArduPlane's default 0 flies home on the wing).
+        child.sendline("param set Q_RTL_MODE 3")
+        observer.recv("PARAM_VALUE", lambda p: p.param_id == "Q_RTL_MODE" and p.param_value == 3,
+                      timeout=30, what="Q_RTL_MODE 3")
         child.sendline("rtl")
         expect(child, r"Mode QRTL")
         observer.wait_vehicle_heartbeat(pred=lambda h: h.custom_mode == QRTL)

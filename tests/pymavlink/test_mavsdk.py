@@ -34,6 +34,9 @@ MAV_FRAME_GLOBAL = 0
 MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_CMD_NAV_VTOL_TAKEOFF = 84
+MAV_FRAME_MISSION = 2
+MAV_CMD_DO_VTOL_TRANSITION = 3000
+MAV_VTOL_STATE_MC = 3
 
 
 async def first(gen, pred, what: str, timeout: float = STEP_TIMEOUT):
@@ -63,9 +66,9 @@ async def connect(url: str):
 
 
 def mission_item(seq: int, command: int, lat: float, lon: float, alt: float,
-                 frame: int = MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) -> MissionItem:
+                 frame: int = MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, param1: float = 0.0) -> MissionItem:
     return MissionItem(seq=seq, frame=frame, command=command, current=int(seq == 0),
-                       autocontinue=1, param1=0.0, param2=0.0, param3=0.0, param4=0.0,
+                       autocontinue=1, param1=param1, param2=0.0, param3=0.0, param4=0.0,
                        x=round(lat * 1e7), y=round(lon * 1e7), z=alt, mission_type=0)
 
 
@@ -116,10 +119,15 @@ async def fly_documented_flows(drone):
                       home.longitude_deg) < 0.5
 
     # Parameters: a float and an integer, read and written.
-    assert await param.get_param_float("WP_RADIUS") == pytest.approx(0.3, abs=1e-6)
-    await param.set_param_float("WP_RADIUS", 0.5)
-    assert await param.get_param_float("WP_RADIUS") == pytest.approx(0.5, abs=1e-6)
+    assert await param.get_param_float("Q_WP_RADIUS") == pytest.approx(200.0, abs=1e-6)
+    await param.set_param_float("Q_WP_RADIUS", 50.0)
+    assert await param.get_param_float("Q_WP_RADIUS") == pytest.approx(50.0, abs=1e-6)
+    assert await param.get_param_int("WP_RADIUS") == 90  # ArduPlane's INT16
     assert await param.get_param_int("SYSID_THISMAV") == 1
+    # Fly as a VTOL-only QuadPlane is set up on ArduPlane: GUIDED targets held in a hover
+    # (Q_GUIDED_MODE 1) and RTL as QRTL (Q_RTL_MODE 3); the defaults fly both on the wing.
+    await param.set_param_int("Q_GUIDED_MODE", 1)
+    await param.set_param_int("Q_RTL_MODE", 3)
 
     # A raw mission: home slot, VTOL take-off, two waypoints (ArduPilot's layout).
     lat0, lon0 = home.latitude_deg, home.longitude_deg
@@ -128,8 +136,11 @@ async def fly_documented_flows(drone):
     items = [
         mission_item(0, MAV_CMD_NAV_WAYPOINT, lat0, lon0, home.absolute_altitude_m, MAV_FRAME_GLOBAL),
         mission_item(1, MAV_CMD_NAV_VTOL_TAKEOFF, 0.0, 0.0, TAKEOFF_ALT),
-        mission_item(2, MAV_CMD_NAV_WAYPOINT, *wp1, TAKEOFF_ALT),
-        mission_item(3, MAV_CMD_NAV_WAYPOINT, *wp2, TAKEOFF_ALT),
+        # ArduPlane flies the waypoints after a take-off on the wing; to MC keeps them in a hover.
+        mission_item(2, MAV_CMD_DO_VTOL_TRANSITION, 0.0, 0.0, 0.0, MAV_FRAME_MISSION,
+                     param1=MAV_VTOL_STATE_MC),
+        mission_item(3, MAV_CMD_NAV_WAYPOINT, *wp1, TAKEOFF_ALT),
+        mission_item(4, MAV_CMD_NAV_WAYPOINT, *wp2, TAKEOFF_ALT),
     ]
     await mission.upload_mission(items)
     down = await mission.download_mission()
@@ -155,7 +166,7 @@ async def fly_documented_flows(drone):
     await first(mission.subscribe_mission_progress(), lambda p: p.total > 0 and p.current >= p.total,
                 "mission progress to the end")
 
-    # Return to launch (QRTL) to landed and disarmed.
+    # Return to launch (QRTL, Q_RTL_MODE 3) to landed and disarmed.
     await action.return_to_launch()
     await first(telemetry.subscribe_armed(), lambda a: not a, "landed and disarmed")
     pos = await telemetry.position()

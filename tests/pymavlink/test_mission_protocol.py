@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 import struct
 
+import pytest
+
 from pymavlink import mavutil
 
 from conftest import VEHICLE_COMPID, VEHICLE_SYSID, Gcs
@@ -31,8 +33,13 @@ def item(seq: int, command: int, north: float, east: float, alt: float, p1=0.0, 
 
 
 def plan():
+    # Item 0 is home as the vehicle serves it (ArduPilot writes home into the slot: a download
+    # returns the current home whatever was uploaded there), so the round trip is exact.
+    home = MAV.MAVLink_mission_item_int_message(VEHICLE_SYSID, VEHICLE_COMPID, 0, MAV.MAV_FRAME_GLOBAL,
+                                                MAV.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0,
+                                                HOME[0], HOME[1], 584.0)
     return [
-        item(0, MAV.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, frame=MAV.MAV_FRAME_GLOBAL_INT, current=1),
+        home,
         item(1, MAV.MAV_CMD_NAV_VTOL_TAKEOFF, 0, 0, 2.5),
         item(2, MAV.MAV_CMD_NAV_WAYPOINT, 4.0, 1.0, 3.0, p1=1.5, p2=0.25, p4=float("nan")),
         item(3, MAV.MAV_CMD_NAV_LOITER_TIME, -2.0, 3.0, 2.0, p1=5.0),
@@ -146,3 +153,21 @@ def test_mission_survives_a_restart(twin_factory, gcs_factory, tmp_path):
     g2 = gcs_factory(again.tcp)
     g2.wait_vehicle_heartbeat()
     assert [wire_bytes(m) for m in download(g2)] == [wire_bytes(m) for m in sent]
+
+
+def test_item_0_downloads_as_the_current_home(twin_factory, gcs_factory):
+    """MAVSDK uploads the home slot with altitude 0; ArduPlane's download returns home as it has
+    it (584 m above sea level here), never the slot as sent."""
+    twin = twin_factory(speed=4)
+    g = gcs_factory(twin.tcp)
+    g.wait_vehicle_heartbeat()
+    sent = plan()
+    sent[0] = MAV.MAVLink_mission_item_int_message(VEHICLE_SYSID, VEHICLE_COMPID, 0,
+                                                   MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                   MAV.MAV_CMD_NAV_WAYPOINT, 1, 1, 0, 0, 0, 0,
+                                                   HOME[0], HOME[1], 0.0)
+    assert upload(g, sent)[0] == MAV.MAV_MISSION_ACCEPTED
+    got = download(g)
+    assert (got[0].frame, got[0].x, got[0].y) == (MAV.MAV_FRAME_GLOBAL, HOME[0], HOME[1])
+    assert got[0].z == pytest.approx(584.0, abs=0.01), got[0]
+    assert [wire_bytes(m) for m in got[1:]] == [wire_bytes(m) for m in sent[1:]]

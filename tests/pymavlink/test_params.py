@@ -219,3 +219,18 @@ def test_values_survive_restart(twin_factory, gcs_factory, tmp_path):
     assert g2.param_get("HOVER_ALT").param_value == f32(1.3)
     assert g2.param_get("YAW_KP").param_value == 4.25
     assert g2.param_get("ALT_KP").param_value == f32(5.0)
+
+
+def test_wp_radius_is_an_int16_as_on_arduplane(twin, gcs_factory, restore):
+    """ArduPlane's WP_RADIUS is an AP_Int16: PARAM_VALUE says INT16, and a write of 0.4 stores
+    (and reads back) 0, the C cast. Q_TAILSIT_ENABLE says the twin is a tailsitter."""
+    g = gcs_factory(twin.tcp)
+    restore("WP_RADIUS")
+    p = g.param_get("WP_RADIUS")
+    assert (p.param_type, p.param_value) == (4, 90.0), p
+    g.drain()
+    g.m.param_set_send("WP_RADIUS", 0.4)
+    echo = g.recv("PARAM_VALUE", lambda v: v.param_id == "WP_RADIUS", what="WP_RADIUS echo")
+    assert (echo.param_type, echo.param_value) == (4, 0.0), echo
+    p = g.param_get("Q_TAILSIT_ENABLE")
+    assert (p.param_type, p.param_value) == (2, 1.0), p

@@ -50,6 +50,7 @@ def test_every_view_at_80x24_and_the_live_target(screen_factory):  # noqa: F811
 
     with Gcs(f"tcp:127.0.0.1:{port}") as g:
         g.wait_ready(timeout=15)
+        g.param_set("Q_GUIDED_MODE", 1)  # GUIDED targets held in a hover (0 flies them on the wing)
         g.set_mode("QHOVER")
         g.arm()
         g.recv("LOCAL_POSITION_NED", lambda p: -p.z > 0.5, timeout=30, what="climbing")

@@ -1,6 +1,6 @@
 """A user's pymavlink script, written the way ArduPilot's examples are (scripts/ardupilot_flight.py:
-3D fix, arm in GUIDED, take off to 2 m, reposition 5 m, a 4-item mission in AUTO with a
-MISSION_ITEM_REACHED for each, QRTL, disarm), run unchanged as its own process against the twin
+3D fix, Q_GUIDED_MODE 1, arm in GUIDED, take off to 2 m, reposition 5 m, a 5-item mission in
+AUTO flown in a hover with a MISSION_ITEM_REACHED for each, QRTL, disarm), run unchanged as its own process against the twin
 and through the vtol-gcs daemon. The twin runs at 20x so a flight takes a few seconds."""
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def check_flight(out: str) -> None:
     for step in ("3D fix", "armed", "took off", "repositioned", "mission uploaded"):
         assert any(line.startswith(step) for line in lines), f"no '{step}' in:\n{out}"
     assert [line for line in lines if line.startswith("reached item")] == [
-        f"reached item {n}" for n in (1, 2, 3, 4)
+        f"reached item {n}" for n in (1, 2, 3, 4, 5)
     ], out
     assert lines[-1].startswith("landed") and lines[-1].endswith("disarmed"), out
 

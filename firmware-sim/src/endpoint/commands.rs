@@ -6,9 +6,9 @@
 //! without acting twice. SET_MODE gets one too, COMMAND_ACK with `command` = 11, as ArduPilot
 //! answers it.
 //!
-//! Modes: the twin's own (`FlightMode`); RTL (11) is flown as QRTL, as ArduPlane does with
-//! `Q_RTL_MODE` = QRTL always, since the twin cannot fly as a plane; any other mode number is
-//! refused with a reason. Navigation commands (take-off, reposition, mission start, home) are
+//! Modes: the twin's own (`FlightMode`); RTL (11) flies home on the wing (QRTL with
+//! `Q_RTL_MODE` = 3, QRTL always, or in the `paper` model); any other mode number is refused
+//! with a reason. Navigation commands (take-off, reposition, mission start, home) are
 //! `guided`'s.
 
 use mavlink::dialects::ardupilotmega as apm;
@@ -340,6 +340,11 @@ impl Endpoint {
             _ => return result::DENIED,
         };
         let t = self.vehicle.telemetry();
+        if t.mode == FlightMode::Auto {
+            // The mission's position items are flown in this phase from now on (ArduPlane's
+            // auto_state.vtol_mode).
+            self.navigator.set_vtol_mode(!forward);
+        }
         let already = if forward {
             matches!(t.vtol_state, VtolState::Fw | VtolState::TransitionToFw)
         } else {
@@ -379,7 +384,15 @@ impl Endpoint {
             if self.vehicle.telemetry().armed {
                 return result::ACCEPTED;
             }
-            self.vehicle.arm(force)
+            match self.mission_prearm() {
+                Some(why) if !force && self.vehicle.pre_arm_check().is_ok() => {
+                    // ArduPilot's arming command says "Arm:", its periodic report "PreArm:".
+                    let text = format!("Arm: {why}");
+                    self.say(link, apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
+                    return result::FAILED;
+                }
+                _ => self.vehicle.arm(force),
+            }
         } else if p1 == 0.0 {
             if !self.vehicle.telemetry().armed {
                 return result::ACCEPTED;
@@ -406,14 +419,21 @@ impl Endpoint {
         }
     }
 
+    /// The mode RTL is flown as: RTL, home as a plane (a hovering vehicle transitions first), as
+    /// ArduPlane's; with Q_RTL_MODE 3 (QRTL always) QRTL, and so in the `paper` model, which has
+    /// no forward flight.
+    pub(super) fn rtl_or_qrtl(&self) -> FlightMode {
+        let paper = self.vehicle.config().model == crate::model::airframe::ModelMode::Paper;
+        if paper || self.params.value("Q_RTL_MODE") as i32 == 3 {
+            FlightMode::QRtl
+        } else {
+            FlightMode::Rtl
+        }
+    }
+
     pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
         let wanted = if custom_mode == RTL_MODE {
-            // RTL on the wing flies home as a plane; in a hover it is QRTL (Q_RTL_MODE).
-            use crate::model::mode::VtolState;
-            match self.vehicle.telemetry().vtol_state {
-                VtolState::Fw | VtolState::TransitionToFw => RTL_MODE,
-                _ => FlightMode::QRtl.custom_mode(),
-            }
+            self.rtl_or_qrtl().custom_mode()
         } else {
             custom_mode
         };

@@ -1,6 +1,7 @@
 //! The battery failsafe on the wire: [`crate::nav::failsafe`] decides, this says it
-//! (STATUSTEXT, WARNING for low, CRITICAL for critical) and, while armed, flies the action: QRTL
-//! or QLAND as ArduPlane does in hover, or a forced disarm for "terminate".
+//! (STATUSTEXT, WARNING for low, CRITICAL for critical) and, while armed, flies the action: RTL
+//! (home on the wing; QRTL with `Q_RTL_MODE` 3) or QLAND as ArduPlane does, or a forced disarm for
+//! "terminate".
 
 use mavlink::dialects::ardupilotmega as apm;
 
@@ -26,7 +27,15 @@ impl Endpoint {
         }
         let mode = match event.action {
             Action::None => return,
-            Action::Rtl => FlightMode::QRtl,
+            // ArduPlane's handle_battery_failsafe: RTL (flown as QRTL with Q_RTL_MODE 3),
+            // unless already landing.
+            Action::Rtl => {
+                let m = self.vehicle.telemetry().mode;
+                if matches!(m, FlightMode::QLand | FlightMode::QRtl) {
+                    return;
+                }
+                self.rtl_or_qrtl()
+            }
             Action::QLand => FlightMode::QLand,
             Action::Terminate => {
                 let _ = self.vehicle.disarm(true);

@@ -96,9 +96,24 @@ fn rectangle_mission() -> Vec<MissionItem> {
     ]
 }
 
+/// The same rectangle without the DO_VTOL_TRANSITION item: ArduPlane flies the waypoints after
+/// a VTOL take-off on the wing all the same.
+fn rectangle_mission_without_the_transition_item() -> Vec<MissionItem> {
+    let mut m = rectangle_mission();
+    m.remove(2);
+    m
+}
+
 #[test]
 fn auto_flies_a_vtol_take_off_a_rectangle_on_the_wing_and_a_vtol_landing() {
     fly_rectangle(endpoint(), &[]);
+}
+
+#[test]
+fn without_a_transition_item_the_waypoints_after_the_take_off_are_flown_on_the_wing_too() {
+    let mut ep = endpoint();
+    upload(&mut ep, &rectangle_mission_without_the_transition_item());
+    fly_uploaded_rectangle(ep);
 }
 
 #[test]
@@ -123,6 +138,10 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
         ep.handle(GCS, &v2(&param_set(name, *value)));
     }
     upload(&mut ep, &rectangle_mission());
+    fly_uploaded_rectangle(ep);
+}
+
+fn fly_uploaded_rectangle(mut ep: Endpoint) {
     ep.handle(GCS, &set_mode(FlightMode::Auto));
     // The gyros calibrate for 1 s after power-up.
     let mut t = 0u64;
@@ -196,8 +215,9 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
         ],
         "{trace}"
     );
-    // The whole rectangle is flown; the turns at its corners swing out by about 20 m.
-    let flown = |reach: f64, side: f64| (side - 5.0..side + 30.0).contains(&reach);
+    // The whole rectangle is flown; each turn starts up to the L1 distance (28.6 m) short of its
+    // corner (ArduPlane's turn distance) and swings out past the line.
+    let flown = |reach: f64, side: f64| (side - 30.0..side + 30.0).contains(&reach);
     assert!(
         flown(south_fw, RECT_LONG_M) && flown(east_fw, RECT_SHORT_M),
         "the rectangle flown on the wing reached {south_fw:.1} m south, {east_fw:.1} m east:\n{trace}"
@@ -220,6 +240,8 @@ fn fly_rectangle(mut ep: Endpoint, params: &[(&str, f32)]) {
 #[test]
 fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
+    // RTL lands vertically at home (not ArduPlane's default, which circles home).
+    ep.handle(GCS, &v2(&param_set("Q_RTL_MODE", 1.0)));
     let mut loiter = item(mcmd::NAV_LOITER_TIME, -100.0, 0.0, 20.0);
     loiter.params[0] = 20.0;
     let [home, takeoff] = home_and_vtol_takeoff(20.0);
@@ -247,7 +269,7 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
         if ep.navigator.current() == 3 && circled_from.is_none() {
             let p = ep.vehicle().telemetry().pos_m;
             let d = (p.xy() - nalgebra::Vector2::new(100.0, 0.0)).norm();
-            if (20.0..40.0).contains(&d) && ep.vehicle().vtol_state() == VtolState::Fw {
+            if (50.0..70.0).contains(&d) && ep.vehicle().vtol_state() == VtolState::Fw {
                 circled_from = Some(t);
             }
         }
@@ -281,4 +303,96 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
         "landed at home: {:?}",
         tel.pos_m
     );
+}
+
+/// ArduPlane's defaults (`Q_RTL_MODE` 0): a mission that ends on the wing changes to RTL, which
+/// flies home and circles it on the wing at `WP_LOITER_RAD` (60 m) without landing.
+#[test]
+fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
+    let mut ep = endpoint();
+    let [home, takeoff] = home_and_vtol_takeoff(20.0);
+    upload(
+        &mut ep,
+        &[home, takeoff, item(mcmd::NAV_WAYPOINT, -150.0, 0.0, 20.0)],
+    );
+    ep.handle(GCS, &set_mode(FlightMode::Auto));
+    let mut t = 0u64;
+    while t < 2_000_000 {
+        t += 20_000;
+        ep.tick(t);
+    }
+    assert_eq!(
+        acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+        vec![(400, 0)]
+    );
+    while ep.vehicle().telemetry().mode == FlightMode::Auto {
+        t += 20_000;
+        ep.tick(t);
+        assert!(t < 200_000_000, "the mission never ended");
+    }
+    assert_eq!(ep.vehicle().telemetry().mode, FlightMode::Rtl);
+    let end = t + 150_000_000;
+    let (mut near, mut far) = (f64::INFINITY, 0.0_f64);
+    let (mut low, mut high) = (f64::INFINITY, 0.0_f64);
+    while t < end {
+        t += 20_000;
+        ep.tick(t);
+        let tel = ep.vehicle().telemetry();
+        assert!(tel.armed && tel.mode == FlightMode::Rtl, "{:?}", tel.mode);
+        if t + 60_000_000 > end {
+            assert_eq!(tel.vtol_state, VtolState::Fw);
+            let d = tel.pos_m.xy().norm();
+            (near, far) = (near.min(d), far.max(d));
+            (low, high) = (low.min(tel.pos_m.z), high.max(tel.pos_m.z));
+        }
+    }
+    assert!(
+        near > 45.0 && far < 80.0,
+        "circling home at {near:.1}..{far:.1} m"
+    );
+    // At RTL_ALTITUDE, 100 m above home.
+    assert!(low > 95.0 && high < 105.0, "at {low:.1}..{high:.1} m");
+}
+
+/// ArduPlane's battery failsafe action 1 is RTL: from a hover the vehicle goes to the wing and
+/// flies home (with Q_RTL_MODE 3 it is QRTL).
+#[test]
+fn a_battery_failsafe_rtl_flies_home_on_the_wing() {
+    for (q_rtl_mode, want) in [(0.0, FlightMode::Rtl), (3.0, FlightMode::QRtl)] {
+        let mut ep = endpoint();
+        ep.handle(GCS, &v2(&param_set("Q_RTL_MODE", q_rtl_mode)));
+        let mut t = 0u64;
+        while t < 2_000_000 {
+            t += 20_000;
+            ep.tick(t);
+        }
+        ep.handle(GCS, &set_mode(FlightMode::Guided));
+        assert_eq!(
+            acks(&ep.handle(GCS, &command(400, [1.0; 7]))),
+            vec![(400, 0)]
+        );
+        ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0]));
+        while ep.vehicle().telemetry().pos_m.z < 19.0 {
+            t += 20_000;
+            ep.tick(t);
+            assert!(t < 60_000_000, "never climbed");
+        }
+        // Low at 1 mAh used: RTL at once.
+        ep.handle(GCS, &v2(&param_set("BATT_LOW_MAH", 1299.0)));
+        ep.handle(GCS, &v2(&param_set("BATT_FS_LOW_ACT", 1.0)));
+        let end = t + 20_000_000;
+        while t < end {
+            t += 20_000;
+            ep.tick(t);
+        }
+        let tel = ep.vehicle().telemetry();
+        assert_eq!(tel.mode, want);
+        let wing = want == FlightMode::Rtl;
+        assert_eq!(
+            tel.vtol_state == VtolState::Fw,
+            wing,
+            "{:?}",
+            tel.vtol_state
+        );
+    }
 }

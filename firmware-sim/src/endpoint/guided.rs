@@ -68,7 +68,7 @@ impl Endpoint {
             pos_ned_m: paper_to_ned(&t.pos_m),
             mission: &self.mission,
             limits: &limits,
-            wp_radius_m: self.params.value("WP_RADIUS"),
+            wp_radius_m: self.params.value("Q_WP_RADIUS") / 100.0,
             speed_up_m_s: self.params.value("WP_SPEED_UP"),
             speed_dn_m_s: self.params.value("WP_SPEED_DN"),
             fixed_wing: FixedWingInput {
@@ -79,9 +79,17 @@ impl Endpoint {
                     period_s: self.params.value("NAVL1_PERIOD"),
                     damping: self.params.value("NAVL1_DAMPING"),
                 },
-                loiter_radius_m: self.params.value("WP_LOITER_RAD"),
+                loiter_radius_m: match self.params.value("RTL_RADIUS").abs() {
+                    r if t.mode == FlightMode::Rtl && r > 0.0 => r,
+                    _ => self.params.value("WP_LOITER_RAD"),
+                },
+                wp_radius_m: self.params.value("WP_RADIUS"),
                 gravity_m_s2: self.vehicle.config().airframe.gravity_m_s2,
-                rtl_vtol_land: self.params.value("Q_RTL_MODE") >= 1.0,
+                rtl_vtol_land: matches!(self.params.value("Q_RTL_MODE") as i32, 1 | 2),
+                trans_decel_m_s2: self.params.value("Q_TRANS_DECEL"),
+                guided_on_the_wing: self.params.value("Q_GUIDED_MODE") == 0.0,
+                rtl_altitude_m: Some(self.params.value("RTL_ALTITUDE")).filter(|a| *a >= 0.0),
+                vtol_auto: self.params.value("Q_ENABLE") == 2.0,
             },
         };
         let r = f(&mut self.navigator, &inp, &mut events);
@@ -97,7 +105,14 @@ impl Endpoint {
                     let m = self.mission_current();
                     self.broadcast(&m);
                 }
-                NavEvent::SetMode(m) => self.vehicle.set_mode(m),
+                NavEvent::SetMode(m) => {
+                    let m = if m == FlightMode::Rtl {
+                        self.rtl_or_qrtl()
+                    } else {
+                        m
+                    };
+                    self.vehicle.set_mode(m);
+                }
                 NavEvent::Info(text) => self.announce(apm::MavSeverity::MAV_SEVERITY_INFO, &text),
                 NavEvent::Transition(forward) => {
                     if forward {

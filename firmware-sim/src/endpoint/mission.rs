@@ -415,11 +415,15 @@ impl Endpoint {
         int: bool,
     ) {
         let to = (frame.system_id(), frame.component_id());
-        let item = (kind == TYPE_MISSION)
-            .then(|| self.mission.get(seq).copied())
-            .flatten()
-            // Home is always readable as item 0, also with no mission stored (ArduPilot).
-            .or_else(|| (kind == TYPE_MISSION && seq == 0).then(|| self.home_item()));
+        // Item 0 is always the current home, whatever an upload put in the slot and also with
+        // no mission stored (ArduPilot writes home into it whenever home is set).
+        let item = if kind == TYPE_MISSION && seq == 0 {
+            Some(self.home_item())
+        } else {
+            (kind == TYPE_MISSION)
+                .then(|| self.mission.get(seq).copied())
+                .flatten()
+        };
         match item {
             Some(item) => {
                 let payload = item_payload(seq, &item, to, int);

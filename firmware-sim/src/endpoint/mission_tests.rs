@@ -190,7 +190,14 @@ fn upload_then_download_is_byte_identical() {
     );
     let back = download(&mut ep);
     assert_eq!(back.len(), items.len());
-    for (seq, (payload, it)) in back.iter().zip(&items).enumerate() {
+    // Item 0 is home as the vehicle has it (584 m above sea level), not the slot as sent.
+    let home = item_payload(0, &ep.home_item(), (GCS_SYSID, GCS_COMPID), true);
+    assert_eq!(&back[0][..32], &home[..32]);
+    assert_eq!(
+        f32::from_le_bytes(back[0][24..28].try_into().unwrap()),
+        584.0
+    );
+    for (seq, (payload, it)) in back.iter().zip(&items).enumerate().skip(1) {
         let sent = item_payload(seq as u16, it, (GCS_SYSID, GCS_COMPID), true);
         // Everything but the target (ours on upload, the GCS's on download) is the same bytes.
         assert_eq!(&payload[..32], &sent[..32], "item {seq}");
@@ -370,7 +377,7 @@ fn legacy_set_mode_rtl_and_arming_refusals() {
         texts(&out)[0].text.to_str().unwrap(),
         "Arm: mode QLAND cannot take off"
     );
-    // RTL (11) is flown as QRTL; an unknown mode is refused.
+    // RTL (11) is RTL, as on ArduPlane (QRTL with Q_RTL_MODE 3); an unknown mode is refused.
     #[allow(deprecated)]
     let legacy = |custom_mode| {
         apm::MavMessage::SET_MODE(apm::SET_MODE_DATA {
@@ -379,6 +386,9 @@ fn legacy_set_mode_rtl_and_arming_refusals() {
             base_mode: apm::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
         })
     };
+    assert_eq!(acks(&ep.handle(GCS, &v2(&legacy(11)))), vec![(11, 0)]);
+    assert_eq!(ep.vehicle().telemetry().mode, FlightMode::Rtl);
+    ep.set_param("Q_RTL_MODE", 3.0).unwrap();
     assert_eq!(acks(&ep.handle(GCS, &v2(&legacy(11)))), vec![(11, 0)]);
     assert_eq!(ep.vehicle().telemetry().mode, FlightMode::QRtl);
     assert_eq!(
@@ -447,7 +457,16 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
 #[test]
 fn guided_take_off_reposition_and_auto_mission() {
     let mut ep = endpoint_in_a_small_envelope();
-    upload(&mut ep, &flight_plan());
+    // The reposition held in a hover (Q_GUIDED_MODE 1; ArduPlane's default circles it on the
+    // wing).
+    ep.set_param("Q_GUIDED_MODE", 1.0).unwrap();
+    // A DO_VTOL_TRANSITION to MC after the take-off: AUTO flies the waypoints in a hover (without
+    // it they are flown on the wing, as ArduPlane does).
+    let mut plan = flight_plan();
+    let mut to_mc = super::test_support::transition_to_fw();
+    to_mc.params[0] = 3.0;
+    plan.insert(2, to_mc);
+    upload(&mut ep, &plan);
     run_until(&mut ep, 200_000);
     assert_eq!(acks(&set_mode(&mut ep, FlightMode::Guided)), vec![(176, 0)]);
     // Take-off before arming: FAILED, with the reason.
@@ -519,9 +538,10 @@ fn guided_take_off_reposition_and_auto_mission() {
     assert_eq!(acks(&out), vec![(176, 0)]);
     // Already at the take-off altitude: item 1 is reached at once.
     out.extend(run_until(&mut ep, 120_000_000));
-    assert_eq!(reached(&out), vec![1, 2, 3, 4]);
+    assert_eq!(reached(&out), vec![1, 2, 3, 4, 5]);
     let t = ep.vehicle().telemetry();
     assert!(!t.armed && t.landed, "landed and disarmed");
+    assert_eq!(t.vtol_state, crate::model::mode::VtolState::Mc);
     assert!(
         (t.pos_m.y - 2.0).abs() < 0.3 && t.pos_m.x.abs() < 0.3,
         "{}",
@@ -576,6 +596,8 @@ fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
 #[test]
 fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
     let mut ep = endpoint_in_a_small_envelope();
+    // Targets held in a hover (ArduPlane's default, 0, circles them on the wing).
+    ep.set_param("Q_GUIDED_MODE", 1.0).unwrap();
     run_until(&mut ep, 200_000);
     // Not in GUIDED: refused with the reason, as ArduPlane refuses it.
     let out = ep.handle(GCS, &guided_waypoint(3.0, 2.0));
@@ -613,6 +635,45 @@ fn guided_waypoint_is_acked_flown_and_refused_outside_guided() {
     );
 }
 
+/// ArduPlane's default `Q_GUIDED_MODE` 0: a guided waypoint (DroneKit's `simple_goto`) after a
+/// VTOL take-off is flown on the wing and circled at `WP_LOITER_RAD` (60 m).
+#[test]
+fn a_guided_waypoint_is_circled_on_the_wing_by_default() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 200_000);
+    set_mode(&mut ep, FlightMode::Guided);
+    ep.handle(GCS, &command(400, [1.0; 7]));
+    ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0]));
+    run_until(&mut ep, 30_000_000);
+    assert_eq!(
+        ep.vehicle().vtol_state(),
+        crate::model::mode::VtolState::Mc,
+        "the take-off hovers"
+    );
+    let out = ep.handle(GCS, &guided_waypoint(200.0, 20.0));
+    assert_eq!(
+        mission_acks(&out),
+        vec![apm::MavMissionResult::MAV_MISSION_ACCEPTED]
+    );
+    run_until(&mut ep, 90_000_000);
+    // Paper frame: x is south, so the point is at x = -200.
+    let centre = nalgebra::Vector2::new(-200.0, 0.0);
+    let (mut near, mut far) = (f64::INFINITY, 0.0_f64);
+    let mut t = 90_000_000;
+    while t < 120_000_000 {
+        t += 500_000;
+        run_until(&mut ep, t);
+        let tel = ep.vehicle().telemetry();
+        assert_eq!(tel.vtol_state, crate::model::mode::VtolState::Fw);
+        let d = (tel.pos_m.xy() - centre).norm();
+        (near, far) = (near.min(d), far.max(d));
+    }
+    assert!(
+        near > 45.0 && far < 80.0,
+        "circling at {near:.1}..{far:.1} m"
+    );
+}
+
 #[test]
 fn auto_with_no_mission_reaches_nothing() {
     let mut ep = endpoint();
@@ -631,4 +692,49 @@ fn auto_with_no_mission_reaches_nothing() {
         "no item reached: {:?}",
         reached(&out)
     );
+}
+
+/// ArduPlane's pre-arm mission check: a VTOL landing 5 m after the waypoint before it (under
+/// 0.75 v² / (2 Q_TRANS_DECEL) = 9 m at 12 m/s and 6 m/s²) stops arming with ArduPlane's texts
+/// ("Arm:" to the arming command, "PreArm:" while it fails), and SYS_STATUS shows the pre-arm
+/// check failing; 10 m arms.
+#[test]
+fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
+    let prearm_healthy = |out: &[Outbound]| {
+        decode(out).iter().rev().find_map(|m| match m {
+            apm::MavMessage::SYS_STATUS(s) => Some(
+                s.onboard_control_sensors_health
+                    .contains(apm::MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK),
+            ),
+            _ => None,
+        })
+    };
+    for (leg_m, arms) in [(5.0, false), (10.0, true)] {
+        let mut ep = endpoint();
+        let [home, takeoff] = home_and_vtol_takeoff(20.0);
+        let plan = [
+            home,
+            takeoff,
+            item(mcmd::NAV_WAYPOINT, 100.0, 0.0, 20.0),
+            item(mcmd::NAV_VTOL_LAND, 100.0 - leg_m, 0.0, 0.0),
+        ];
+        upload(&mut ep, &plan);
+        let out = run_until(&mut ep, 3_000_000);
+        assert_eq!(prearm_healthy(&out), Some(arms), "{leg_m} m");
+        let reported = texts(&out)
+            .iter()
+            .any(|t| t.text.to_str().unwrap() == "PreArm: VTOL land too short, min 9m");
+        assert_eq!(reported, !arms);
+        let out = ep.handle(GCS, &command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
+        if arms {
+            assert_eq!(acks(&out), vec![(400, 0)]);
+        } else {
+            assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+            assert_eq!(
+                texts(&out)[0].text.to_str().unwrap(),
+                "Arm: VTOL land too short, min 9m"
+            );
+            assert!(!ep.vehicle().telemetry().armed);
+        }
+    }
 }

@@ -12,12 +12,15 @@
 //! - While disarmed and failing a check, a "PreArm: …" STATUSTEXT to every link when the
 //!   failure starts or changes and then every [`PREARM_TEXT_PERIOD_US`] of sim time, ArduPilot's
 //!   30 s.
+//! - ArduPlane's pre-arm mission check: a VTOL landing too close after the waypoint before it
+//!   stops arming ("PreArm: VTOL land too short, min 9m").
 
 use mavlink::dialects::ardupilotmega as apm;
 
 use super::Endpoint;
 use crate::model::airframe::ModelMode;
 use crate::model::vehicle::{ArmError, Vehicle};
+use crate::nav::fixed_wing::vtol_land_too_short;
 
 /// EKF_STATUS_REPORT's message id.
 pub const EKF_STATUS_REPORT: u32 = 193;
@@ -29,7 +32,7 @@ pub const PREARM_TEXT_PERIOD_US: u64 = 30_000_000;
 #[derive(Debug, Clone, Default)]
 pub struct PreArmReport {
     /// The failure last reported and when, µs of sim time.
-    last: Option<(&'static str, u64)>,
+    last: Option<(String, u64)>,
 }
 
 /// Whether the navigation solution has a position: the estimator has fused a fix, or the model
@@ -109,29 +112,46 @@ impl Endpoint {
             self.vehicle.telemetry(),
             errors_comm,
         )?;
-        with_prearm_bit(&mut msg, prearm_ok(&self.vehicle));
+        let ok = prearm_ok(&self.vehicle)
+            && (self.vehicle.telemetry().armed || self.mission_prearm().is_none());
+        with_prearm_bit(&mut msg, ok);
         Some(msg)
+    }
+
+    /// ArduPlane's pre-arm mission checks ([`vtol_land_too_short`]): the reason the stored
+    /// mission stops arming, if it does.
+    pub(super) fn mission_prearm(&self) -> Option<String> {
+        vtol_land_too_short(
+            &self.mission,
+            &self.origin,
+            self.params.value("TRIM_ARSPD_CM") / 100.0,
+            self.params.value("Q_TRANS_DECEL"),
+        )
     }
 
     /// Announces a failing pre-arm check while disarmed: at once when it starts or changes,
     /// then every [`PREARM_TEXT_PERIOD_US`].
     pub(super) fn report_prearm(&mut self) {
-        let failing = match self.vehicle.pre_arm_check() {
-            Err(ArmError::PreArm(why)) if !self.vehicle.telemetry().armed => Some(why),
-            _ => None,
+        let failing = if self.vehicle.telemetry().armed {
+            None
+        } else {
+            match self.vehicle.pre_arm_check() {
+                Err(ArmError::PreArm(why)) => Some(why.to_owned()),
+                _ => self.mission_prearm(),
+            }
         };
         let Some(why) = failing else {
             self.prearm.last = None;
             return;
         };
         let due = match self.prearm.last {
-            Some((last, at)) => {
-                last != why || self.now_us.saturating_sub(at) >= PREARM_TEXT_PERIOD_US
+            Some((ref last, at)) => {
+                *last != why || self.now_us.saturating_sub(at) >= PREARM_TEXT_PERIOD_US
             }
             None => true,
         };
         if due {
-            self.prearm.last = Some((why, self.now_us));
+            self.prearm.last = Some((why.clone(), self.now_us));
             self.announce(
                 apm::MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!("PreArm: {why}"),

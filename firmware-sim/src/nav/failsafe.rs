@@ -22,7 +22,7 @@ pub enum Level {
 pub enum Action {
     /// 0: report only.
     None,
-    /// 1: RTL, flown as QRTL by a VTOL in hover.
+    /// 1: RTL (QRTL with `Q_RTL_MODE` 3).
     Rtl,
     /// 2 (Land), 4 (QLand), 6 (Loiter to QLand): QLAND.
     QLand,

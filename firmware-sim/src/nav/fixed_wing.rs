@@ -5,7 +5,9 @@
 use nalgebra::{Vector2, Vector3};
 
 use crate::model::mode::{ForwardGuidance, Guidance, VtolState};
+use crate::nav::globe::{GeoPoint, Origin, horizontal_distance_m};
 use crate::nav::l1::{self, L1Params};
+use crate::nav::mission::{Mission, MissionItem, cmd};
 
 /// A fixed-wing approach to a VTOL landing starts the back transition this far from the
 /// landing point, m: the slowing stage and the pull-up take about 50 m from the trim airspeed;
@@ -23,13 +25,24 @@ pub struct FixedWingInput {
     pub airspeed_m_s: f64,
     /// `NAVL1_PERIOD`, `NAVL1_DAMPING`.
     pub l1: L1Params,
-    /// `WP_LOITER_RAD`, m.
+    /// The radius of this mode's circles, m: `WP_LOITER_RAD`, in RTL `RTL_RADIUS` when set.
     pub loiter_radius_m: f64,
+    /// `WP_RADIUS`, m: the most a waypoint on the wing is reached short of its point.
+    pub wp_radius_m: f64,
     /// Gravity, m/s².
     pub gravity_m_s2: f64,
-    /// `Q_RTL_MODE` = 1: RTL on the wing lands vertically at home (QRTL on arrival); 0: it
-    /// circles home at `WP_LOITER_RAD`.
+    /// `Q_RTL_MODE` 1 or 2: RTL on the wing lands vertically at home (QRTL on arrival); 0: it
+    /// circles home (3, QRTL always, never gets here).
     pub rtl_vtol_land: bool,
+    /// `Q_TRANS_DECEL`, m/s²: the deceleration the VTOL landing distances assume.
+    pub trans_decel_m_s2: f64,
+    /// `Q_GUIDED_MODE` 0: a GUIDED target in the air is flown to on the wing and circled at
+    /// `WP_LOITER_RAD`; 1: flown to and held in a hover.
+    pub guided_on_the_wing: bool,
+    /// `RTL_ALTITUDE`, m above home; `None` (a negative value): RTL keeps its altitude.
+    pub rtl_altitude_m: Option<f64>,
+    /// `Q_ENABLE` 2 (VTOL AUTO): AUTO starts in VTOL mode, its position items flown in a hover.
+    pub vtol_auto: bool,
 }
 
 impl Default for FixedWingInput {
@@ -42,14 +55,69 @@ impl Default for FixedWingInput {
                 period_s: 10.0,
                 damping: 0.75,
             },
-            loiter_radius_m: 30.0,
+            loiter_radius_m: 60.0,
+            wp_radius_m: 90.0,
             gravity_m_s2: crate::model::airframe::GRAVITY_M_S2,
-            rtl_vtol_land: true,
+            rtl_vtol_land: false,
+            trans_decel_m_s2: 6.0,
+            guided_on_the_wing: true,
+            rtl_altitude_m: Some(100.0),
+            vtol_auto: false,
         }
     }
 }
 
+/// ArduPlane's `QuadPlane::stopping_distance`: v² / (2 `Q_TRANS_DECEL`), m.
+#[must_use]
+pub fn stopping_distance_m(speed_m_s: f64, decel_m_s2: f64) -> f64 {
+    speed_m_s * speed_m_s / (2.0 * decel_m_s2)
+}
+
+/// ArduPlane's pre-arm mission check (`AP_Arming_Plane::mission_checks`): a VTOL landing
+/// (NAV_LAND, NAV_VTOL_LAND) right after a NAV_WAYPOINT must be at least 0.75 stopping
+/// distances at the landing airspeed (here the cruise airspeed) from it. Returns the text
+/// ArduPlane sends (without "PreArm: ") for the first leg too short.
+#[must_use]
+pub fn vtol_land_too_short(
+    mission: &Mission,
+    origin: &Origin,
+    airspeed_m_s: f64,
+    decel_m_s2: f64,
+) -> Option<String> {
+    let min_m = 0.75 * stopping_distance_m(airspeed_m_s, decel_m_s2);
+    let items = mission.items();
+    items
+        .iter()
+        .skip(1)
+        .zip(items.iter().skip(2))
+        .find_map(|(prev, it)| {
+            let land = matches!(it.command, cmd::NAV_LAND | cmd::NAV_VTOL_LAND);
+            // A point of latitude and longitude 0 is "here": ArduPilot's distance to it is the
+            // distance to 0°, 0°, never short.
+            let placed = |i: &MissionItem| i.x != 0 || i.y != 0;
+            if !(land && prev.command == cmd::NAV_WAYPOINT && placed(prev) && placed(it)) {
+                return None;
+            }
+            let at = |i: &MissionItem| {
+                origin.to_local_ned(&GeoPoint {
+                    lat_e7: i.x,
+                    lon_e7: i.y,
+                    alt_amsl_m: 0.0,
+                })
+            };
+            let dist = horizontal_distance_m(&at(prev), &at(it));
+            (dist < min_m).then(|| format!("VTOL land too short, min {min_m:.0}m"))
+        })
+}
+
 impl FixedWingInput {
+    /// ArduPlane's `QuadPlane::transition_threshold`: a VTOL landing point farther than 1.5
+    /// stopping distances at the cruise airspeed is approached on the wing, m.
+    #[must_use]
+    pub fn transition_threshold_m(&self) -> f64 {
+        1.5 * stopping_distance_m(self.airspeed_m_s, self.trans_decel_m_s2)
+    }
+
     /// Whether the vehicle flies (or is going) on the wing.
     #[must_use]
     pub fn on_the_wing(&self) -> bool {
@@ -136,5 +204,61 @@ mod tests {
             "{f:?}"
         );
         assert!((f.airspeed_m_s - 12.0).abs() < 1e-12);
+    }
+}
+
+#[cfg(test)]
+mod mission_check_tests {
+    use super::*;
+    use crate::nav::mission::frame;
+    use crate::nav::mission::test_items::{item, limits};
+
+    fn at(command: u16, north_m: f64) -> MissionItem {
+        let p = limits().origin.to_global(&Vector3::new(north_m, 0.0, 0.0));
+        item(command, [0.0; 4], p.lat_e7, p.lon_e7, 20.0)
+    }
+
+    /// ArduPlane's rule: 0.75 v² / (2 Q_TRANS_DECEL), 27 m at 12 m/s and 2 m/s², between a
+    /// NAV_WAYPOINT and the VTOL landing right after it.
+    #[test]
+    fn a_vtol_landing_too_close_after_its_waypoint_is_refused_with_ardupilots_text() {
+        let o = limits().origin;
+        let mission = |leg_m: f64| {
+            Mission::new(vec![
+                at(cmd::NAV_WAYPOINT, 0.0),
+                at(cmd::NAV_VTOL_TAKEOFF, 0.0),
+                at(cmd::NAV_WAYPOINT, 100.0),
+                at(cmd::NAV_VTOL_LAND, 100.0 - leg_m),
+            ])
+        };
+        assert_eq!(
+            vtol_land_too_short(&mission(20.0), &o, 12.0, 2.0).as_deref(),
+            Some("VTOL land too short, min 27m")
+        );
+        assert_eq!(vtol_land_too_short(&mission(30.0), &o, 12.0, 2.0), None);
+        // What ArduPlane SITL's tailsitter answers for a 29 m leg (AIRSPEED_CRUISE 22,
+        // Q_TRANS_DECEL 6), and the twin's defaults (12 m/s, 6 m/s²).
+        assert_eq!(
+            vtol_land_too_short(&mission(29.0), &o, 22.0, 6.0).as_deref(),
+            Some("VTOL land too short, min 30m")
+        );
+        assert_eq!(
+            vtol_land_too_short(&mission(5.0), &o, 12.0, 6.0).as_deref(),
+            Some("VTOL land too short, min 9m")
+        );
+        // NAV_LAND counts too; a DO item between them, or a landing "here", does not.
+        let mut m = mission(20.0).items().to_vec();
+        m[3].command = cmd::NAV_LAND;
+        assert!(vtol_land_too_short(&Mission::new(m.clone()), &o, 12.0, 2.0).is_some());
+        let mut with_do = m.clone();
+        let mut tr = at(cmd::DO_VTOL_TRANSITION, 0.0);
+        (tr.x, tr.y, tr.frame, tr.params[0]) = (0, 0, frame::MISSION, 3.0);
+        with_do.insert(3, tr);
+        assert_eq!(
+            vtol_land_too_short(&Mission::new(with_do), &o, 12.0, 2.0),
+            None
+        );
+        (m[3].x, m[3].y) = (0, 0);
+        assert_eq!(vtol_land_too_short(&Mission::new(m), &o, 12.0, 2.0), None);
     }
 }

@@ -17,10 +17,11 @@
 //!   `param1` seconds there; VTOL_LAND flies to its point and lands; RETURN_TO_LAUNCH flies home
 //!   and lands. An item is reached within `WP_RADIUS` (or a waypoint's `param2`) of its point, a
 //!   take-off at its altitude, a landing when the vehicle has touched down and disarmed. When
-//!   the last item is done in the air, the mode changes to QRTL ("Mission complete"), as
-//!   ArduPlane changes to RTL and, with `Q_RTL_MODE` set to QRTL, on to QRTL.
-//! - QRTL flies home at its altitude, then lands and disarms. RTL requests become QRTL (the twin
-//!   cannot fly as a plane).
+//!   the last item is done in the air, the mode changes to RTL ("Mission complete"), as
+//!   ArduPlane's does. Outside VTOL mode (a DO_VTOL_TRANSITION to MC sets it) the position items
+//!   are flown on the wing, as ArduPlane flies them (see [`fixed_wing`]).
+//! - QRTL flies home at its altitude, then lands and disarms. RTL flies home on the wing, then
+//!   circles home or lands by `Q_RTL_MODE`.
 //!
 //! Altitude changes are flown at `WP_SPEED_UP`/`WP_SPEED_DN`: the altitude the controller holds
 //! moves towards the target at that rate, so a take-off does not overshoot the way a step in the
@@ -159,6 +160,9 @@ pub struct Navigator {
     hold_until_us: Option<u64>,
     /// Sim time of the last step, µs (the climb rate's time base).
     last_step_us: Option<u64>,
+    /// AUTO flies its position items in a hover (ArduPlane's `auto_state.vtol_mode`): set by a
+    /// DO_VTOL_TRANSITION to MC, cleared by one to FW and whenever AUTO is entered.
+    vtol_mode: bool,
 }
 
 impl Default for Navigator {
@@ -172,6 +176,7 @@ impl Default for Navigator {
             state: MissionState::NotStarted,
             hold_until_us: None,
             last_step_us: None,
+            vtol_mode: false,
         }
     }
 }
@@ -248,6 +253,11 @@ impl Navigator {
         if entered && self.mode == Some(FlightMode::Auto) && self.state == MissionState::Active {
             self.state = MissionState::Paused;
         }
+        if entered && inp.mode == FlightMode::Auto {
+            // ArduPlane's ModeAuto::_enter: position items are flown on the wing, or in a hover
+            // with Q_ENABLE 2 (VTOL AUTO).
+            self.vtol_mode = inp.fixed_wing.vtol_auto;
+        }
         self.mode = Some(inp.mode);
         self.armed = inp.armed;
         if !inp.mode.is_autonomous() {
@@ -281,7 +291,7 @@ impl Navigator {
                     }
                 };
             }
-            FlightMode::QRtl | FlightMode::Rtl => self.start_return(inp),
+            FlightMode::QRtl | FlightMode::Rtl => self.start_return(inp, events),
             FlightMode::Auto => {
                 // Resume where the mission was; a completed one starts over (ArduPilot).
                 let seq = if self.state == MissionState::Complete {
@@ -318,14 +328,24 @@ impl Navigator {
         self.last_step_us = None;
     }
 
-    fn start_return(&mut self, inp: &NavInput<'_>) {
+    fn start_return(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
         let here = inp.pos_ned_m;
+        if inp.mode == FlightMode::Rtl && !inp.landed && inp.fixed_wing.vtol == VtolState::Mc {
+            // RTL is a fixed-wing mode: a hovering vehicle goes to the wing to fly home.
+            events.push(NavEvent::Transition(true));
+        }
+        // RTL flies home at RTL_ALTITUDE above home (negative: where it is), as ArduPlane's
+        // get_RTL_altitude_cm; QRTL at its altitude.
+        let z = match inp.fixed_wing.rtl_altitude_m {
+            Some(alt) if inp.mode == FlightMode::Rtl => inp.limits.home_ned_m.z - alt,
+            _ => here.z.min(self.z_cmd),
+        };
         self.leg = if inp.landed {
             landing_here(&here)
         } else {
             Leg::LandAt {
                 xy: inp.limits.home_ned_m.xy(),
-                z: here.z.min(self.z_cmd),
+                z,
             }
         };
     }
@@ -352,16 +372,33 @@ impl Navigator {
                 xy: here.xy(),
                 z: t.z_ned_m,
             },
-            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => Leg::Goto { xy, z: t.z_ned_m },
+            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => {
+                self.to_the_wing(inp, events);
+                Leg::Goto { xy, z: t.z_ned_m }
+            }
             cmd::NAV_LAND | cmd::NAV_VTOL_LAND => {
                 if inp.landed {
                     landing_here(&here)
                 } else {
+                    // ArduPlane's poscontrol_init_approach: a landing point farther than the
+                    // transition threshold is approached on the wing (in VTOL mode too).
+                    let dist = (xy - here.xy()).norm();
+                    if inp.fixed_wing.vtol == VtolState::Mc {
+                        if dist >= inp.fixed_wing.transition_threshold_m() {
+                            events.push(NavEvent::Info(format!("VTOL approach d={dist:.1}")));
+                            if inp.mode == FlightMode::Auto && inp.armed {
+                                events.push(NavEvent::Transition(true));
+                            }
+                        } else {
+                            events.push(NavEvent::Info(format!("VTOL Position1 d={dist:.1}")));
+                        }
+                    }
                     Leg::LandAt { xy, z: here.z }
                 }
             }
             cmd::DO_VTOL_TRANSITION => {
                 let forward = item.params[0] as u8 == mav_vtol_state::FW;
+                self.vtol_mode = !forward;
                 events.push(NavEvent::Transition(forward));
                 self.item_done(inp, events, "Transition");
                 return;
@@ -370,6 +407,7 @@ impl Navigator {
                 if inp.landed {
                     landing_here(&here)
                 } else {
+                    self.to_the_wing(inp, events);
                     Leg::LandAt {
                         xy: inp.limits.home_ned_m.xy(),
                         z: here.z.min(self.z_cmd),
@@ -384,22 +422,38 @@ impl Navigator {
         };
     }
 
+    /// AUTO outside VTOL mode flies its position items on the wing, as ArduPlane does (its
+    /// `in_vtol_auto` is false for them): a vehicle hovering in the air starts a forward
+    /// transition (the `paper` model has none, and keeps flying them in a hover).
+    fn to_the_wing(&self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
+        if inp.mode == FlightMode::Auto
+            && !self.vtol_mode
+            && inp.armed
+            && !inp.landed
+            && inp.fixed_wing.vtol == VtolState::Mc
+        {
+            events.push(NavEvent::Transition(true));
+        }
+    }
+
+    /// MAV_CMD_DO_VTOL_TRANSITION taken in AUTO: to MC, the mission's position items are
+    /// flown in a hover from now on; to FW, on the wing (ArduPlane's `handle_do_vtol_transition`).
+    pub fn set_vtol_mode(&mut self, hover: bool) {
+        self.vtol_mode = hover;
+    }
+
     fn complete_mission(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
         self.state = MissionState::Complete;
         // Nothing of AUTO is left to fly: a leg started in another mode (a GUIDED take-off
         // still climbing) must not complete as if it were a mission item.
         self.leg = Leg::Idle;
-        if inp.armed && !inp.landed && inp.fixed_wing.on_the_wing() {
-            // On the wing, home as a plane (ArduPlane's RTL), then Q_RTL_MODE.
+        if inp.armed && !inp.landed {
+            // ArduPlane's exit_mission_callback: RTL, home as a plane, then Q_RTL_MODE (the
+            // endpoint makes it QRTL where RTL is: Q_RTL_MODE 3, the `paper` model).
             events.push(NavEvent::Info(
                 "Mission complete, changing mode to RTL".into(),
             ));
             events.push(NavEvent::SetMode(FlightMode::Rtl));
-        } else if inp.armed && !inp.landed {
-            events.push(NavEvent::Info(
-                "Mission complete, changing mode to QRTL".into(),
-            ));
-            events.push(NavEvent::SetMode(FlightMode::QRtl));
         } else {
             events.push(NavEvent::Info("Mission complete".into()));
         }
@@ -494,7 +548,15 @@ impl Navigator {
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
                 let loiter =
                     inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
-                if inp.mode == FlightMode::Auto
+                if inp.mode == FlightMode::Guided {
+                    // A GUIDED target on the wing is circled once reached (ArduPlane's guided
+                    // loiter at WP_LOITER_RAD).
+                    if close <= inp.fixed_wing.loiter_radius_m
+                        || fixed_wing::passed(&from, &xy, &here.xy())
+                    {
+                        self.leg = Leg::Circle { xy, z };
+                    }
+                } else if inp.mode == FlightMode::Auto
                     && (close <= radius || fixed_wing::passed(&from, &xy, &here.xy()))
                 {
                     if loiter {
@@ -507,18 +569,29 @@ impl Navigator {
                 }
             }
             Leg::Approach { xy, z, .. } => {
+                let fw = &inp.fixed_wing;
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                let on_wing = inp.fixed_wing.vtol == VtolState::Fw;
-                if close <= fixed_wing::APPROACH_DISTANCE_M && on_wing {
-                    if inp.mode != FlightMode::Rtl {
+                if fw.vtol != VtolState::Fw {
+                    return;
+                }
+                if inp.mode != FlightMode::Rtl {
+                    if close <= fixed_wing::APPROACH_DISTANCE_M {
                         events.push(NavEvent::Transition(false));
-                    } else if inp.fixed_wing.rtl_vtol_land {
-                        // Q_RTL_MODE 1: home reached on the wing, land as QRTL does.
+                    }
+                } else if fw.rtl_vtol_land {
+                    // Q_RTL_MODE 1: within the larger of the RTL radius and the stopping
+                    // distance of home, land as QRTL does (ArduPlane's ModeRTL::switch_QRTL).
+                    let stop = fixed_wing::stopping_distance_m(
+                        fw.vel_ned_m_s.xy().norm(),
+                        fw.trans_decel_m_s2,
+                    );
+                    if close <= fw.loiter_radius_m.max(stop) {
                         events.push(NavEvent::Info("RTL: switching to QRTL".into()));
                         events.push(NavEvent::SetMode(FlightMode::QRtl));
-                    } else if close <= inp.fixed_wing.loiter_radius_m {
-                        self.leg = Leg::Circle { xy, z };
                     }
+                } else if close <= fw.loiter_radius_m {
+                    // Q_RTL_MODE 0: circle home on the wing.
+                    self.leg = Leg::Circle { xy, z };
                 }
             }
             _ => {}
@@ -543,15 +616,25 @@ impl Navigator {
         }
     }
 
+    /// The radius an item is reached within: a waypoint's `param2`, else in a hover
+    /// `Q_WP_RADIUS`, on the wing `WP_RADIUS` but at most the L1 distance (ArduPlane's
+    /// `turn_distance` for a square turn).
     fn item_radius(&self, inp: &NavInput<'_>) -> f64 {
+        let fw = &inp.fixed_wing;
+        let default = if fw.on_the_wing() {
+            let l1 = fw.l1.distance_m(fw.vel_ned_m_s.xy().norm());
+            fw.wp_radius_m.min(l1)
+        } else {
+            inp.wp_radius_m
+        };
         if inp.mode != FlightMode::Auto {
-            return inp.wp_radius_m;
+            return default;
         }
         match inp.mission.get(self.current) {
             Some(i) if i.command == cmd::NAV_WAYPOINT && i.params[1] > 0.0 => {
                 f64::from(i.params[1])
             }
-            _ => inp.wp_radius_m,
+            _ => default,
         }
     }
 
@@ -589,86 +672,6 @@ impl Navigator {
         self.z_cmd += dz.clamp(-max, max);
         let ned = Vector3::new(xy.x, xy.y, self.z_cmd);
         Guidance::Position(ned_to_paper(&ned))
-    }
-
-    /// NAV_TAKEOFF in GUIDED: climb `alt_m` above where the vehicle stands.
-    ///
-    /// # Errors
-    /// Why not: [`Refused::NotNow`] (not GUIDED, not armed, already flying) or
-    /// [`Refused::Invalid`] (altitude not positive or above the envelope).
-    pub fn takeoff(
-        &mut self,
-        alt_m: f64,
-        inp: &NavInput<'_>,
-        events: &mut Vec<NavEvent>,
-    ) -> Result<(), Refused> {
-        self.sync(inp, events);
-        if inp.mode != FlightMode::Guided {
-            return Err(Refused::NotNow("Takeoff: only in GUIDED mode".into()));
-        }
-        if !inp.armed {
-            return Err(Refused::NotNow("Takeoff: must be armed".into()));
-        }
-        if !inp.landed || !matches!(self.leg, Leg::Idle) {
-            return Err(Refused::NotNow("Takeoff: already flying".into()));
-        }
-        if !(alt_m.is_finite() && alt_m > 0.0) {
-            return Err(Refused::Invalid(format!("Takeoff: bad altitude {alt_m} m")));
-        }
-        let here = inp.pos_ned_m;
-        let target = Vector3::new(here.x, here.y, here.z - alt_m);
-        inp.limits
-            .check("Takeoff target", &target)
-            .map_err(|r| Refused::Invalid(r.reason))?;
-        self.z_cmd = here.z;
-        self.leg = Leg::Takeoff {
-            xy: here.xy(),
-            z: target.z,
-        };
-        Ok(())
-    }
-
-    /// A new point to hold in GUIDED (DO_REPOSITION, SET_POSITION_TARGET_*), local NED.
-    ///
-    /// # Errors
-    /// Why not: [`Refused::NotNow`] (not GUIDED, not flying) or [`Refused::Invalid`] (outside
-    /// the envelope).
-    pub fn reposition(
-        &mut self,
-        target_ned_m: Vector3<f64>,
-        inp: &NavInput<'_>,
-        events: &mut Vec<NavEvent>,
-    ) -> Result<(), Refused> {
-        self.sync(inp, events);
-        if inp.mode != FlightMode::Guided {
-            return Err(Refused::NotNow("Reposition: only in GUIDED mode".into()));
-        }
-        if !inp.armed || matches!(self.leg, Leg::Idle) {
-            return Err(Refused::NotNow(
-                "Reposition: not flying, take off first".into(),
-            ));
-        }
-        if !target_ned_m.iter().all(|v| v.is_finite()) {
-            return Err(Refused::Invalid(
-                "Reposition: target is not a number".into(),
-            ));
-        }
-        inp.limits
-            .check("Reposition target", &target_ned_m)
-            .map_err(|r| {
-                Refused::Invalid(format!("Reposition refused: {}", strip_what(&r.reason)))
-            })?;
-        self.leg = Leg::Goto {
-            xy: target_ned_m.xy(),
-            z: target_ned_m.z,
-        };
-        Ok(())
-    }
-
-    /// The point a GUIDED reposition without a position keeps (the current target, or here).
-    #[must_use]
-    pub fn hold_point(&self, here: &Vector3<f64>) -> Vector3<f64> {
-        self.target_ned_m().unwrap_or(*here)
     }
 
     /// MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the item AUTO flies next (0 means 1, as
@@ -736,14 +739,8 @@ fn landing_here(here: &Vector3<f64>) -> Leg {
     }
 }
 
-/// "Reposition target is 150.0 m from home…" → "150.0 m from home…": the refusal sentence
-/// names the target once.
-fn strip_what(reason: &str) -> &str {
-    reason
-        .strip_prefix("Reposition target is ")
-        .or_else(|| reason.strip_prefix("Reposition target "))
-        .unwrap_or(reason)
-}
+#[path = "navigation_guided.rs"]
+mod guided;
 
 #[cfg(test)]
 #[path = "navigation_tests.rs"]

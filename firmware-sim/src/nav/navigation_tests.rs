@@ -13,6 +13,7 @@ struct World {
     pos: Vector3<f64>,
     now_us: u64,
     events: Vec<NavEvent>,
+    vtol_auto: bool,
 }
 
 impl World {
@@ -26,6 +27,7 @@ impl World {
             pos: Vector3::zeros(),
             now_us: 0,
             events: Vec::new(),
+            vtol_auto: false,
         }
     }
 
@@ -41,7 +43,10 @@ impl World {
             wp_radius_m: 0.3,
             speed_up_m_s: 1.0,
             speed_dn_m_s: 0.5,
-            fixed_wing: crate::nav::fixed_wing::FixedWingInput::default(),
+            fixed_wing: crate::nav::fixed_wing::FixedWingInput {
+                vtol_auto: self.vtol_auto,
+                ..Default::default()
+            },
         }
     }
 
@@ -173,10 +178,12 @@ fn auto_flies_each_item_then_qrtl_lands_home() {
     assert_eq!(w.reached(), vec![1, 2], "holding 2 s at the loiter point");
     w.fly(1.5);
     assert_eq!(w.reached(), vec![1, 2, 3, 4]);
-    assert_eq!(w.mode, FlightMode::QRtl, "mission complete in the air");
+    assert_eq!(w.mode, FlightMode::Rtl, "mission complete in the air");
     assert!(w.events.contains(&NavEvent::Info(
-        "Mission complete, changing mode to QRTL".into()
+        "Mission complete, changing mode to RTL".into()
     )));
+    // The endpoint flies RTL as QRTL where it must (Q_RTL_MODE 3, the paper model).
+    w.mode = FlightMode::QRtl;
     w.fly(10.0);
     assert!(!w.armed, "landed and disarmed");
     assert!(w.pos.xy().norm() < 1e-9, "at home: {}", w.pos);
@@ -230,5 +237,138 @@ fn guided_entered_in_flight_holds_and_empty_auto_returns() {
     );
     w.mode = FlightMode::Auto;
     w.fly(0.04);
-    assert_eq!(w.mode, FlightMode::QRtl, "nothing to fly: home");
+    assert_eq!(w.mode, FlightMode::Rtl, "nothing to fly: home");
+}
+
+fn transitions(w: &World) -> Vec<bool> {
+    w.events
+        .iter()
+        .filter_map(|e| match e {
+            NavEvent::Transition(f) => Some(*f),
+            _ => None,
+        })
+        .collect()
+}
+
+/// ArduPlane's AUTO flies the position items after a VTOL take-off on the wing: the navigator
+/// asks for the forward transition when the first waypoint starts, not before.
+#[test]
+fn auto_goes_to_the_wing_for_the_waypoints_after_a_vtol_take_off() {
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+    ]);
+    let mut w = World::new(m);
+    w.mode = FlightMode::Auto;
+    w.armed = true;
+    w.fly(2.9);
+    assert!(transitions(&w).is_empty(), "the take-off climbs in a hover");
+    assert!(w.reached().is_empty());
+    w.fly(0.2);
+    assert_eq!(w.reached()[0], 1);
+    // Item 2 starts: to the wing (then the end of the mission, RTL, asks again).
+    assert_eq!(transitions(&w).first(), Some(&true));
+}
+
+/// With `Q_ENABLE` 2 (VTOL AUTO) AUTO starts in VTOL mode: no transition for the waypoints.
+#[test]
+fn with_vtol_auto_the_waypoints_stay_in_a_hover() {
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+    ]);
+    let mut w = World::new(m);
+    w.vtol_auto = true;
+    w.mode = FlightMode::Auto;
+    w.armed = true;
+    w.fly(4.0);
+    assert_eq!(w.reached()[..2], [1, 2]);
+    // Only the end of the mission (RTL) asks for the wing.
+    let end = w
+        .events
+        .iter()
+        .position(|e| matches!(e, NavEvent::Info(t) if t.starts_with("Mission complete")))
+        .expect("mission complete");
+    assert!(
+        !w.events[..end].contains(&NavEvent::Transition(true)),
+        "{:?}",
+        w.events
+    );
+}
+
+/// A DO_VTOL_TRANSITION to MC puts AUTO in VTOL mode: the waypoints after it are flown in a
+/// hover, with no transition asked for; entering AUTO again clears it.
+#[test]
+fn a_transition_to_mc_item_keeps_the_waypoints_in_a_hover() {
+    let mut to_mc = item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 3.0);
+    to_mc.frame = crate::nav::mission::frame::MISSION;
+    let m = Mission::new(vec![
+        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        to_mc,
+        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 10.0),
+        item(cmd::NAV_WAYPOINT, 8.0, 3.0, 0.0),
+    ]);
+    let mut w = World::new(m);
+    w.mode = FlightMode::Auto;
+    w.armed = true;
+    w.fly(5.0);
+    assert_eq!(w.reached(), vec![1, 2], "holding 10 s at item 3");
+    assert_eq!(
+        transitions(&w),
+        vec![false],
+        "only the item's own (already MC)"
+    );
+    w.mode = FlightMode::Guided;
+    w.fly(0.1);
+    w.mode = FlightMode::Auto;
+    w.fly(0.1);
+    assert_eq!(
+        transitions(&w),
+        vec![false, true],
+        "AUTO entered again: item 3 on the wing"
+    );
+}
+
+/// A VTOL landing point farther than 1.5 stopping distances at the cruise airspeed (18 m at
+/// 12 m/s and 6 m/s²) is approached on the wing, a nearer one in a hover.
+#[test]
+fn a_far_vtol_landing_is_approached_on_the_wing() {
+    for (north, wing) in [(20.0, true), (16.0, false)] {
+        let mut to_mc = item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 3.0);
+        to_mc.frame = crate::nav::mission::frame::MISSION;
+        let m = Mission::new(vec![
+            item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+            item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+            to_mc,
+            item(cmd::NAV_VTOL_LAND, north, 0.0, 0.0),
+        ]);
+        let mut w = World::new(m);
+        w.mode = FlightMode::Auto;
+        w.armed = true;
+        w.fly(3.5);
+        let text = if wing {
+            format!("VTOL approach d={north:.1}")
+        } else {
+            format!("VTOL Position1 d={north:.1}")
+        };
+        assert!(w.events.contains(&NavEvent::Info(text)), "{:?}", w.events);
+        assert_eq!(transitions(&w).contains(&true), wing, "{north} m");
+    }
+}
+
+/// RTL is a fixed-wing mode: entered in a hover it asks for the forward transition; QRTL
+/// does not.
+#[test]
+fn rtl_in_a_hover_goes_to_the_wing_and_qrtl_does_not() {
+    for (mode, wing) in [(FlightMode::Rtl, true), (FlightMode::QRtl, false)] {
+        let mut w = World::new(Mission::default());
+        w.armed = true;
+        w.pos = Vector3::new(30.0, 0.0, -10.0);
+        w.mode = mode;
+        w.fly(0.1);
+        assert_eq!(transitions(&w), if wing { vec![true] } else { vec![] });
+    }
 }

@@ -172,3 +172,53 @@ fn forward_flight_cross_checks_refuse_a_write_and_say_why() {
     p.set("TRIM_ARSPD_CM", 1500.0).unwrap();
     assert!((p.gains().forward.airspeed_trim_m_s - 15.0).abs() < 1e-9);
 }
+
+/// The parameters the twin shares with ArduPlane 4.7 have ArduPlane's `MAV_PARAM_TYPE` (from
+/// its AP_GROUPINFO/GSCALAR definitions: AP_Int8/16/32, AP_Float) and, where the twin does not
+/// keep its airframe's own value, ArduPlane's default.
+#[test]
+fn shared_parameters_have_ardupilots_types_and_defaults() {
+    use ParamType::{Int8 as I8, Int16 as I16, Int32 as I32, Real32 as F32};
+    #[rustfmt::skip]
+    let arduplane: &[(&str, ParamType, Option<f64>)] = &[
+        ("FORMAT_VERSION", I16, None), ("SYSID_THISMAV", I16, Some(1.0)),
+        ("SYSID_MYGCS", I16, Some(255.0)), ("FS_GCS_ENABL", I8, Some(0.0)),
+        ("SR0_RAW_SENS", I16, None), ("SR0_EXT_STAT", I16, None), ("SR0_RC_CHAN", I16, None),
+        ("SR0_POSITION", I16, None), ("SR0_EXTRA1", I16, None), ("SR0_EXTRA2", I16, None),
+        ("SR0_EXTRA3", I16, None), ("SERVO1_FUNCTION", I16, None), ("SERVO5_FUNCTION", I16, None),
+        ("SIM_WIND_SPD", F32, Some(0.0)), ("SIM_WIND_DIR", F32, None),
+        ("SIM_WIND_TURB", F32, Some(0.0)), ("SIM_BATT_VOLTAGE", F32, Some(12.6)),
+        ("WP_RADIUS", I16, Some(90.0)), ("WP_LOITER_RAD", I16, Some(60.0)),
+        ("RTL_RADIUS", I16, Some(0.0)), ("RTL_ALTITUDE", F32, Some(100.0)), ("Q_RTL_MODE", I8, Some(0.0)),
+        ("Q_GUIDED_MODE", I8, Some(0.0)), ("Q_TRANS_DECEL", F32, Some(6.0)),
+        ("Q_WP_RADIUS", F32, Some(200.0)), ("Q_TAILSIT_ENABLE", I8, Some(1.0)), ("Q_ENABLE", I8, Some(1.0)),
+        ("BATT_CAPACITY", I32, None), ("BATT_LOW_VOLT", F32, Some(10.5)),
+        ("BATT_CRT_VOLT", F32, Some(0.0)), ("BATT_LOW_MAH", F32, Some(0.0)),
+        ("BATT_CRT_MAH", F32, Some(0.0)), ("BATT_LOW_TIMER", I8, Some(10.0)),
+        ("BATT_FS_LOW_ACT", I8, Some(0.0)), ("BATT_FS_CRT_ACT", I8, Some(0.0)),
+        ("ARMING_CHECK", I32, Some(1.0)), ("TECS_TIME_CONST", F32, None),
+        ("TECS_CLMB_MAX", F32, None), ("TECS_SINK_MAX", F32, None),
+        ("Q_TAILSIT_RAT_FW", F32, Some(50.0)), ("Q_TAILSIT_RAT_VT", F32, Some(50.0)),
+        ("Q_TAILSIT_ANGLE", I8, Some(45.0)), ("Q_TAILSIT_ANG_VT", I8, None),
+        ("Q_TRANSITION_MS", I16, None), ("NAVL1_PERIOD", F32, None),
+        ("NAVL1_DAMPING", F32, Some(0.75)), ("Q_P_POSXY_P", F32, None), ("Q_P_VELXY_P", F32, None),
+        ("Q_P_VELXY_I", F32, None), ("Q_P_VELXY_IMAX", F32, None), ("Q_WP_SPEED", F32, None),
+        ("Q_ANGLE_MAX", I16, Some(3000.0)),
+    ];
+    let p = Params::new();
+    for (name, ty, default) in arduplane {
+        let i = Params::index_of(name).unwrap_or_else(|| panic!("{name} missing"));
+        let (d, v) = p.at(i).unwrap();
+        assert_eq!(d.ty, *ty, "{name}");
+        if let Some(default) = default {
+            assert_eq!(v, *default, "{name}");
+        }
+    }
+    // An integer parameter stores the C cast of what was sent: 0.4 reads back 0.
+    let mut p = Params::new();
+    assert_eq!(p.set("WP_RADIUS", 0.4).unwrap().new, 0.0);
+    assert!(matches!(
+        p.set("Q_TAILSIT_ENABLE", 0.0),
+        Err(ParamError::ReadOnly(_))
+    ));
+}

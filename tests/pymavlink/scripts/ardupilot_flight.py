@@ -4,8 +4,10 @@ against ArduPlane SITL, the twin, or the twin through the vtol-gcs daemon:
 
     python ardupilot_flight.py tcp:127.0.0.1:5760
 
-wait for a 3D fix, arm in GUIDED, take off to 2 m, reposition 5 m north, upload a 4-item
-mission, fly it in AUTO (a MISSION_ITEM_REACHED for each item), QRTL, wait for the disarm.
+wait for a 3D fix, set Q_GUIDED_MODE 1 (GUIDED targets held in a hover), arm in GUIDED, take
+off to 2 m, reposition 5 m north, upload a 5-item mission (a DO_VTOL_TRANSITION to MC after the
+take-off, so ArduPlane flies its waypoints in a hover, not on the wing), fly it in AUTO (a
+MISSION_ITEM_REACHED for each item), QRTL, wait for the disarm.
 Exits 0 when the flight is done, 1 with the reason otherwise. Every wait has a deadline.
 
 Nothing in here knows about the twin: standard messages, ArduPlane mode names, the mission
@@ -90,6 +92,12 @@ def fly(url):
     gps = wait(master, "GPS_RAW_INT", lambda g: g.fix_type >= 3, what="3D fix")
     print(f"3D fix, {gps.satellites_visible} satellites")
 
+    # ArduPlane flies GUIDED targets on the wing unless Q_GUIDED_MODE is 1.
+    master.mav.param_set_send(master.target_system, master.target_component, b"Q_GUIDED_MODE", 1,
+                              mavutil.mavlink.MAV_PARAM_TYPE_INT8)
+    wait(master, "PARAM_VALUE", lambda p: p.param_id == "Q_GUIDED_MODE" and p.param_value == 1,
+         timeout=10, what="Q_GUIDED_MODE 1")
+
     set_mode(master, "GUIDED")
     master.arducopter_arm()
     command_ack(master, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
@@ -118,29 +126,33 @@ def fly(url):
          what="the reposition point")
     print("repositioned")
 
-    # Home slot, then four items.
+    # Home slot, then five items; the DO_VTOL_TRANSITION to MC keeps the waypoints in a hover.
     a = offset(home.latitude, home.longitude, 5.0, 3.0)
     b = offset(home.latitude, home.longitude, 2.0, 4.0)
     c = offset(home.latitude, home.longitude, 0.0, 3.0)
     mav = mavutil.mavlink
+    to_mc = mavutil.mavlink.MAVLink_mission_item_int_message(
+        master.target_system, master.target_component, 2, mav.MAV_FRAME_MISSION,
+        mav.MAV_CMD_DO_VTOL_TRANSITION, 0, 1, mav.MAV_VTOL_STATE_MC, 0, 0, 0, 0, 0, 0)
     items = [
         item(master, 0, mav.MAV_CMD_NAV_WAYPOINT, home.latitude, home.longitude, 0),
         item(master, 1, mav.MAV_CMD_NAV_VTOL_TAKEOFF, 0, 0, 3.0),
-        item(master, 2, mav.MAV_CMD_NAV_WAYPOINT, a[0], a[1], 3.0),
-        item(master, 3, mav.MAV_CMD_NAV_LOITER_TIME, b[0], b[1], 2.5, p1=2.0),
-        item(master, 4, mav.MAV_CMD_NAV_WAYPOINT, c[0], c[1], 2.0),
+        to_mc,
+        item(master, 3, mav.MAV_CMD_NAV_WAYPOINT, a[0], a[1], 3.0),
+        item(master, 4, mav.MAV_CMD_NAV_LOITER_TIME, b[0], b[1], 2.5, p1=2.0),
+        item(master, 5, mav.MAV_CMD_NAV_WAYPOINT, c[0], c[1], 2.0),
     ]
     upload_mission(master, items)
     print("mission uploaded")
 
     set_mode(master, "AUTO")
     reached = []
-    while len(reached) < 4:
+    while len(reached) < 5:
         m = wait(master, "MISSION_ITEM_REACHED", what=f"item {len(reached) + 1} reached")
         if m.seq not in reached:
             reached.append(m.seq)
             print(f"reached item {m.seq}")
-    if reached != [1, 2, 3, 4]:
+    if reached != [1, 2, 3, 4, 5]:
         raise Failed(f"items reached out of order: {reached}")
 
     set_mode(master, "QRTL")
