@@ -240,8 +240,8 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
             continue;
         }
         let t = stamp.saturating_sub(start) as f64 * 1e-6;
-        if let Ok(msg) = frame.decode() {
-            scan.message(t, msg);
+        if let Ok(l) = frame.decode_lenient() {
+            scan.message(t, l.msg);
         }
     }
     finish_read(&mut reader, path)?;
