@@ -148,9 +148,12 @@ fn print_export(r: &ExportReport) {
 pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
     match cmd {
         LogCommand::Stats { file, json } => {
+            let directions = vtol_gcs::log::directions(&file)?;
             let (mut reader, size) = open_tlog(&file)?;
             let bar = progress_bar(&file);
-            let s = stats::scan(&mut reader, size, &mut |n| bar.set_position(n));
+            let s = stats::scan(&mut reader, size, directions, &mut |n| {
+                bar.set_position(n);
+            });
             bar.finish_and_clear();
             vtol_gcs::log::finish_read(&mut reader, &file)?;
             // A file with no record at all is no log: say so and fail, instead of a table of

@@ -118,6 +118,9 @@ def _enum_value(enum: str, text: str) -> int:
 def _same(msg, field: str, value, text: str) -> bool:
     enum = msg.fieldenums_by_name.get(field)
     if enum is not None:
+        # A value the dialect does not define is written as its number.
+        if text.lstrip("-").isdigit():
+            return int(text) == value
         return _enum_value(enum, text) == value
     if isinstance(value, float):
         return struct.pack("<f", value) == struct.pack("<f", float(text))
