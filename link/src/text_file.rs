@@ -127,6 +127,161 @@ fn is_a_directory() -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory")
 }
 
+/// A file written as [`write`] writes one, but streamed: `-` is standard output; a device, a
+/// FIFO or a symbolic link's target is written in place; a regular file goes into a
+/// temporary file beside it, renamed over it by [`Output::finish`] (dropped unfinished, the
+/// temporary file is removed and the old file stays).
+#[derive(Debug)]
+pub struct Output {
+    sink: Sink,
+}
+
+#[derive(Debug)]
+enum Sink {
+    /// Renamed over `to` by `finish`.
+    Atomic {
+        file: std::fs::File,
+        tmp: PathBuf,
+        to: PathBuf,
+    },
+    /// Written where it is.
+    InPlace(std::fs::File),
+    /// Standard output.
+    Stdout(std::io::Stdout),
+    /// Spooled in an unnamed temporary file (a writer that seeks), copied out by `finish`.
+    Spool { file: std::fs::File, to: Box<Sink> },
+    /// Finished.
+    Done,
+}
+
+impl Output {
+    /// Opens `path` for a writer that only appends.
+    ///
+    /// # Errors
+    /// The I/O error of opening it (a directory is refused).
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        let sink = if path.as_os_str() == "-" {
+            Sink::Stdout(std::io::stdout())
+        } else if in_place(path)? {
+            Sink::InPlace(
+                std::fs::OpenOptions::new()
+                    .write(true)
+                    .create(true)
+                    .truncate(true)
+                    .open(path)?,
+            )
+        } else {
+            let tmp = temporary_beside(path);
+            Sink::Atomic {
+                file: std::fs::File::create(&tmp)?,
+                tmp,
+                to: path.to_owned(),
+            }
+        };
+        Ok(Self { sink })
+    }
+
+    /// Opens `path` for a writer that seeks back (MCAP's): what cannot seek (standard
+    /// output, a FIFO, a device) is spooled in a temporary file first.
+    ///
+    /// # Errors
+    /// As [`Output::create`].
+    pub fn create_seekable(path: &Path) -> std::io::Result<Self> {
+        let out = Self::create(path)?;
+        if matches!(out.sink, Sink::Atomic { .. }) {
+            return Ok(out);
+        }
+        let tmp = std::env::temp_dir().join(format!(
+            ".vtol-spool-{}-{}",
+            std::process::id(),
+            SPOOLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+        ));
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&tmp)?;
+        // Unnamed from the start: nothing is left behind, whatever happens.
+        std::fs::remove_file(&tmp)?;
+        let mut out = out;
+        let to = Box::new(std::mem::replace(&mut out.sink, Sink::Done));
+        out.sink = Sink::Spool { file, to };
+        Ok(out)
+    }
+
+    /// Completes the file: flushes it, and renames a regular file's temporary file over it or
+    /// copies a spool out.
+    ///
+    /// # Errors
+    /// The I/O error of the step that failed.
+    pub fn finish(mut self) -> std::io::Result<()> {
+        match std::mem::replace(&mut self.sink, Sink::Done) {
+            Sink::Atomic { mut file, tmp, to } => {
+                let done = file
+                    .flush()
+                    .and_then(|()| file.sync_all())
+                    .and_then(|()| std::fs::rename(&tmp, &to));
+                if done.is_err() {
+                    let _ = std::fs::remove_file(&tmp);
+                }
+                done
+            }
+            Sink::InPlace(mut f) => f.flush(),
+            Sink::Stdout(mut s) => s.flush(),
+            Sink::Spool { mut file, to, .. } => {
+                use std::io::Seek;
+                file.rewind()?;
+                let mut out = Output { sink: *to };
+                std::io::copy(&mut file, &mut out)?;
+                out.finish()
+            }
+            Sink::Done => Ok(()),
+        }
+    }
+
+    fn writer(&mut self) -> std::io::Result<&mut dyn Write> {
+        Ok(match &mut self.sink {
+            Sink::Atomic { file, .. } | Sink::InPlace(file) | Sink::Spool { file, .. } => file,
+            Sink::Stdout(s) => s,
+            Sink::Done => {
+                return Err(std::io::Error::other("written after finish"));
+            }
+        })
+    }
+}
+
+static SPOOLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+impl Write for Output {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.writer()?.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.writer()?.flush()
+    }
+}
+
+impl std::io::Seek for Output {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        match &mut self.sink {
+            Sink::Atomic { file, .. } | Sink::Spool { file, .. } => file.seek(pos),
+            _ => Err(std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "this output cannot seek",
+            )),
+        }
+    }
+}
+
+impl Drop for Output {
+    fn drop(&mut self) {
+        if let Sink::Atomic { tmp, .. } = &self.sink {
+            let _ = std::fs::remove_file(tmp);
+        }
+    }
+}
+
 /// The temporary file [`write`] goes through: `.NAME.tmp` in the same directory.
 fn temporary_beside(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
