@@ -418,6 +418,41 @@ mod tests {
         assert!(made.is_ok_and(|s| s.success()), "mkfifo {}", path.display());
     }
 
+    /// A streamed output replaces a regular file only when finished; one dropped unfinished
+    /// leaves the old file and nothing beside it. A seeking writer into a FIFO is spooled.
+    #[test]
+    fn a_streamed_output_is_atomic_and_spools_for_a_fifo() {
+        use std::io::{Seek, SeekFrom};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.csv");
+        std::fs::write(&path, b"old").unwrap();
+        let mut o = Output::create(&path).unwrap();
+        o.write_all(b"half").unwrap();
+        drop(o);
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let mut o = Output::create_seekable(&path).unwrap();
+        o.write_all(b"xxxx tail").unwrap();
+        o.seek(SeekFrom::Start(0)).unwrap();
+        o.write_all(b"head").unwrap();
+        o.finish().unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"head tail");
+
+        let fifo = dir.path().join("pipe");
+        make_fifo(&fifo);
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        let mut o = Output::create_seekable(&fifo).unwrap();
+        o.write_all(b"1234 rest").unwrap();
+        o.seek(SeekFrom::Start(0)).unwrap();
+        o.write_all(b"abcd").unwrap();
+        o.finish().unwrap();
+        assert_eq!(reader.join().unwrap(), b"abcd rest");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
     #[test]
     fn a_write_replaces_the_whole_file_and_leaves_nothing_beside_it() {
         let dir = tempfile::tempdir().unwrap();
