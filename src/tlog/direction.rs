@@ -4,8 +4,10 @@
 //! for a frame sent towards the vehicle and 0 for one received from it. Mission Planner and
 //! QGroundControl stamp plain microseconds, whose low two bits are arbitrary. A log follows
 //! the link-bit convention when, over its first [`DETECT_RECORDS`] records, every record's
-//! bits are 0 or 3 and agree with its sender: 3 never on a vehicle's frame, 0 never on a
-//! ground station's. Otherwise a record's direction is its sender's side: a ground station
+//! bits are 0 or 3 and 3 is never on a vehicle's frame (plain microseconds put 1 and 2 on half
+//! the records and 3 on a quarter of the vehicle's). A 0 on a ground station's frame agrees
+//! with the convention: MAVProxy stamps 0 on whatever its vehicle link brings, another ground
+//! station's heartbeat routed to it included. Otherwise a record's direction is its sender's side: a ground station
 //! (a heartbeat of MAV_TYPE_GCS; before any heartbeat, component 190 or system 255) sends
 //! towards the vehicle, everything else comes from the vehicle's side.
 
@@ -52,7 +54,7 @@ impl Directions {
         for (stamp, frame) in records.into_iter().take(DETECT_RECORDS) {
             let ground = probe.is_ground(&frame);
             consistent &= match stamp & 3 {
-                0 => !ground,
+                0 => true,
                 3 => ground || probe.is_vehicle_side_unknown(&frame),
                 _ => false,
             };
@@ -173,6 +175,18 @@ mod tests {
         let log = flight(|t, _| t);
         assert!(log.iter().filter(|(s, _)| s & 3 == 3).count() > 40);
         assert_eq!(count_to_vehicle(&log), (Convention::Sender, 20));
+    }
+
+    /// MAVProxy's log: another ground station's frames, routed to it over the vehicle link,
+    /// carry 0; its own carry 3. Still the convention.
+    #[test]
+    fn another_ground_stations_frames_from_the_vehicle_link_keep_the_convention() {
+        let mut log = flight(|t, gcs| if gcs { t | 3 } else { t & !3 });
+        log.push((
+            1_700_000_100_000_000,
+            beat(255, 0, apm::MavType::MAV_TYPE_GCS),
+        ));
+        assert_eq!(count_to_vehicle(&log), (Convention::LinkBits, 20));
     }
 
     /// Bits of 0 and 3 only, but on the wrong senders: not the convention.
