@@ -223,7 +223,8 @@ fn main() {
     let (cpu0, _) = cpu_s();
     let t = Instant::now();
     let (mut reader, size) = open_tlog(&path).expect("open");
-    let s = stats::scan(&mut reader, size, &mut |_| {});
+    let directions = vtol_gcs::log::directions(&path).expect("open");
+    let s = stats::scan(&mut reader, size, directions, &mut |_| {});
     let wall = t.elapsed().as_secs_f64();
     let cpu = cpu_s().0 - cpu0;
     assert_eq!(s.frames, frames, "stats must see every frame");

@@ -153,8 +153,9 @@ pub struct ArmArgs {
 /// `vtol-gcs mode NAME`.
 #[derive(Debug, Args)]
 pub struct ModeArgs {
-    /// ArduPlane mode name or number: QSTABILIZE (17), QHOVER (18), QLOITER (19), QLAND (20),
-    /// ... (an unknown name lists them all).
+    /// Mode name as the vehicle names it (ArduPlane: QSTABILIZE, QHOVER, QLOITER, QLAND, ...;
+    /// ArduCopter: LOITER, GUIDED, ...; PX4: POSCTL, MISSION, ...) or its number (an unknown
+    /// name lists the vehicle's modes).
     name: String,
     #[command(flatten)]
     link: LinkArgs,
@@ -410,34 +411,11 @@ pub fn reboot(args: RebootArgs) -> ExitCode {
     })
 }
 
-/// A mode given by name (any case) or by ArduPlane number, as its name.
-fn mode_name(given: &str) -> Option<&'static str> {
-    let modes = vtol_gcs::client::MODES;
-    match given.parse::<u32>() {
-        Ok(n) => modes.iter().find(|(_, m)| *m == n).map(|(name, _)| *name),
-        Err(_) => modes
-            .iter()
-            .find(|(name, _)| name.eq_ignore_ascii_case(given))
-            .map(|(name, _)| *name),
-    }
-}
-
 /// `mode NAME|NUMBER`.
 pub fn mode(args: ModeArgs) -> ExitCode {
-    let Some(name) = mode_name(&args.name) else {
-        let known: Vec<String> = vtol_gcs::client::MODES
-            .iter()
-            .map(|(n, m)| format!("{n} ({m})"))
-            .collect();
-        eprintln!(
-            "error: unknown mode '{}': one of {}",
-            args.name,
-            known.join(", ")
-        );
-        return ExitCode::from(EXIT_USAGE);
-    };
+    // The vehicle's heartbeat tells which table its mode names come from.
     with_client(&args.link, |c| async move {
-        c.set_mode(name).await?;
+        let name = c.change_mode(&args.name).await?;
         println!("mode {name}");
         Ok(())
     })

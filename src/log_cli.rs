@@ -124,11 +124,20 @@ fn damage_line(skipped: u64, tail: u64) -> Option<String> {
 }
 
 fn print_export(r: &ExportReport) {
+    // An export to standard output (`-`) keeps it for the data: the report goes to stderr.
+    let to_stdout = r.files.iter().any(|f| f.as_os_str() == "-");
+    let say = |line: String| {
+        if to_stdout {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
     for (name, rows) in &r.rows {
-        println!("{name}: {rows}");
+        say(format!("{name}: {rows}"));
     }
     for f in &r.files {
-        println!("wrote {}", f.display());
+        say(format!("wrote {}", f.display()));
     }
     if r.undecodable > 0 {
         eprintln!(
@@ -148,9 +157,12 @@ fn print_export(r: &ExportReport) {
 pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
     match cmd {
         LogCommand::Stats { file, json } => {
+            let directions = vtol_gcs::log::directions(&file)?;
             let (mut reader, size) = open_tlog(&file)?;
             let bar = progress_bar(&file);
-            let s = stats::scan(&mut reader, size, &mut |n| bar.set_position(n));
+            let s = stats::scan(&mut reader, size, directions, &mut |n| {
+                bar.set_position(n);
+            });
             bar.finish_and_clear();
             vtol_gcs::log::finish_read(&mut reader, &file)?;
             // A file with no record at all is no log: say so and fail, instead of a table of
@@ -207,11 +219,16 @@ pub fn run(cmd: LogCommand) -> anyhow::Result<()> {
             let figure = plot::draw(&main, compare.as_ref(), &a.output, &opts)
                 .map_err(anyhow::Error::from)
                 .with_context(|| format!("plotting {}", a.file.display()))?;
-            println!(
+            let line = format!(
                 "wrote {} ({} panels)",
                 a.output.display(),
                 figure.panels.len()
             );
+            if a.output.as_os_str() == "-" {
+                eprintln!("{line}");
+            } else {
+                println!("{line}");
+            }
         }
     }
     Ok(())

@@ -31,8 +31,8 @@ pub use mavlink::dialects::ardupilotmega as dialect;
 
 pub use decoder::{DecodeStats, FrameDecoder};
 pub use frame::{
-    Frame, FrameError, FrameSource, RawCommand, RawCommandAck, RawCommandKind, command_long,
-    frame_len_from_prefix, gcs_heartbeat,
+    Frame, FrameError, FrameSource, Lenient, RawCommand, RawCommandAck, RawCommandKind,
+    command_long, frame_len_from_prefix, gcs_heartbeat,
 };
 pub use ids::{ComponentId, SystemId};
 pub use signing::{

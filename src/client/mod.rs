@@ -44,30 +44,9 @@ pub const FORCE_MAGIC: f32 = 21196.0;
 /// How long a request waits for the first vehicle heartbeat when no target was given.
 pub const FIND_VEHICLE_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// ArduPlane's mode numbers, which the twin reuses (pymavlink and MAVProxy name them).
-pub const MODES: &[(&str, u32)] = &[
-    ("MANUAL", 0),
-    ("CIRCLE", 1),
-    ("STABILIZE", 2),
-    ("TRAINING", 3),
-    ("ACRO", 4),
-    ("FBWA", 5),
-    ("FBWB", 6),
-    ("CRUISE", 7),
-    ("AUTOTUNE", 8),
-    ("AUTO", 10),
-    ("RTL", 11),
-    ("LOITER", 12),
-    ("TAKEOFF", 13),
-    ("GUIDED", 15),
-    ("QSTABILIZE", 17),
-    ("QHOVER", 18),
-    ("QLOITER", 19),
-    ("QLAND", 20),
-    ("QRTL", 21),
-    ("QAUTOTUNE", 22),
-    ("QACRO", 23),
-];
+/// ArduPlane's mode numbers, which the twin reuses (pymavlink and MAVProxy name them). Other
+/// vehicles' tables are in [`crate::modes`]; [`ClientHandle::set_mode`] takes the vehicle's own.
+pub const MODES: &[(&str, u32)] = crate::modes::PLANE;
 
 /// Why a client request failed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -546,25 +525,80 @@ impl ClientHandle {
         .await
     }
 
-    /// Mode by name ("QHOVER", "QLAND", ...) as ArduPlane numbers them.
+    /// Mode by the vehicle's own name for it (any case: `QHOVER` on ArduPlane, `LOITER` on
+    /// ArduCopter, `POSCTL` on PX4) or by its number.
     ///
     /// # Errors
-    /// [`ClientError::Usage`] for an unknown name; otherwise as [`ClientHandle::arm`].
+    /// [`ClientError::Usage`] for a name the vehicle does not have; otherwise as
+    /// [`ClientHandle::arm`].
     pub async fn set_mode(&self, name: &str) -> Result<(), ClientError> {
-        let upper = name.to_ascii_uppercase();
-        let Some(&(_, number)) = MODES.iter().find(|(n, _)| *n == upper) else {
-            let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
-            return Err(ClientError::Usage(format!(
-                "unknown mode '{name}' (one of {})",
-                names.join(", ")
-            )));
+        self.change_mode(name).await.map(|_| ())
+    }
+
+    /// [`ClientHandle::set_mode`], returning the mode's name as the vehicle's table spells it.
+    ///
+    /// # Errors
+    /// As [`ClientHandle::set_mode`].
+    pub async fn change_mode(&self, given: &str) -> Result<String, ClientError> {
+        let (autopilot, mav_type) = self.vehicle_kind().await?;
+        let number = match given.trim().parse::<u32>() {
+            Ok(n) => Some(n),
+            Err(_) => crate::modes::mode_number(autopilot, mav_type, given),
         };
-        // p1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, p2 = the custom mode (what pymavlink sends).
-        self.command_ok(
-            MavCmd::MAV_CMD_DO_SET_MODE,
-            [1.0, number as f32, 0., 0., 0., 0., 0.],
-        )
-        .await
+        let Some(number) = number else {
+            let known: Vec<String> = crate::modes::modes_for(autopilot, mav_type)
+                .iter()
+                .map(|(n, m)| format!("{n} ({m})"))
+                .collect();
+            let vehicle = crate::modes::vehicle_name(autopilot, mav_type);
+            return Err(ClientError::Usage(if known.is_empty() {
+                format!(
+                    "unknown mode '{given}': the modes of {vehicle} are not known; give its number"
+                )
+            } else {
+                format!(
+                    "unknown mode '{given}' for {vehicle}: one of {}",
+                    known.join(", ")
+                )
+            }));
+        };
+        let params = if autopilot == crate::modes::AUTOPILOT_PX4 {
+            // PX4: base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, then main and sub mode.
+            [
+                1.0,
+                f32::from(crate::modes::px4_main_mode(number)),
+                f32::from(crate::modes::px4_sub_mode(number)),
+                0.,
+                0.,
+                0.,
+                0.,
+            ]
+        } else {
+            // p1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, p2 = the custom mode (what pymavlink sends).
+            [1.0, number as f32, 0., 0., 0., 0., 0.]
+        };
+        self.command_ok(MavCmd::MAV_CMD_DO_SET_MODE, params).await?;
+        Ok(crate::modes::mode_name(autopilot, mav_type, number))
+    }
+
+    /// The vehicle's MAV_AUTOPILOT and MAV_TYPE, from its heartbeat (waited for up to
+    /// [`FIND_VEHICLE_TIMEOUT`] when the vehicle was found by other telemetry).
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`] when no vehicle is heard; [`ClientError::Timeout`] when it
+    /// sends no heartbeat.
+    pub async fn vehicle_kind(&self) -> Result<(u8, u8), ClientError> {
+        let target = self.vehicle().await?;
+        let key = (target.0.0, target.1.0);
+        let heard = self
+            .wait_heard(FIND_VEHICLE_TIMEOUT, |h| h.kinds.contains_key(&key))
+            .await;
+        heard.kinds.get(&key).copied().ok_or_else(|| {
+            ClientError::Timeout(format!(
+                "no heartbeat from vehicle {}:{}",
+                target.0.0, target.1.0
+            ))
+        })
     }
 
     /// Whole table; progress reports (received, total).

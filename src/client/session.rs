@@ -10,14 +10,14 @@
 //! state is saved when the session ends). Inside the daemon it has no key: the router signs
 //! and verifies for it.
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio_util::sync::CancellationToken;
-use vtol_link::dialect::{MavAutopilot, MavMessage, MavType};
+use vtol_link::dialect::MavMessage;
 use vtol_link::{ComponentId, Frame, FrameSource, LinkEvent, LinkId, LinkSender, SystemId};
 
 use super::machine::Inbound;
@@ -91,6 +91,9 @@ pub struct Heard {
     pub unsigned: BTreeSet<u8>,
     /// Systems whose frames arrived signed although the client has no key.
     pub signed: BTreeSet<u8>,
+    /// Each vehicle's (MAV_AUTOPILOT, MAV_TYPE) from its last heartbeat, raw, by (system,
+    /// component): which mode table it uses.
+    pub kinds: BTreeMap<(u8, u8), (u8, u8)>,
 }
 
 /// Adds `sys` to the set `pick` chooses, telling the watchers only when it is new.
@@ -300,14 +303,23 @@ impl Finder<'_> {
         if !WANTED.contains(&frame.message_id()) {
             return None;
         }
-        let msg = frame.decode().ok()?;
+        // Leniently: a heartbeat of a MAV_TYPE the dialect lacks still finds its vehicle. An
+        // enum value read as a stand-in could mislead the machines, so only exact messages
+        // go on to them.
+        let lenient = frame.decode_lenient().ok()?;
         let (sys, comp) = frame.sender();
-        if let MavMessage::HEARTBEAT(h) = &msg
-            && is_vehicle(h.autopilot, h.mavtype)
+        if let Some((mav_type, autopilot)) = frame.heartbeat_kind()
+            && crate::tracker::state::is_vehicle_heartbeat(mav_type, autopilot)
         {
             note(heard, sys.0, |h| &mut h.vehicles);
+            let kind = (autopilot, mav_type);
+            heard.send_if_modified(|h| h.kinds.insert((sys.0, comp.0), kind) != Some(kind));
             self.found((sys, comp));
         }
+        if !lenient.replaced.is_empty() {
+            return None;
+        }
+        let msg = lenient.msg;
         Some(Inbound { sys, comp, msg })
     }
 
@@ -317,16 +329,6 @@ impl Finder<'_> {
             self.target.send_replace(Some(vehicle));
         }
     }
-}
-
-/// A heartbeat from a vehicle: not a ground station, not an autopilot-less peripheral
-/// (pymavlink's `probably_vehicle_heartbeat` rule).
-fn is_vehicle(autopilot: MavAutopilot, mavtype: MavType) -> bool {
-    autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-        && !matches!(
-            mavtype,
-            MavType::MAV_TYPE_GCS | MavType::MAV_TYPE_ONBOARD_CONTROLLER | MavType::MAV_TYPE_GIMBAL
-        )
 }
 
 #[cfg(test)]

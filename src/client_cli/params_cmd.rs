@@ -128,7 +128,13 @@ pub fn params(args: ParamsArgs) -> ExitCode {
                     c.target().unwrap_or((SystemId(1), ComponentId(1))),
                 )
                 .map_err(|e| usage(e.to_string()))?;
-                println!("{} parameters written to {}", set.len(), path.display());
+                let line = format!("{} parameters written to {}", set.len(), path.display());
+                // Saved to standard output (`-`): the file is the output, the report goes aside.
+                if path.as_os_str() == "-" {
+                    eprintln!("{line}");
+                } else {
+                    println!("{line}");
+                }
                 Ok(())
             }
             ParamsCommand::Get { names } => {

@@ -7,9 +7,9 @@
 //! written.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use vtol_link::text_file::Output;
 
 use serde::Serialize;
 use serde_json::Value;
@@ -79,6 +79,15 @@ fn write_err(path: &Path, e: impl std::fmt::Display) -> LogError {
     }
 }
 
+/// Flushes a CSV file and completes it (a regular file is renamed into place).
+fn finish_csv(w: csv::Writer<BufWriter<Output>>) -> std::io::Result<()> {
+    w.into_inner()
+        .map_err(|e| std::io::Error::other(e.to_string()))?
+        .into_inner()
+        .map_err(std::io::IntoInnerError::into_error)?
+        .finish()
+}
+
 fn seconds(stamp: u64, start: u64) -> f64 {
     stamp.saturating_sub(start) as f64 * 1e-6
 }
@@ -97,7 +106,7 @@ pub fn csv_per_type(
     std::fs::create_dir_all(out_dir).map_err(|e| write_err(out_dir, e))?;
     let (mut reader, _) = open_tlog(input)?;
     let mut report = ExportReport::default();
-    let mut writers: HashMap<&'static str, (PathBuf, csv::Writer<BufWriter<File>>)> =
+    let mut writers: HashMap<&'static str, (PathBuf, csv::Writer<BufWriter<Output>>)> =
         HashMap::new();
     for_each_selected(&mut reader, selection, progress, &mut report, |m| {
         let Selected {
@@ -111,7 +120,7 @@ pub fn csv_per_type(
             std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
             std::collections::hash_map::Entry::Vacant(v) => {
                 let path = out_dir.join(format!("{name}.csv"));
-                let file = File::create(&path).map_err(|e| write_err(&path, e))?;
+                let file = Output::create(&path).map_err(|e| write_err(&path, e))?;
                 let mut w = csv::Writer::from_writer(BufWriter::new(file));
                 let header = ["t", "system_id", "component_id"]
                     .into_iter()
@@ -132,8 +141,8 @@ pub fn csv_per_type(
     })?;
     finish_read(&mut reader, input)?;
     let mut files = Vec::new();
-    for (_, (path, mut w)) in writers {
-        w.flush().map_err(|e| write_err(&path, e))?;
+    for (_, (path, w)) in writers {
+        finish_csv(w).map_err(|e| write_err(&path, e))?;
         files.push(path);
     }
     files.sort();
@@ -258,7 +267,7 @@ pub fn csv_wide(
         )));
     }
     let layout = wide_layout(input, selection)?;
-    let file = File::create(out).map_err(|e| write_err(out, e))?;
+    let file = Output::create(out).map_err(|e| write_err(out, e))?;
     let mut w = csv::Writer::from_writer(BufWriter::new(file));
     w.write_record(&layout.header)
         .map_err(|e| write_err(out, e))?;
@@ -272,7 +281,7 @@ pub fn csv_wide(
                           inclusive: bool,
                           row: &mut Vec<String>,
                           tick: &mut u64,
-                          w: &mut csv::Writer<BufWriter<File>>|
+                          w: &mut csv::Writer<BufWriter<Output>>|
      -> Result<(), LogError> {
         loop {
             let tk = *tick as f64 / rate_hz;
@@ -315,7 +324,7 @@ pub fn csv_wide(
     emit_until(last_t, true, &mut row, &mut tick, &mut w)?;
     progress(reader.bytes_consumed());
     finish_read(&mut reader, input)?;
-    w.flush().map_err(|e| write_err(out, e))?;
+    finish_csv(w).map_err(|e| write_err(out, e))?;
     report.rows.insert("rows".into(), rows);
     report.files = vec![out.to_owned()];
     report.skipped_bytes = reader.skipped_bytes as u64;
@@ -358,7 +367,7 @@ pub fn mcap(
     selection: &Selection,
     progress: &mut dyn FnMut(u64),
 ) -> Result<ExportReport, LogError> {
-    let file = File::create(out).map_err(|e| write_err(out, e))?;
+    let file = Output::create_seekable(out).map_err(|e| write_err(out, e))?;
     let options = mcap::WriteOptions::new()
         .compression(None)
         .profile("vtol-gcs");
@@ -420,6 +429,11 @@ pub fn mcap(
     })?;
     finish_read(&mut reader, input)?;
     w.finish().map_err(|e| write_err(out, e))?;
+    w.into_inner()
+        .into_inner()
+        .map_err(std::io::IntoInnerError::into_error)
+        .and_then(Output::finish)
+        .map_err(|e| write_err(out, e))?;
     report.files = vec![out.to_owned()];
     report.skipped_bytes = reader.skipped_bytes as u64;
     report.truncated_tail_bytes = reader.truncated_tail_bytes as u64;

@@ -5,6 +5,8 @@
 //! the enum entry's name (`MAV_TYPE_GCS`), bitmask fields as their flag names joined by ` | `,
 //! character arrays as text, and numeric arrays as one field per element, `name[i]`.
 
+use std::collections::HashMap;
+
 use serde_json::{Map, Value};
 use vtol_link::Frame;
 use vtol_link::dialect::MavMessage;
@@ -12,12 +14,57 @@ use vtol_link::dialect::MavMessage;
 /// One message's fields in definition order of the generated struct, flattened.
 pub type Fields = Vec<(String, Value)>;
 
-/// Decodes a frame and flattens it; `None` if the dialect cannot decode it (unknown id, an enum
-/// value the XML does not define).
+/// Decodes a frame and flattens it; `None` if the dialect does not know the message id. An enum
+/// value the XML does not define is written as its number, as pymavlink reads it.
 #[must_use]
 pub fn decode(frame: &Frame) -> Option<(&'static str, Fields)> {
-    let msg = frame.decode().ok()?;
-    Some(flatten(&msg))
+    let lenient = frame.decode_lenient().ok()?;
+    let (name, mut fields) = flatten(&lenient.msg);
+    for r in &lenient.replaced {
+        let Some(key) = field_key(frame.message_id(), r.field) else {
+            continue;
+        };
+        if let Some(slot) = fields.iter_mut().find(|(k, _)| *k == key) {
+            slot.1 = Value::from(r.value);
+        }
+    }
+    Some((name, fields))
+}
+
+/// The flattened name of an enum field at its place in the payload: the field whose value
+/// changes when another value the enum defines is written there. Learnt once per field.
+fn field_key(message_id: u32, field: vtol_link::frame::EnumField) -> Option<String> {
+    use mavlink::{MavlinkVersion, Message};
+    use std::sync::{Mutex, OnceLock};
+    type Keys = Mutex<HashMap<(u32, u8), Option<String>>>;
+    static KEYS: OnceLock<Keys> = OnceLock::new();
+    let keys = KEYS.get_or_init(Keys::default);
+    let at = (message_id, field.offset);
+    if let Some(k) = keys.lock().ok()?.get(&at) {
+        return k.clone();
+    }
+    let learn = || {
+        let msg = MavMessage::default_message_from_id(message_id)?;
+        let mut payload = [0u8; 255];
+        msg.ser(MavlinkVersion::V2, &mut payload);
+        let (_, before) = flatten(&msg);
+        let span = usize::from(field.offset)..usize::from(field.offset) + usize::from(field.width);
+        (0u32..=u32::from(u16::MAX)).find_map(|v| {
+            payload[span.clone()].copy_from_slice(&v.to_le_bytes()[..span.len()]);
+            let other = MavMessage::parse(MavlinkVersion::V2, message_id, &payload).ok()?;
+            let (_, after) = flatten(&other);
+            before
+                .iter()
+                .zip(&after)
+                .find(|(b, a)| b.1 != a.1)
+                .map(|(b, _)| b.0.clone())
+        })
+    };
+    let key = learn();
+    if let Ok(mut k) = keys.lock() {
+        k.insert(at, key.clone());
+    }
+    key
 }
 
 /// The message's name and flattened fields.
@@ -99,6 +146,30 @@ mod tests {
         assert_eq!(get("type"), Some(Value::String("MAV_TYPE_GCS".into())));
         assert!(get("mavtype").is_none());
         assert!(get("custom_mode").is_some_and(|v| v.is_number()));
+    }
+
+    /// A COMMAND_ACK of a command number the dialect lacks is written, the command as its
+    /// number and every other field as usual.
+    #[test]
+    fn an_enum_value_the_dialect_lacks_is_written_as_its_number() {
+        let ack = vtol_link::RawCommandAck {
+            command: 31_337,
+            result: 4,
+            progress: 9,
+            result_param2: 0,
+            target_system: 255,
+            target_component: 190,
+        };
+        let frame = ack.to_frame(vtol_link::SystemId(1), vtol_link::ComponentId(1), 0);
+        let (name, f) = decode(&frame).unwrap();
+        assert_eq!(name, "COMMAND_ACK");
+        let get = |k: &str| f.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+        assert_eq!(get("command"), Some(Value::from(31_337)));
+        assert_eq!(
+            get("result"),
+            Some(Value::String("MAV_RESULT_FAILED".into()))
+        );
+        assert_eq!(get("progress"), Some(Value::from(9)));
     }
 
     #[test]

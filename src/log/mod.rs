@@ -62,6 +62,19 @@ pub fn open_tlog(path: &Path) -> Result<(TlogReader, u64), LogError> {
     Ok((reader, size))
 }
 
+/// How the log at `path` tells a record's direction, from its first records (see
+/// [`crate::tlog::Directions`]).
+///
+/// # Errors
+/// [`LogError::Read`].
+pub fn directions(path: &Path) -> Result<crate::tlog::Directions, LogError> {
+    let reader = TlogReader::open(path).map_err(|source| LogError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    Ok(crate::tlog::Directions::detect(reader))
+}
+
 /// Ends a scan: a read error in the middle of the file is an error (the report would be
 /// silently short), a torn tail or garbage is not.
 ///

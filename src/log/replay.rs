@@ -2,8 +2,10 @@
 //!
 //! The frames the vehicle side sent are written, byte for byte, into the daemon's vehicle link
 //! at their recorded times (divided by the speed factor), so every client, script and view sees
-//! the flight again. Records stamped as sent towards the vehicle (link bits 3, the convention of
-//! this project's logger and of MAVProxy) are left out: they were the ground side's own traffic.
+//! the flight again. Records sent towards the vehicle are left out: they were the ground side's
+//! own traffic. Their direction is the timestamp's link bits in a log that follows that
+//! convention (this project's logger, MAVProxy), otherwise their sender's (a ground station's
+//! frames), as [`crate::tlog::Directions`] decides.
 //! What clients send to the replayed vehicle is read and dropped.
 //!
 //! The file is read on a blocking thread (plain file I/O) that feeds the async pacer through a
@@ -113,14 +115,19 @@ pub async fn run<S>(
     });
     let (tx, mut rx) = mpsc::channel::<(u64, Frame)>(READ_AHEAD);
     let feeder_cancel = cancel.clone();
+    let detect_path = path.to_owned();
     let feeder = tokio::task::spawn_blocking(move || {
         let mut reader = reader;
         let mut left_out = 0u64;
+        let mut directions = TlogReader::open(&detect_path).map_or(
+            crate::tlog::Directions::with(crate::tlog::Convention::LinkBits),
+            crate::tlog::Directions::detect,
+        );
         for (stamp, frame) in reader.by_ref() {
             if feeder_cancel.is_cancelled() {
                 break;
             }
-            if stamp & 3 == 3 {
+            if directions.to_vehicle(stamp, &frame) {
                 left_out += 1;
                 continue;
             }

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use crate::tlog::TlogReader;
+use crate::tlog::{Convention, Directions, TlogReader};
 use crate::tracker::seq::SenderSeq;
 
 /// Frames of one message type.
@@ -59,8 +59,12 @@ pub struct LogStats {
     pub file_bytes: u64,
     /// Frames read.
     pub frames: u64,
-    /// Frames whose timestamp mark them as sent towards the vehicle (link bits 3).
+    /// Frames sent towards the vehicle: by the timestamp's link bits in a log that follows
+    /// that convention (MAVProxy's, this daemon's), otherwise by their sender (a ground
+    /// station's frames).
     pub frames_to_vehicle: u64,
+    /// How the direction was read: `link_bits` or `sender`.
+    pub direction_from: &'static str,
     /// First record's time, µs since the Unix epoch.
     pub start_us: Option<u64>,
     /// Last record's time minus the first's, s.
@@ -77,7 +81,13 @@ pub struct LogStats {
 
 /// Scans a log. `progress` is called now and then with the bytes consumed so far.
 #[must_use]
-pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u64)) -> LogStats {
+pub fn scan(
+    reader: &mut TlogReader,
+    file_bytes: u64,
+    directions: Directions,
+    progress: &mut dyn FnMut(u64),
+) -> LogStats {
+    let mut directions = directions;
     let mut by_id: BTreeMap<u32, u64> = BTreeMap::new();
     // (count, lost, sequences) per (sys, comp), indexed flat for speed. A new session of a
     // sender (a restart, a second process under its identity) is no loss: see
@@ -89,7 +99,7 @@ pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u
     let mut last_count: u64 = 0;
     while let Some((stamp, frame)) = reader.next() {
         frames += 1;
-        if stamp & 3 == 3 {
+        if directions.to_vehicle(stamp, &frame) {
             to_vehicle += 1;
         }
         first.get_or_insert(stamp);
@@ -147,6 +157,10 @@ pub fn scan(reader: &mut TlogReader, file_bytes: u64, progress: &mut dyn FnMut(u
         file_bytes,
         frames,
         frames_to_vehicle: to_vehicle,
+        direction_from: match directions.convention() {
+            Convention::LinkBits => "link_bits",
+            Convention::Sender => "sender",
+        },
         start_us: first,
         duration_s,
         messages,
@@ -181,8 +195,16 @@ pub fn render(s: &LogStats) -> String {
     );
     let _ = writeln!(
         out,
-        "{} frames in {} bytes, {:.3} s from {start} UTC ({} towards the vehicle)",
-        s.frames, s.file_bytes, s.duration_s, s.frames_to_vehicle
+        "{} frames in {} bytes, {:.3} s from {start} UTC ({} towards the vehicle, by {})",
+        s.frames,
+        s.file_bytes,
+        s.duration_s,
+        s.frames_to_vehicle,
+        if s.direction_from == "link_bits" {
+            "the timestamps' link bits"
+        } else {
+            "sender"
+        }
     );
     let _ = writeln!(
         out,

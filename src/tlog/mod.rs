@@ -13,6 +13,7 @@
 //! its own timer: the producers only wake it after a quiet spell.
 //! SETUP_SIGNING is never logged: it carries the signing key.
 
+mod direction;
 mod naming;
 mod reader;
 #[cfg(test)]
@@ -27,6 +28,7 @@ use vtol_link::Frame;
 pub use vtol_link::tlog::Direction;
 use vtol_link::tlog::encode_record;
 
+pub use direction::{Convention, DETECT_RECORDS, Directions};
 pub use naming::log_file_name;
 use naming::{create_unique, is_regular_file};
 pub use reader::TlogReader;

@@ -62,10 +62,10 @@ pub struct VehicleView {
     /// Its frames received and lost over the last seconds: this vehicle's link health, apart
     /// from other vehicles sharing the link.
     pub window: Window,
-    /// MAV_TYPE.
-    pub mav_type: MavType,
-    /// MAV_AUTOPILOT.
-    pub autopilot: MavAutopilot,
+    /// MAV_TYPE as the heartbeat gave it (a value the dialect lacks included).
+    pub mav_type: u8,
+    /// MAV_AUTOPILOT as the heartbeat gave it.
+    pub autopilot: u8,
     /// custom_mode.
     pub custom_mode: u32,
     /// Armed bit of the last heartbeat.
@@ -125,11 +125,17 @@ impl VehicleView {
         )
     }
 
-    /// The mode's name in the ArduPlane table (the twin's mode numbers), or the number.
+    /// The mode's name for this vehicle's autopilot and type (`QHOVER` on ArduPlane, `LOITER`
+    /// on ArduCopter, `POSCTL` on PX4), or `MODE(n)`.
     #[must_use]
     pub fn mode_name(&self) -> String {
-        plane_mode_name(self.custom_mode)
-            .map_or_else(|| format!("MODE({})", self.custom_mode), str::to_owned)
+        crate::modes::mode_name(self.autopilot, self.mav_type, self.custom_mode)
+    }
+
+    /// What the vehicle is (`ArduPlane`, `PX4 quadrotor`, or its numbers).
+    #[must_use]
+    pub fn kind(&self) -> String {
+        crate::modes::vehicle_name(self.autopilot, self.mav_type)
     }
 }
 
@@ -159,31 +165,10 @@ pub fn servo_outputs(s: &SERVO_OUTPUT_RAW_DATA) -> [u16; 16] {
 /// Names of ArduPlane's mode numbers (what pymavlink's `mode_mapping_apm` holds).
 #[must_use]
 pub fn plane_mode_name(mode: u32) -> Option<&'static str> {
-    Some(match mode {
-        0 => "MANUAL",
-        1 => "CIRCLE",
-        2 => "STABILIZE",
-        3 => "TRAINING",
-        4 => "ACRO",
-        5 => "FBWA",
-        6 => "FBWB",
-        7 => "CRUISE",
-        8 => "AUTOTUNE",
-        10 => "AUTO",
-        11 => "RTL",
-        12 => "LOITER",
-        13 => "TAKEOFF",
-        15 => "GUIDED",
-        17 => "QSTABILIZE",
-        18 => "QHOVER",
-        19 => "QLOITER",
-        20 => "QLAND",
-        21 => "QRTL",
-        22 => "QAUTOTUNE",
-        23 => "QACRO",
-        24 => "THERMAL",
-        _ => return None,
-    })
+    crate::modes::PLANE
+        .iter()
+        .find(|(_, n)| *n == mode)
+        .map(|(name, _)| *name)
 }
 
 /// Health of one link, from what arrived on it.
@@ -261,17 +246,18 @@ impl Default for VehicleState {
     }
 }
 
-/// Whether a heartbeat comes from a vehicle (pymavlink `probably_vehicle_heartbeat`).
+/// Whether a heartbeat comes from a vehicle (pymavlink `probably_vehicle_heartbeat`), from
+/// its raw `type` and `autopilot` (a type the dialect does not define is a vehicle).
 #[must_use]
-pub fn is_vehicle_heartbeat(mav_type: MavType, autopilot: MavAutopilot) -> bool {
-    autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-        && !matches!(
-            mav_type,
-            MavType::MAV_TYPE_GCS
-                | MavType::MAV_TYPE_GIMBAL
-                | MavType::MAV_TYPE_ADSB
-                | MavType::MAV_TYPE_ONBOARD_CONTROLLER
-        )
+pub fn is_vehicle_heartbeat(mav_type: u8, autopilot: u8) -> bool {
+    autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID as u8
+        && ![
+            MavType::MAV_TYPE_GCS as u8,
+            MavType::MAV_TYPE_GIMBAL as u8,
+            MavType::MAV_TYPE_ADSB as u8,
+            MavType::MAV_TYPE_ONBOARD_CONTROLLER as u8,
+        ]
+        .contains(&mav_type)
 }
 
 impl VehicleState {
@@ -360,12 +346,17 @@ impl VehicleState {
         if !wanted {
             return None;
         }
-        let Ok(msg) = frame.decode() else { return None };
+        // Leniently, as pymavlink: a value the dialect does not define (a newer MAV_TYPE)
+        // must not lose the vehicle; its raw numbers are read from the payload.
+        let Ok(msg) = frame.decode_lenient().map(|l| l.msg) else {
+            return None;
+        };
         if let MavMessage::HEARTBEAT(hb) = &msg {
-            if !is_vehicle_heartbeat(hb.mavtype, hb.autopilot) {
+            let (mav_type, autopilot) = frame.heartbeat_kind()?;
+            if !is_vehicle_heartbeat(mav_type, autopilot) {
                 return None;
             }
-            self.apply_heartbeat(key, link, hb, &stamp);
+            self.apply_heartbeat(key, link, hb, (mav_type, autopilot), &stamp);
             return Some(msg);
         }
         let v = self.vehicles.get_mut(&key)?;
@@ -402,6 +393,7 @@ impl VehicleState {
         key: (SystemId, ComponentId),
         link: LinkId,
         hb: &vtol_link::dialect::HEARTBEAT_DATA,
+        (mav_type, autopilot): (u8, u8),
         stamp: &Stamp,
     ) {
         let (epoch, now, stamp) = (self.epoch, stamp.at(), *stamp);
@@ -416,8 +408,8 @@ impl VehicleState {
                 w.add_stamped(&stamp, 1, 0);
                 w
             },
-            mav_type: hb.mavtype,
-            autopilot: hb.autopilot,
+            mav_type,
+            autopilot,
             custom_mode: hb.custom_mode,
             armed: false,
             system_status: hb.system_status,
@@ -431,8 +423,8 @@ impl VehicleState {
             reboots: 0,
             last_reboot: None,
         });
-        v.mav_type = hb.mavtype;
-        v.autopilot = hb.autopilot;
+        v.mav_type = mav_type;
+        v.autopilot = autopilot;
         v.custom_mode = hb.custom_mode;
         v.armed = hb
             .base_mode

@@ -259,3 +259,71 @@ fn vehicles_leaving_and_rejoining_on_new_links_leave_the_state_at_its_steady_siz
     assert!(sizes.iter().all(|x| x.4 <= DOWN_MEMORY), "{sizes:?}");
     assert_eq!(s.down.len(), s.down_order.len());
 }
+
+/// A HEARTBEAT's payload: custom_mode, type, autopilot (armed, custom mode enabled, ACTIVE).
+fn raw_heartbeat(custom_mode: u32, mav_type: u8, autopilot: u8) -> Frame {
+    let mut p = [0u8; 9];
+    p[..4].copy_from_slice(&custom_mode.to_le_bytes());
+    p[4] = mav_type;
+    p[5] = autopilot;
+    p[6] = 0x81;
+    p[7] = 4;
+    p[8] = 3;
+    Frame::encode_payload_v2(SystemId(1), ComponentId(1), 0, 0, &p).unwrap()
+}
+
+#[test]
+fn an_arducopter_reads_copter_modes() {
+    let mut s = VehicleState::default();
+    // ArduCopter, QUADROTOR, custom_mode 5.
+    s.apply(
+        LinkId(1),
+        Side::Vehicle,
+        &raw_heartbeat(5, 2, 3),
+        Instant::now(),
+    );
+    let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+    assert_eq!((v.autopilot, v.mav_type), (3, 2));
+    assert_eq!(v.mode_name(), "LOITER");
+    assert_eq!(v.kind(), "ArduCopter");
+    s.apply(
+        LinkId(1),
+        Side::Vehicle,
+        &raw_heartbeat(4, 2, 3),
+        Instant::now(),
+    );
+    assert_eq!(
+        s.vehicles[&(SystemId(1), ComponentId(1))].mode_name(),
+        "GUIDED"
+    );
+    // PX4: main mode 3 (POSCTL).
+    s.apply(
+        LinkId(1),
+        Side::Vehicle,
+        &raw_heartbeat(196_609, 2, 12),
+        Instant::now(),
+    );
+    assert_eq!(
+        s.vehicles[&(SystemId(1), ComponentId(1))].mode_name(),
+        "POSCTL"
+    );
+}
+
+/// A vehicle whose MAV_TYPE the dialect does not define (60) is tracked, not dropped: its
+/// type is kept as the number and its mode falls back to `MODE(n)`.
+#[test]
+fn a_type_the_dialect_lacks_is_still_a_vehicle() {
+    let mut s = VehicleState::default();
+    let got = s.apply(
+        LinkId(1),
+        Side::Vehicle,
+        &raw_heartbeat(7, 60, 3),
+        Instant::now(),
+    );
+    assert!(matches!(got, Some(MavMessage::HEARTBEAT(_))));
+    let v = &s.vehicles[&(SystemId(1), ComponentId(1))];
+    assert_eq!((v.autopilot, v.mav_type), (3, 60));
+    assert!(v.armed);
+    assert_eq!(v.mode_name(), "MODE(7)");
+    assert_eq!(v.kind(), "ArduPilot type 60");
+}

@@ -8,6 +8,7 @@
 
 mod command;
 mod dialect;
+mod lenient;
 mod source;
 #[cfg(test)]
 mod tests;
@@ -24,6 +25,7 @@ use crate::protocol::id;
 pub use command::{RawCommand, RawCommandAck, RawCommandKind, command_long, gcs_heartbeat};
 use dialect::dialect_table;
 pub use dialect::{crc_extra, frame_crc, frame_len_from_prefix, known_message_ids, message_name};
+pub use lenient::{EnumField, Lenient, Replaced, enum_fields};
 pub use source::FrameSource;
 
 /// First byte of a MAVLink 1 frame.
@@ -453,6 +455,31 @@ impl Frame {
         MavMessage::parse(self.version(), id, self.payload()).map_err(|source| FrameError::Parse {
             message_id: id,
             source,
+        })
+    }
+
+    /// Decodes the payload as pymavlink does: an enum value the dialect does not define (a
+    /// newer MAV_TYPE, a command number it lacks) does not fail the decode; the field holds
+    /// its enum's default instead and [`Lenient::replaced`] gives the wire value. For
+    /// showing, tracking and logging; code that acts on an enum's value uses
+    /// [`Frame::decode`] or checks `replaced`. Fails only for an id the dialect does not know.
+    pub fn decode_lenient(&self) -> Result<Lenient, FrameError> {
+        let id = self.message_id();
+        if !self.verified {
+            return Err(FrameError::UnknownMessage(id));
+        }
+        lenient::parse(self.version(), id, self.payload()).map_err(|source| FrameError::Parse {
+            message_id: id,
+            source,
+        })
+    }
+
+    /// A HEARTBEAT's `type` (MAV_TYPE) and `autopilot` (MAV_AUTOPILOT) as on the wire, values
+    /// the dialect does not define included; `None` for other messages.
+    pub fn heartbeat_kind(&self) -> Option<(u8, u8)> {
+        (self.message_id() == id::HEARTBEAT && self.verified).then(|| {
+            let p = self.payload_padded::<9>();
+            (p[4], p[5])
         })
     }
 

@@ -215,3 +215,112 @@ fn unsupported_ack_for_unknown_command_decodes_in_raw_form() {
     assert_eq!(ack.payload(), &[0xe8, 0xfd, 3, 0xff, 0, 0, 0, 0, 255, 190]);
     assert_eq!(Frame::from_bytes(ack.bytes().clone()).unwrap(), ack);
 }
+
+/// A HEARTBEAT with a MAV_TYPE the dialect does not define (60) decodes, the type read as the
+/// default and the wire value kept, as pymavlink keeps it.
+#[test]
+fn an_unknown_enum_value_decodes_leniently() {
+    let mut p = [0u8; 9];
+    p[..4].copy_from_slice(&5u32.to_le_bytes());
+    p[4] = 60; // type
+    p[5] = 3; // autopilot ARDUPILOTMEGA
+    p[6] = 0x81;
+    p[7] = 4; // ACTIVE
+    p[8] = 3;
+    let f = Frame::encode_payload_v2(SystemId(1), ComponentId(1), 0, 0, &p).unwrap();
+    assert!(matches!(
+        f.decode(),
+        Err(FrameError::Parse { message_id: 0, .. })
+    ));
+    let l = f.decode_lenient().unwrap();
+    let MavMessage::HEARTBEAT(hb) = &l.msg else {
+        panic!("{l:?}")
+    };
+    assert_eq!(hb.custom_mode, 5);
+    assert_eq!(hb.autopilot, apm::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    assert_eq!(hb.system_status, apm::MavState::MAV_STATE_ACTIVE);
+    assert_eq!(l.raw("MavType"), Some(60));
+    assert_eq!(l.replaced.len(), 1);
+    assert_eq!(l.replaced[0].field.offset, 4);
+    assert_eq!(f.payload()[4], 60);
+    // Two bad fields at once: type and system_status.
+    p[7] = 200;
+    let f = Frame::encode_payload_v2(SystemId(1), ComponentId(1), 0, 0, &p).unwrap();
+    let l = f.decode_lenient().unwrap();
+    assert_eq!(l.raw("MavType"), Some(60));
+    assert_eq!(l.raw("MavState"), Some(200));
+    // A frame that decodes exactly has nothing replaced.
+    let ok = Frame::encode_v2(SystemId(1), ComponentId(1), 0, &heartbeat());
+    assert!(ok.decode_lenient().unwrap().replaced.is_empty());
+}
+
+/// A COMMAND_ACK of a command number the dialect lacks (a two-byte enum, with MAV_RESULT and
+/// the extension fields after it) decodes with every other field intact.
+#[test]
+fn a_command_ack_of_an_unknown_command_decodes() {
+    let ack = RawCommandAck {
+        command: 31_337,
+        result: 0,
+        progress: 7,
+        result_param2: -3,
+        target_system: 255,
+        target_component: 190,
+    };
+    let f = ack.to_frame(SystemId(1), ComponentId(1), 9);
+    assert!(f.decode().is_err());
+    let l = f.decode_lenient().unwrap();
+    let MavMessage::COMMAND_ACK(a) = &l.msg else {
+        panic!("{l:?}")
+    };
+    assert_eq!(l.raw("MavCmd"), Some(31_337));
+    assert_eq!(l.replaced[0].field.width, 2);
+    assert_eq!(a.result, apm::MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(
+        (
+            a.progress,
+            a.result_param2,
+            a.target_system,
+            a.target_component
+        ),
+        (7, -3, 255, 190)
+    );
+}
+
+/// Every enum field the dialect declares is found at its place: a field set to an undefined
+/// value in any message decodes leniently, with that value reported.
+#[test]
+fn every_messages_enum_fields_are_learnt() {
+    let hb = enum_fields(0);
+    assert_eq!(
+        hb.iter()
+            .map(|f| (f.offset, f.width, f.enum_type))
+            .collect::<Vec<_>>(),
+        [
+            (4, 1, "MavType"),
+            (5, 1, "MavAutopilot"),
+            (7, 1, "MavState")
+        ]
+    );
+    let mut messages = 0;
+    for id in known_message_ids() {
+        for f in enum_fields(id) {
+            let msg = MavMessage::default_message_from_id(id).unwrap();
+            let mut p = [0u8; 255];
+            msg.ser(MavlinkVersion::V2, &mut p);
+            let at = usize::from(f.offset);
+            let w = usize::from(f.width);
+            p[at..at + w].fill(0xA5);
+            let frame = Frame::encode_payload_v2(SystemId(1), ComponentId(1), 0, id, &p).unwrap();
+            // 0xA5.. is a defined value of a few enums.
+            if frame.decode().is_ok() {
+                continue;
+            }
+            let l = frame
+                .decode_lenient()
+                .unwrap_or_else(|e| panic!("{id} {f:?}: {e}"));
+            assert!(l.replaced.iter().any(|r| r.field == f), "{id} {f:?}");
+            messages += 1;
+        }
+    }
+    assert!(messages > 50, "{messages}");
+}

@@ -223,6 +223,7 @@ fn vtol_state_name(v: u32) -> Option<&'static str> {
 }
 
 fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
+    let mut directions = super::super::directions(path)?;
     let (mut reader, _) = open_tlog(path)?;
     let mut scan = Scan::default();
     let mut start = None;
@@ -233,15 +234,15 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
     const WANTED: [u32; 8] = [30, 33, 32, 36, 74, 85, 245, 251];
     for (stamp, frame) in reader.by_ref() {
         let start = *start.get_or_insert(stamp);
-        if stamp & 3 == 3 || !WANTED.contains(&frame.message_id()) {
+        if !WANTED.contains(&frame.message_id()) || directions.to_vehicle(stamp, &frame) {
             continue;
         }
         if *vehicle.get_or_insert(frame.system_id()) != frame.system_id() {
             continue;
         }
         let t = stamp.saturating_sub(start) as f64 * 1e-6;
-        if let Ok(msg) = frame.decode() {
-            scan.message(t, msg);
+        if let Ok(l) = frame.decode_lenient() {
+            scan.message(t, l.msg);
         }
     }
     finish_read(&mut reader, path)?;

@@ -294,13 +294,20 @@ pub fn draw(
 }
 
 fn write_png(out: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), LogError> {
-    let file = std::fs::File::create(out).map_err(|e| draw_err(out, e))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut writer = enc.write_header().map_err(|e| draw_err(out, e))?;
-    writer.write_image_data(rgb).map_err(|e| draw_err(out, e))?;
-    writer.finish().map_err(|e| draw_err(out, e))
+    let file = vtol_link::text_file::Output::create(out).map_err(|e| draw_err(out, e))?;
+    let mut buf = std::io::BufWriter::new(file);
+    {
+        let mut enc = png::Encoder::new(&mut buf, w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut writer = enc.write_header().map_err(|e| draw_err(out, e))?;
+        writer.write_image_data(rgb).map_err(|e| draw_err(out, e))?;
+        writer.finish().map_err(|e| draw_err(out, e))?;
+    }
+    buf.into_inner()
+        .map_err(std::io::IntoInnerError::into_error)
+        .and_then(vtol_link::text_file::Output::finish)
+        .map_err(|e| draw_err(out, e))
 }
 
 /// Where a figure goes when `-o` names a directory: `DIR/<kind>.png`.
