@@ -95,10 +95,14 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     let out_rows = u16::try_from(outputs.len().max(1)).unwrap_or(8) + 2;
     let [horizon_area, pwm] =
         Layout::vertical([Constraint::Min(5), Constraint::Length(out_rows)]).areas(left);
-    draw_horizon(f, snap, vehicle, horizon_area);
+    let shown = vehicle.and_then(|v| shown_attitude(app, snap, v));
+    draw_horizon(f, snap, vehicle, shown, horizon_area);
+    let title = match shown.and_then(|s| s.frame.label()) {
+        Some(frame) => format!(" Attitude ({frame}) and position "),
+        None => " Attitude and position ".to_owned(),
+    };
     f.render_widget(
-        Paragraph::new(numbers(app, snap, vehicle))
-            .block(Block::bordered().title(" Attitude and position ")),
+        Paragraph::new(numbers(app, snap, vehicle, shown)).block(Block::bordered().title(title)),
         right,
     );
     draw_outputs(f, app, vehicle, &outputs, pwm);
@@ -110,12 +114,30 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     }
 }
 
-fn draw_horizon(f: &mut Frame<'_>, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>, area: Rect) {
-    let att = vehicle.and_then(|v| v.attitude);
+/// The attitude of `v` as the operator reads it: a tailsitter in hover in its hover frame.
+pub(super) fn shown_attitude(
+    app: &App,
+    snap: &Snapshot<'_>,
+    v: &VehicleView,
+) -> Option<crate::tui::attitude::Shown> {
+    crate::tui::attitude::shown(snap.state, v, app.params.value("Q_TAILSIT_ENABLE"))
+}
+
+fn draw_horizon(
+    f: &mut Frame<'_>,
+    snap: &Snapshot<'_>,
+    vehicle: Option<&VehicleView>,
+    att: Option<crate::tui::attitude::Shown>,
+    area: Rect,
+) {
     let stale_att = vehicle
         .and_then(|v| age_s(snap, v, 30))
         .filter(|a| *a > STALE_S);
-    let block = Block::bordered().title(" Horizon ");
+    let title = match att.and_then(|a| a.frame.label()) {
+        Some(frame) => format!(" Horizon ({frame}) "),
+        None => " Horizon ".to_owned(),
+    };
+    let block = Block::bordered().title(title);
     let inner = block.inner(area);
     f.render_widget(block, area);
     let [tape, horizon] =
@@ -174,9 +196,14 @@ fn draw_horizon(f: &mut Frame<'_>, snap: &Snapshot<'_>, vehicle: Option<&Vehicle
 }
 
 /// The attitude, position against the setpoint, air data and VTOL state, one line each.
-fn numbers(app: &App, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>) -> Vec<Line<'static>> {
+fn numbers(
+    app: &App,
+    snap: &Snapshot<'_>,
+    vehicle: Option<&VehicleView>,
+    shown: Option<crate::tui::attitude::Shown>,
+) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
-    let (v, a) = match (vehicle, vehicle.and_then(|v| v.attitude)) {
+    let (v, a) = match (vehicle, shown) {
         (Some(v), Some(a)) => (v, a),
         (Some(_), None) => return vec![Line::raw("no attitude yet")],
         (None, _) => return vec![Line::raw("no vehicle yet")],
@@ -281,7 +308,7 @@ fn position_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'
 /// Airspeed, angle of attack and sideslip; the VTOL state and a transition's progress.
 fn air_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'static>> {
     let min = app.params.value("ARSPD_FBW_MIN");
-    let air = crate::tui::air::air(snap.state, v, min);
+    let air = crate::tui::air::air(snap.state, v, min, super::tailsitter(app, v));
     let num = |x: Option<f32>, f: &dyn Fn(f32) -> String| x.map_or_else(|| "-".to_owned(), f);
     let air_line = format!(
         "Air   {:>5} m/s  AoA {:>6}  SSA {:>6}",
@@ -329,9 +356,14 @@ fn draw_outputs(
         height: 1,
         ..inner
     });
+    let w = used
+        .iter()
+        .map(|i| names[*i].chars().count())
+        .max()
+        .unwrap_or(0);
     for (row, i) in rows.zip(used) {
         let us = v.servo_us[*i];
-        let label = format!("{:<13} {us:>4} µs ", names[*i]);
+        let label = format!("{:<w$} {us:>4} µs ", names[*i]);
         let width = usize::from(row.width).saturating_sub(label.chars().count());
         f.render_widget(Paragraph::new(pwm_bar(label, us, width)), row);
     }
