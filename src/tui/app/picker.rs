@@ -28,15 +28,20 @@ pub fn vehicle_modes(v: Option<&VehicleView>) -> &'static [(&'static str, u32)] 
 }
 
 impl Picker {
-    /// The modes of `v` that match the filter, in the vehicle's order.
+    /// The modes of `v` that match the filter: the one named exactly first, then those that
+    /// start with it, then the rest, each in the vehicle's order.
     #[must_use]
     pub fn listed(&self, v: Option<&VehicleView>) -> Vec<(&'static str, u32)> {
         let f = self.filter.to_ascii_uppercase();
-        vehicle_modes(v)
+        let mut out: Vec<_> = vehicle_modes(v)
             .iter()
             .filter(|(n, _)| n.contains(&f))
             .copied()
-            .collect()
+            .collect();
+        if !f.is_empty() {
+            out.sort_by_key(|(n, _)| (*n != f, !n.starts_with(&f)));
+        }
+        out
     }
 }
 

@@ -47,6 +47,12 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
                 status_name(v.system_status),
                 status_style(v.system_status),
             ));
+            if app.replay {
+                spans.push(Span::styled(
+                    " │ REPLAY",
+                    Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD),
+                ));
+            }
             // A lost vehicle's clock stops at its last heartbeat: nothing says it still flies.
             let until = if lost { v.last_heartbeat } else { now };
             let flight = v

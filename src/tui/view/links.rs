@@ -74,7 +74,7 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             };
             // Narrow, the peer wraps in its column rather than lose its end (the port).
             let peer = if narrow {
-                wrap(&peer, peer_w)
+                peer_lines(&peer, peer_w)
             } else {
                 vec![peer]
             };
@@ -197,4 +197,42 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             .block(Block::bordered().title(" Log and endpoints ")),
         tlog,
     );
+}
+
+/// A peer in lines of `width`: words whole where they fit, an address too long for a line
+/// broken after a `:` (host, then port) rather than inside a number.
+fn peer_lines(peer: &str, width: usize) -> Vec<String> {
+    let mut words = Vec::new();
+    for word in peer.split_whitespace() {
+        let mut rest = word;
+        while rest.chars().count() > width {
+            let head: String = rest.chars().take(width).collect();
+            let Some(cut) = head.rfind(':').filter(|c| *c > 0) else {
+                break;
+            };
+            words.push(&rest[..=cut]);
+            rest = &rest[cut + 1..];
+        }
+        words.push(rest);
+    }
+    wrap(&words.join(" "), width)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::peer_lines;
+
+    #[test]
+    fn an_address_breaks_at_its_colon_not_inside_a_number() {
+        assert_eq!(peer_lines("tcp 127.0.0.1:5810", 20), ["tcp 127.0.0.1:5810"]);
+        assert_eq!(
+            peer_lines("udp 192.168.100.200:14550", 20),
+            ["udp 192.168.100.200:", "14550"]
+        );
+        // A host longer than the column is cut where it must, the port kept with its colon.
+        assert_eq!(
+            peer_lines("udp 192.168.100.200:14550", 12),
+            ["udp", "192.168.100.", "200:14550"]
+        );
+    }
 }

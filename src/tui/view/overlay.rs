@@ -148,7 +148,13 @@ pub(super) fn draw_picker(
     }
     for (i, (name, number)) in listed.iter().enumerate().skip(first).take(rows) {
         let q = name.starts_with('Q');
-        let note = match (Some(*number) == current, v.is_some(), q, hover) {
+        // What picking it does, on the selected row only (the list stays readable).
+        let note = match (
+            Some(*number) == current,
+            i == p.selected && v.is_some(),
+            q,
+            hover,
+        ) {
             (true, _, _, _) => "current",
             (false, true, false, true) => "forward transition",
             (false, true, true, false) => "back transition",
