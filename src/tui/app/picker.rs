@@ -20,11 +20,22 @@ pub struct Picker {
     pub selected: usize,
 }
 
-/// The modes `v` has, in its own numbering (ArduPlane's for an ArduPilot plane or VTOL).
+/// Modes a vehicle reports but does not take from a ground station (ArduPlane's start-up
+/// state and its ADS-B avoidance).
+const NOT_OFFERED: [&str; 2] = ["INITIALISING", "AVOID_ADSB"];
+
+/// The modes `v` has, in its own numbering ([`crate::modes::modes_for`]: ArduPlane's with the
+/// Q modes for an ArduPilot plane or VTOL); none before a vehicle is heard.
 #[must_use]
-pub fn vehicle_modes(v: Option<&VehicleView>) -> &'static [(&'static str, u32)] {
-    let _ = v;
-    crate::client::MODES
+pub fn vehicle_modes(v: Option<&VehicleView>) -> Vec<(&'static str, u32)> {
+    let Some(v) = v else {
+        return Vec::new();
+    };
+    crate::modes::modes_for(v.autopilot as u8, v.mav_type as u8)
+        .iter()
+        .filter(|(n, _)| !NOT_OFFERED.contains(n))
+        .copied()
+        .collect()
 }
 
 impl Picker {
@@ -34,9 +45,8 @@ impl Picker {
     pub fn listed(&self, v: Option<&VehicleView>) -> Vec<(&'static str, u32)> {
         let f = self.filter.to_ascii_uppercase();
         let mut out: Vec<_> = vehicle_modes(v)
-            .iter()
+            .into_iter()
             .filter(|(n, _)| n.contains(&f))
-            .copied()
             .collect();
         if !f.is_empty() {
             out.sort_by_key(|(n, _)| (*n != f, !n.starts_with(&f)));
