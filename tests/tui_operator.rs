@@ -349,3 +349,65 @@ fn a_long_refusal_wraps_at_words() {
         );
     }
 }
+
+/// QLOITER entered through a back transition holds where the vehicle stops, not where the mode
+/// was entered 56 m before: the view shows no setpoint rather than a standing error; entered
+/// from a hover it shows the entry point as before.
+#[test]
+fn qloiter_after_a_back_transition_shows_no_entry_point() {
+    let mut rec = Recording::new();
+    rec.fly_wing(0, 3_000, |_| (5, true, 0.0, 0.1, 0.0, 30.0));
+    let mut app = app_with_params();
+    rec.render(&mut app, 3_000, (80, 24));
+    // QLOITER at 17 m/s, the back transition under way.
+    rec.feed(
+        3_000,
+        &ext_state(MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_MC),
+    );
+    rec.feed(
+        3_000,
+        &MavMessage::LOCAL_POSITION_NED(dialect::LOCAL_POSITION_NED_DATA {
+            x: 56.0,
+            z: -30.0,
+            vx: 17.0,
+            ..Default::default()
+        }),
+    );
+    rec.feed(3_000, &ui_support::recording::heartbeat(19, true));
+    let frame = rec.render(&mut app, 3_000, (80, 24));
+    assert!(frame.contains("QLOITER"), "{frame}");
+    assert!(!frame.contains("where QLOITER was entered"), "{frame}");
+    assert!(app.target_ned.is_none());
+
+    // From a slow hover: the entry point.
+    let rec = hover();
+    let mut app = app_with_params();
+    rec.render(&mut app, 20_000, (80, 24));
+    let mut rec = rec;
+    rec.fly(20_000, 21_000, |_| (19, true, 0.0, 0.0, 0.3, 1.0));
+    let frame = rec.render(&mut app, 21_000, (80, 24));
+    assert!(frame.contains("where QLOITER was entered"), "{frame}");
+}
+
+/// A vehicle without a battery monitor (ArduPilot's BATT_MONITOR 0 sends 0 mV and an unknown
+/// charge) shows `BAT -`, not an empty pack at 0.0 V; a monitored pack shows its voltage.
+#[test]
+fn no_battery_monitor_reads_a_dash() {
+    let sys_status = |mv: u16, pct: i8| {
+        MavMessage::SYS_STATUS(dialect::SYS_STATUS_DATA {
+            voltage_battery: mv,
+            current_battery: -1,
+            battery_remaining: pct,
+            ..Default::default()
+        })
+    };
+    let mut rec = hover();
+    rec.feed(19_900, &sys_status(0, -1));
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(frame.contains("BAT -"), "{frame}");
+    assert!(!frame.contains("0.0V"), "{frame}");
+    rec.feed(19_950, &sys_status(12_100, 80));
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(frame.contains("BAT 12.1V 80%"), "{frame}");
+}

@@ -59,6 +59,61 @@ impl ClientHandle {
     }
 }
 
+/// The heartbeats a client hears from now on (made before a command, read after it).
+#[derive(Debug)]
+pub struct Heartbeats(tokio::sync::broadcast::Receiver<std::sync::Arc<Inbound>>);
+
+impl ClientHandle {
+    /// Starts listening to heartbeats.
+    #[must_use]
+    pub fn heartbeats(&self) -> Heartbeats {
+        Heartbeats(self.inbound.subscribe())
+    }
+}
+
+impl Heartbeats {
+    /// The last heartbeat of `target` heard since [`ClientHandle::heartbeats`], else the next
+    /// one within `timeout`; `None` when none comes.
+    pub async fn latest(
+        &mut self,
+        target: (SystemId, ComponentId),
+        timeout: Duration,
+    ) -> Option<apm::HEARTBEAT_DATA> {
+        use tokio::sync::broadcast::error::{RecvError, TryRecvError};
+        let mine = |m: &Inbound| match &m.msg {
+            MavMessage::HEARTBEAT(h) if (m.sys, m.comp) == target => Some(h.clone()),
+            _ => None,
+        };
+        let mut last = None;
+        loop {
+            match self.0.try_recv() {
+                Ok(m) => last = mine(&m).or(last),
+                Err(TryRecvError::Lagged(_)) => {}
+                Err(TryRecvError::Empty | TryRecvError::Closed) => break,
+            }
+        }
+        if last.is_some() {
+            return last;
+        }
+        tokio::time::timeout(timeout, async {
+            loop {
+                match self.0.recv().await {
+                    Ok(m) => {
+                        if let Some(h) = mine(&m) {
+                            return Some(h);
+                        }
+                    }
+                    Err(RecvError::Lagged(_)) => {}
+                    Err(RecvError::Closed) => return None,
+                }
+            }
+        })
+        .await
+        .ok()
+        .flatten()
+    }
+}
+
 /// What the tracker knows of the client's vehicle: its key, reboots, armed, and whether
 /// HOME_POSITION and EXTENDED_SYS_STATE were heard from it.
 fn vehicle_now(

@@ -335,6 +335,21 @@ impl Default for App {
     }
 }
 
+/// Horizontal speed under which a vehicle entering QLOITER holds where it was, m/s.
+const SETTLED_M_S: f32 = 1.0;
+
+/// Whether `v` hovers slowly: EXTENDED_SYS_STATE says hover (or is not sent) and it moves
+/// less than [`SETTLED_M_S`] across the ground.
+fn settled_hover(
+    state: &VehicleState,
+    v: &VehicleView,
+    p: &crate::tracker::state::LocalPosition,
+) -> bool {
+    let air = crate::tui::air::air(state, v, None, false);
+    let hovering = matches!(air.vtol, None | Some(crate::tui::air::Vtol::Mc));
+    hovering && p.vel_ned_m_s[0].hypot(p.vel_ned_m_s[1]) < SETTLED_M_S
+}
+
 impl App {
     /// The vehicle the UI shows and commands: the selected one while it is listed, else the
     /// first (lowest system id).
@@ -392,7 +407,10 @@ impl App {
         let entered = self.last_mode.as_deref() != Some(mode.as_str());
         if entered {
             self.target_ned = match (mode.as_str(), v.position) {
-                ("QLOITER", Some(p)) => {
+                // Entered from a hover the vehicle holds where it was. Entered at speed (from
+                // forward flight, through a back transition) it holds where it stops, which
+                // the UI does not know: no setpoint rather than a wrong one.
+                ("QLOITER", Some(p)) if settled_hover(state, v, &p) => {
                     let airborne = crate::tui::vitals::vitals(state, v).airborne;
                     let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
                     let [n, e, d] = p.pos_ned_m;

@@ -34,8 +34,8 @@ impl SetpointSource {
 }
 
 /// The setpoint (north, east, down; NaN where none) the view shows: the vehicle's live target
-/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point, else
-/// `HOVER_ALT` in QHOVER.
+/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point when it was
+/// entered from a hover, else `HOVER_ALT` in QHOVER.
 pub(super) fn setpoint_ned(
     app: &App,
     snap: &Snapshot<'_>,
@@ -46,10 +46,9 @@ pub(super) fn setpoint_ned(
     }
     let hover = app.params.value("HOVER_ALT");
     match v.mode_name().as_str() {
-        "QLOITER" => app
-            .target_ned
-            .map(|t| (t, SetpointSource::Loiter))
-            .or_else(|| hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt))),
+        // Where QLOITER was entered from a hover; none after a back transition (the vehicle
+        // holds where it stopped, and says nothing of it).
+        "QLOITER" => app.target_ned.map(|t| (t, SetpointSource::Loiter)),
         "QHOVER" => hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt)),
         _ => None,
     }
