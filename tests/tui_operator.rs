@@ -411,3 +411,22 @@ fn no_battery_monitor_reads_a_dash() {
     let frame = rec.render(&mut app, 20_000, (80, 24));
     assert!(frame.contains("BAT 12.1V 80%"), "{frame}");
 }
+
+/// The daemon asks the vehicle for HOME_POSITION when it first hears it (the twin, like
+/// ArduPilot, sends it only when asked or when home moves): the home distance shows before
+/// the vehicle arms.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn home_is_asked_for_on_connect() {
+    let (running, cancel, mut tasks, _control) = ui_support::start().await;
+    let state = ui_support::wait_state(&running, "HOME_POSITION", |s| {
+        s.vehicles
+            .keys()
+            .any(|(sys, comp)| s.messages.contains_key(&(*sys, *comp, 242)))
+    })
+    .await;
+    let v = state.vehicles.values().next().expect("vehicle");
+    assert!(!v.armed);
+    assert!(vtol_gcs::tui::vitals::vitals(&state, v).home.is_some());
+    cancel.cancel();
+    while tasks.join_next().await.is_some() {}
+}
