@@ -276,6 +276,12 @@ fn a_tailsitter_hovering_reads_upright_in_the_hover_frame() {
     assert!(frame.contains("Attitude (wing frame)"), "{frame}");
     assert!(frame.contains("Pitch    +89.9°"), "{frame}");
 
+    // The twin publishes Q_TAILSIT_* gains without the switch: a tailsitter too.
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC);
+    let mut twin = app_with(params_with(&[("Q_TAILSIT_ANGLE", 45.0)]));
+    let frame = rec.render(&mut twin, 5_000, (80, 24));
+    assert!(frame.contains("Attitude (hover frame)"), "{frame}");
+
     // Not a tailsitter (no Q_TAILSIT_ENABLE, a fixed-wing MAV_TYPE): as reported, unlabelled.
     let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC);
     let mut plain = app_with(params_with(&[]));

@@ -4,8 +4,9 @@
 //! reads pitch +90° with roll and yaw degenerate (only their difference means anything), so a
 //! horizon drawn from it is useless just when the operator needs it.
 //!
-//! A tailsitter (`Q_TAILSIT_ENABLE` > 0 in its parameters, or a `MAV_TYPE_VTOL_TAILSITTER*`
-//! heartbeat) in hover (EXTENDED_SYS_STATE's `vtol_state` MC or a forward transition under way,
+//! A tailsitter (`Q_TAILSIT_ENABLE` > 0 in its parameters — or other `Q_TAILSIT_*` ones,
+//! which ArduPilot shows only while it is set —, or a `MAV_TYPE_VTOL_TAILSITTER*` heartbeat;
+//! ArduPlane's own is `MAV_TYPE_FIXED_WING` while `Q_MAV_TYPE` is 0) in hover (EXTENDED_SYS_STATE's `vtol_state` MC or a forward transition under way,
 //! or, without that message, a Q mode) is therefore shown in the **hover frame**: the wing frame
 //! turned by −90° of pitch about the wing's y axis (the right wing), as ArduPilot's own
 //! tailsitter controller views it. In that frame

@@ -119,7 +119,7 @@ pub(super) fn shown_attitude(
     snap: &Snapshot<'_>,
     v: &VehicleView,
 ) -> Option<crate::tui::attitude::Shown> {
-    crate::tui::attitude::shown(snap.state, v, app.params.value("Q_TAILSIT_ENABLE"))
+    crate::tui::attitude::shown(snap.state, v, super::q_tailsit_enable(app))
 }
 
 fn draw_horizon(

@@ -177,9 +177,22 @@ fn servo_outputs(app: &App) -> Vec<crate::outputs::Output> {
     crate::outputs::outputs(&f)
 }
 
-/// Whether the shown vehicle is a tailsitter (its `Q_TAILSIT_ENABLE` or its MAV_TYPE).
+/// Whether the shown vehicle is a tailsitter (its parameters or its MAV_TYPE).
 fn tailsitter(app: &App, v: &VehicleView) -> bool {
-    crate::tui::attitude::is_tailsitter(v, app.params.value("Q_TAILSIT_ENABLE"))
+    crate::tui::attitude::is_tailsitter(v, q_tailsit_enable(app))
+}
+
+/// `Q_TAILSIT_ENABLE` as the vehicle's table says it: its value, else 1 when the table has
+/// other `Q_TAILSIT_*` parameters (ArduPilot shows them only while it is enabled; the twin
+/// publishes them without the switch).
+pub(super) fn q_tailsit_enable(app: &App) -> Option<f32> {
+    app.params.value("Q_TAILSIT_ENABLE").or_else(|| {
+        app.params
+            .table
+            .iter()
+            .any(|(n, _)| n.starts_with("Q_TAILSIT_"))
+            .then_some(1.0)
+    })
 }
 
 fn servo_names(app: &App) -> Vec<String> {
