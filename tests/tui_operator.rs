@@ -436,3 +436,24 @@ async fn home_is_asked_for_on_connect() {
     cancel.cancel();
     while tasks.join_next().await.is_some() {}
 }
+
+/// ArduPilot's HOME_POSITION before its EKF has an origin has no local position (NaN): the home
+/// distance is not shown rather than `home NaN m`.
+#[test]
+fn a_home_without_a_local_position_is_not_shown() {
+    let mut rec = hover();
+    rec.feed(
+        19_900,
+        &MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
+            latitude: 473_977_420,
+            longitude: 85_455_940,
+            x: f32::NAN,
+            y: f32::NAN,
+            z: f32::NAN,
+            ..Default::default()
+        }),
+    );
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(!frame.contains("NaN"), "{frame}");
+}

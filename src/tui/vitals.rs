@@ -176,7 +176,8 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
     if let (Some(MavMessage::HOME_POSITION(h)), Some(p)) = (last(242), v.position) {
         let (dn, de) = (p.pos_ned_m[0] - h.x, p.pos_ned_m[1] - h.y);
         let bearing = de.atan2(dn).to_degrees().rem_euclid(360.0);
-        out.home = Some((dn.hypot(de), bearing));
+        // ArduPilot's home has no local position (NaN) until its EKF sets an origin.
+        out.home = Some((dn.hypot(de), bearing)).filter(|(d, _)| d.is_finite());
     }
     // Either says so: EXTENDED_SYS_STATE and the armed flag (HEARTBEAT) come at 1 Hz, slower
     // than the position, and a guard must not wait for them while the vehicle climbs.
