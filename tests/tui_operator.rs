@@ -457,3 +457,34 @@ fn a_home_without_a_local_position_is_not_shown() {
     let frame = rec.render(&mut app, 20_000, (80, 24));
     assert!(!frame.contains("NaN"), "{frame}");
 }
+
+/// ArduPlane sends its last waypoint as POSITION_TARGET_GLOBAL_INT in hover and stick modes
+/// too: there it is no setpoint (QHOVER's is HOVER_ALT), in AUTO it is.
+#[test]
+fn arduplanes_stale_target_in_a_hover_mode_is_no_setpoint() {
+    let mut rec = hover();
+    let home = MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
+        latitude: 473_977_420,
+        longitude: 85_455_940,
+        altitude: 488_000,
+        ..Default::default()
+    });
+    let target = MavMessage::POSITION_TARGET_GLOBAL_INT(dialect::POSITION_TARGET_GLOBAL_INT_DATA {
+        lat_int: 473_977_420 + 5_000,
+        lon_int: 85_455_940,
+        alt: 488.0,
+        coordinate_frame: dialect::MavFrame::MAV_FRAME_GLOBAL,
+        ..Default::default()
+    });
+    rec.feed(19_900, &home);
+    rec.feed(19_950, &target);
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 20_000, (80, 24));
+    assert!(!frame.contains("the vehicle's live target"), "{frame}");
+    assert!(frame.contains("setpoint: HOVER_ALT"), "{frame}");
+    // The same target in AUTO is the vehicle's.
+    rec.fly(20_000, 21_000, |_| (10, true, 0.0, 0.0, 0.3, 1.0));
+    rec.feed(20_990, &target);
+    let frame = rec.render(&mut app, 21_000, (80, 24));
+    assert!(frame.contains("the vehicle's live target"), "{frame}");
+}

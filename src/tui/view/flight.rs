@@ -33,6 +33,25 @@ impl SetpointSource {
     }
 }
 
+/// Modes that fly to no point: the stick modes, fixed-wing and hover, QLOITER (its hold point
+/// is not in ArduPlane's target) and QLAND (straight down).
+const NO_POINT_MODES: [&str; 14] = [
+    "MANUAL",
+    "STABILIZE",
+    "TRAINING",
+    "ACRO",
+    "FBWA",
+    "FBWB",
+    "CRUISE",
+    "AUTOTUNE",
+    "QSTABILIZE",
+    "QHOVER",
+    "QLOITER",
+    "QLAND",
+    "QACRO",
+    "QAUTOTUNE",
+];
+
 /// The setpoint (north, east, down; NaN where none) the view shows: the vehicle's live target
 /// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point when it was
 /// entered from a hover, else `HOVER_ALT` in QHOVER.
@@ -41,11 +60,16 @@ pub(super) fn setpoint_ned(
     snap: &Snapshot<'_>,
     v: &VehicleView,
 ) -> Option<([f32; 3], SetpointSource)> {
-    if let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now) {
+    // ArduPlane sends its next waypoint as POSITION_TARGET_GLOBAL_INT in every mode but
+    // MANUAL, also where it flies to no point (a stick mode, a hover): there it is stale.
+    let mode = v.mode_name();
+    if !NO_POINT_MODES.contains(&mode.as_str())
+        && let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now)
+    {
         return Some((t, SetpointSource::Vehicle));
     }
     let hover = app.params.value("HOVER_ALT");
-    match v.mode_name().as_str() {
+    match mode.as_str() {
         // Where QLOITER was entered from a hover; none after a back transition (the vehicle
         // holds where it stopped, and says nothing of it).
         "QLOITER" => app.target_ned.map(|t| (t, SetpointSource::Loiter)),
