@@ -128,8 +128,11 @@ fn vehicle_now(
     Some((key, v.reboots, v.armed, heard(HOME_POSITION)))
 }
 
-fn heard_ext(s: &VehicleState, key: (SystemId, ComponentId)) -> bool {
-    s.messages.contains_key(&(key.0, key.1, EXTENDED_SYS_STATE))
+/// Whether EXTENDED_SYS_STATE came from `key` after `since` (not a copy from before a reboot).
+fn heard_ext(s: &VehicleState, key: (SystemId, ComponentId), since: Instant) -> bool {
+    s.messages
+        .get(&(key.0, key.1, EXTENDED_SYS_STATE))
+        .is_some_and(|m| m.last_at > since)
 }
 
 /// Asks the client's vehicle, at first contact and after each reboot, for HOME_POSITION
@@ -164,6 +167,7 @@ pub async fn ask_on_connect(
             continue;
         }
         asked = Some((key, reboots));
+        let since = crate::tracker::now();
         let home = tokio::select! {
             () = cancel.cancelled() => return,
             r = client.request_message(HOME_POSITION) => r,
@@ -177,7 +181,7 @@ pub async fn ask_on_connect(
         }
         let streamed = tokio::time::timeout(STREAM_WAIT, async {
             loop {
-                if heard_ext(&state.borrow_and_update(), key) {
+                if heard_ext(&state.borrow_and_update(), key, since) {
                     return true;
                 }
                 if state.changed().await.is_err() {
