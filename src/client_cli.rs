@@ -174,10 +174,22 @@ impl From<ClientError> for Failure {
             ClientError::Usage(_) => EXIT_USAGE,
             ClientError::Timeout(_) | ClientError::Link(_) | ClientError::NoVehicle => EXIT_LINK,
         };
+        // A command runs only once the vehicle was heard: silence to it while its telemetry
+        // flows is most often a served endpoint that takes nothing from its clients.
+        let hint = if matches!(e, ClientError::Timeout(_)) {
+            " (the vehicle's telemetry arrives but nothing answers: if this link is a vtol-gcs \
+             serve port with ?trust=read-only, the daemon drops everything its clients send; \
+             use a trusted or signed endpoint)"
+        } else {
+            ""
+        };
         Failure {
             code,
             // A crash is cleared by a reboot: every refusal that names one says so.
-            message: vtol_gcs::tui::vitals::with_recovery(&e.to_string()),
+            message: format!(
+                "{}{hint}",
+                vtol_gcs::tui::vitals::with_recovery(&e.to_string())
+            ),
         }
     }
 }
@@ -385,12 +397,34 @@ where
 pub fn arm(args: ArmArgs, arm: bool) -> ExitCode {
     let force = args.force;
     with_client(&args.link, |c| async move {
-        if arm {
-            c.arm(force).await?
-        } else {
-            c.disarm(force).await?
+        if !arm {
+            c.disarm(force).await?;
+            println!("disarmed");
+            return Ok(());
         }
-        println!("{}", if arm { "armed" } else { "disarmed" });
+        let mut beats = c.heartbeats();
+        c.arm(force).await?;
+        // The mode it armed in: in AUTO (a vehicle left there after a mission) it flies at once.
+        let hb = match c.target() {
+            Some(t) => {
+                beats
+                    .latest(t, std::time::Duration::from_millis(1500))
+                    .await
+            }
+            None => None,
+        };
+        match hb {
+            Some(h) => {
+                let mode =
+                    vtol_gcs::modes::mode_name(h.autopilot as u8, h.mavtype as u8, h.custom_mode);
+                if mode == "AUTO" {
+                    println!("armed in AUTO: the vehicle flies its mission now");
+                } else {
+                    println!("armed in {mode}");
+                }
+            }
+            None => println!("armed"),
+        }
         Ok(())
     })
 }

@@ -109,6 +109,9 @@ pub struct Running {
 /// the UI and the status line do not count it as a client.
 pub const OWN_TRAFFIC_PEER: &str = "vtol-gcs (own traffic)";
 
+/// Peer name of the vehicle link of a replayed log: the UI offers no commands on it.
+pub const REPLAY_PEER: &str = "replay";
+
 /// Formats a served endpoint with its bound address, e.g. `tcpin:127.0.0.1:43121`.
 #[must_use]
 pub fn describe(url: &LinkUrl, addr: Option<SocketAddr>) -> String {
@@ -172,6 +175,12 @@ pub async fn start(
     // A replayed log takes no requests: nothing to fit.
     let (fit_tx, link_fit) = watch::channel(None);
     if !matches!(config.vehicle, VehicleSource::Replay(_)) {
+        // The home position and the VTOL state, asked for when the vehicle does not send them.
+        tasks.spawn(crate::client::interval::ask_on_connect(
+            state_rx.clone(),
+            client.clone(),
+            cancel.clone(),
+        ));
         tasks.spawn(crate::fit::run(
             state_rx.clone(),
             client.clone(),
@@ -380,7 +389,7 @@ async fn open_vehicle(
             let (log_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
             let (_, link_task) = spawn_stream_link(
                 router_end,
-                "replay",
+                REPLAY_PEER,
                 vehicle_tx,
                 config.link.clone(),
                 cancel.clone(),

@@ -10,6 +10,7 @@ pub mod fit;
 pub mod gcs;
 pub mod log;
 pub mod modes;
+pub mod outputs;
 pub mod params;
 pub mod reboot;
 pub mod router;

@@ -17,7 +17,12 @@ const HOME_ALT_MM: i32 = 488_000;
 /// A flight in `mode` for 5 s at 1 m, home at the local origin.
 fn flight(mode: u32) -> Recording {
     let mut rec = Recording::new();
-    rec.fly(0, 5_000, |_| (mode, true, 0.0, 0.0, 0.0, 1.0));
+    // Upright in a Q mode, level on the wing in the others.
+    if mode >= 17 {
+        rec.fly(0, 5_000, |_| (mode, true, 0.0, 0.0, 0.0, 1.0));
+    } else {
+        rec.fly_wing(0, 5_000, |_| (mode, true, 0.0, 0.0, 0.0, 1.0));
+    }
     rec.feed(
         4_900,
         &MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
@@ -191,8 +196,9 @@ fn airspeed_angle_of_attack_vtol_state_and_transition_progress() {
     assert!(frame.contains("VTOL  FW"), "{frame}");
     assert!(!frame.contains("transition"), "{frame}");
 
-    // Back transition: the nose 45° from vertical (pitch in the twin's hover frame).
-    rec.fly(5_000, 6_000, |_| {
+    // Back transition: the nose 45° above the horizon, half way from level to upright (pitch
+    // in the wing frame, as ArduPlane reports it).
+    rec.fly_wing(5_000, 6_000, |_| {
         (18, true, 0.0, std::f32::consts::FRAC_PI_4, 0.0, 1.0)
     });
     rec.feed(

@@ -38,8 +38,8 @@ fn check_view(app: &mut App, rec: &Recording, view: View, size: (u16, u16)) -> S
     let frame = rec.render(app, 20_000, size);
     let want: &[&str] = match view {
         View::Flight => &[
-            "ESC1          1",
-            "ESC2          1",
+            "right motor   1",
+            "left motor    1",
             "left aileron  1",
             "right aileron 1",
             "elevator      1520 µs",
@@ -48,7 +48,13 @@ fn check_view(app: &mut App, rec: &Recording, view: View, size: (u16, u16)) -> S
             "Air       - m/s  AoA      -  SSA      -",
             "VTOL  -",
         ],
-        View::Charts => &["Roll (°)", "Pitch (°)", "Yaw (°)", "ESC (µs)", "setpoint"],
+        View::Charts => &[
+            "Roll (°, hover frame)",
+            "Pitch (°, hover frame)",
+            "Yaw (°, hover frame)",
+            "Motors (µs)",
+            "setpoint",
+        ],
         // The peer whole, wrapped in its column when narrow.
         View::Links => &[
             "side",
@@ -107,7 +113,10 @@ fn every_view_whole_at_80_by_24() {
         let frame = check_view(&mut app, &rec, view, (80, 24));
         // Every chart keeps a legend: in its title when ratatui's would not fit.
         if view == View::Charts {
-            assert!(frame.contains("ESC1 ESC2"), "{frame}");
+            assert!(
+                frame.contains("Motors (µs): right motor left motor"),
+                "{frame}"
+            );
             assert!(frame.contains("L ail R ail elev"), "{frame}");
             assert!(frame.contains("alt N E ··· setpoint"), "{frame}");
         }
@@ -130,7 +139,7 @@ fn every_view_uses_the_space_at_200_by_50() {
         let wide: &[&str] = match view {
             // A column of charts beside the instruments.
             View::Flight => &[
-                "Attitude (°): roll pitch yaw",
+                "Attitude (°, hover frame): roll pitch yaw",
                 "Position (m): alt north east",
             ],
             View::Charts => &["left aileron right aileron elevator", "alt north east"],

@@ -66,7 +66,7 @@ pub struct Air {
     /// Hover, forward flight or a transition.
     pub vtol: Option<Vtol>,
     /// How far a transition has come, 0 to 1: a forward one by airspeed against
-    /// `ARSPD_FBW_MIN`, a back one by the nose's way from level to vertical.
+    /// `ARSPD_FBW_MIN`, a tailsitter's back one by the nose's way from level to vertical.
     pub progress: Option<f32>,
 }
 
@@ -75,9 +75,15 @@ fn last(state: &VehicleState, v: &VehicleView, id: u32) -> Option<(MavMessage, I
     Some((s.last.decode().ok()?, s.last_at))
 }
 
-/// The air data of `v`; `arspd_fbw_min` is the vehicle's `ARSPD_FBW_MIN` if known.
+/// The air data of `v`; `arspd_fbw_min` is the vehicle's `ARSPD_FBW_MIN` if known,
+/// `tailsitter` whether it pitches up to hover ([`crate::tui::attitude::is_tailsitter`]).
 #[must_use]
-pub fn air(state: &VehicleState, v: &VehicleView, arspd_fbw_min: Option<f32>) -> Air {
+pub fn air(
+    state: &VehicleState,
+    v: &VehicleView,
+    arspd_fbw_min: Option<f32>,
+    tailsitter: bool,
+) -> Air {
     let mut out = Air::default();
     if let Some((MavMessage::VFR_HUD(h), _)) = last(state, v, VFR_HUD)
         && h.airspeed.is_finite()
@@ -107,13 +113,11 @@ pub fn air(state: &VehicleState, v: &VehicleView, arspd_fbw_min: Option<f32>) ->
                 .unwrap_or(ARSPD_FBW_MIN_DEFAULT);
             (a / min).clamp(0.0, 1.0)
         }),
-        // The twin reports its attitude in the hover frame: the nose (thrust axis) is
-        // vertical at zero roll and pitch, level 90° away from that.
-        Some(Vtol::ToMc) => v.attitude.map(|a| {
-            let tilt = (a.rpy_rad[0].cos() * a.rpy_rad[1].cos())
-                .clamp(-1.0, 1.0)
-                .acos();
-            (1.0 - tilt / std::f32::consts::FRAC_PI_2).clamp(0.0, 1.0)
+        // ArduPlane (and the twin) report a tailsitter's attitude in the wing frame: the
+        // nose's angle above the horizon, 0 in level flight and 90° upright, is the way made.
+        Some(Vtol::ToMc) if tailsitter => v.attitude.map(|a| {
+            let up = crate::tui::attitude::nose_up_rad(a.rpy_rad);
+            (up / std::f32::consts::FRAC_PI_2).clamp(0.0, 1.0)
         }),
         _ => None,
     };

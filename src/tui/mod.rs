@@ -8,6 +8,7 @@
 
 pub mod air;
 pub mod app;
+pub mod attitude;
 pub mod exec;
 pub mod fields;
 pub mod view;
@@ -241,6 +242,8 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
+                        let (links, _, _) = links_and_counters(running);
+                        app.replay = view::is_replay(&app, &state, &links);
                         let reqs = app.on_key(k, &state, crate::tracker::now());
                         sync_selection(&mut app, &state, &control, &mut selected);
                         for req in reqs {

@@ -117,7 +117,11 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
             })
             .map(|(_, n)| *n)
             .collect();
-        if s.voltage_battery != u16::MAX {
+        // No battery monitor (ArduPilot's BATT_MONITOR 0): 0 mV and an unknown charge, or
+        // the "not sent" value; shown as "-", not as an empty pack at 0.0 V.
+        let no_monitor =
+            s.voltage_battery == u16::MAX || (s.voltage_battery == 0 && s.battery_remaining < 0);
+        if !no_monitor {
             let pct = u8::try_from(s.battery_remaining).ok();
             out.battery = Some(Battery {
                 voltage_v: f32::from(s.voltage_battery) / 1000.0,
@@ -149,7 +153,9 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
             _ => Severity::Ok,
         };
         let prev = out.battery.take();
-        out.battery = Some(Battery {
+        let no_monitor =
+            (cells.is_empty() || volts <= 0.0) && prev.is_none() && b.battery_remaining < 0;
+        out.battery = (!no_monitor).then(|| Battery {
             voltage_v: if cells.is_empty() {
                 prev.as_ref().map_or(0.0, |p| p.voltage_v)
             } else {
@@ -170,7 +176,8 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
     if let (Some(MavMessage::HOME_POSITION(h)), Some(p)) = (last(242), v.position) {
         let (dn, de) = (p.pos_ned_m[0] - h.x, p.pos_ned_m[1] - h.y);
         let bearing = de.atan2(dn).to_degrees().rem_euclid(360.0);
-        out.home = Some((dn.hypot(de), bearing));
+        // ArduPilot's home has no local position (NaN) until its EKF sets an origin.
+        out.home = Some((dn.hypot(de), bearing)).filter(|(d, _)| d.is_finite());
     }
     // Either says so: EXTENDED_SYS_STATE and the armed flag (HEARTBEAT) come at 1 Hz, slower
     // than the position, and a guard must not wait for them while the vehicle climbs.

@@ -167,6 +167,7 @@ def test_mode_qhover_then_arm_takes_off(twin_factory):
         assert r.returncode == 0, r.stderr
         r = gcs("arm", link=t.tcp)
         assert r.returncode == 0, r.stderr
+        assert r.stdout.strip() == "armed in QHOVER", r.stdout  # the mode it armed in
         p = g.recv("LOCAL_POSITION_NED", lambda p: -p.z > 0.5, timeout=30, what="altitude above 0.5 m")
         assert -p.z > 0.5
         r = gcs("mode", "QLAND", link=t.tcp)

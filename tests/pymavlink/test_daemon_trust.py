@@ -349,3 +349,15 @@ def test_the_client_commands_sign_against_a_keyed_twin(twin_factory, tmp_path): 
         assert KEY.hex() not in run.stdout + run.stderr and PASSPHRASE not in run.stdout + run.stderr
     saved = int(state.read_text().split("timestamp = ")[1].split()[0])
     assert saved > int((time.time() - SIGNING_EPOCH - 60) * 1e5)
+
+
+def test_a_command_through_a_read_only_endpoint_names_its_trust(daemon_factory, tmp_path):  # noqa: F811
+    """`vtol-gcs arm` on a read-only serve port sees the vehicle but no answer: its error names
+    the endpoint's trust as the likely cause instead of ending at "no answer"."""
+    daemon = daemon_factory(serve=["tcpin:127.0.0.1:0?trust=read-only"], log=False)
+    run = subprocess.run(
+        [str(DAEMON_BIN), "arm", "--link", "tcp:" + daemon.addr("tcpin")],
+        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL, cwd=tmp_path,
+    )
+    assert run.returncode == 3, run.stdout + run.stderr
+    assert "no answer" in run.stderr and "trust=read-only" in run.stderr, run.stderr

@@ -126,7 +126,7 @@ def test_fly_from_the_terminal(screen_factory):
     s.wait(r"▼")  # the heading tape's pointer
     s.wait(r"Roll\s+[+-]\d+\.\d°")
     # Output names come from SERVOn_FUNCTION once the table is downloaded.
-    s.wait(r"ESC1\s+1\d{3} µs")
+    s.wait(r"right motor\s+1\d{3} µs")
     s.wait(r"elevator\s+1\d{3} µs")
     s.wait(r"STANDBY", 30)  # calibration done: ready to arm
 
@@ -218,7 +218,7 @@ def test_connect_to_a_running_daemon(screen_factory, daemon_factory):  # noqa: F
     port = next(addr for scheme, addr in d.serving if scheme == "tcpin").rsplit(":", 1)[1]
     s = screen_factory(f"{shlex.quote(str(GCS_BIN))} tui --connect tcp:127.0.0.1:{port}")
     s.wait(r"Horizon")
-    s.wait(r"ESC1\s+1\d{3} µs", 30)
+    s.wait(r"right motor\s+1\d{3} µs", 30)
     s.keys("t")
     s.wait(r"mode QHOVER: done")
     s.wait(r"QHOVER ")

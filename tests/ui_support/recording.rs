@@ -10,6 +10,7 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use vtol_gcs::tap::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome};
+use vtol_gcs::tui::attitude::hover_to_wing;
 use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{ComponentId, Frame, LinkId, LinkStatsSnapshot, SystemId};
@@ -105,16 +106,65 @@ impl Recording {
     }
 
     /// Vehicle 1 from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
-    /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude).
+    /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude) with
+    /// the attitude in the tailsitter's hover frame (upright is level), reported in the wing
+    /// frame as ArduPlane reports it.
     pub fn fly(
         &mut self,
         from_ms: u64,
         to_ms: u64,
         f: impl Fn(f64) -> (u32, bool, f32, f32, f32, f32),
     ) {
+        self.fly_frames(from_ms, to_ms, |t| {
+            let (mode, armed, roll, pitch, yaw, alt) = f(t);
+            let [r, p, y] = [roll, pitch, yaw].map(f64::from);
+            let q = hover_to_wing(nalgebra::UnitQuaternion::from_euler_angles(r, p, y));
+            let (r, p, y) = q.euler_angles();
+            // Hover rates (0.01, −0.02, 0) about the wing's axes: (−r, q, p).
+            let rates = [0.0, -0.02, 0.01];
+            (
+                mode,
+                armed,
+                [r as f32, p as f32, y as f32],
+                rates,
+                roll,
+                alt,
+            )
+        });
+    }
+
+    /// As [`Recording::fly`] with the attitude given in the wing frame, as reported.
+    pub fn fly_wing(
+        &mut self,
+        from_ms: u64,
+        to_ms: u64,
+        f: impl Fn(f64) -> (u32, bool, f32, f32, f32, f32),
+    ) {
+        self.fly_frames(from_ms, to_ms, |t| {
+            let (mode, armed, roll, pitch, yaw, alt) = f(t);
+            (
+                mode,
+                armed,
+                [roll, pitch, yaw],
+                [0.01, -0.02, 0.0],
+                roll,
+                alt,
+            )
+        });
+    }
+
+    /// The frames of [`Recording::fly`]: (mode, armed, reported roll/pitch/yaw, reported body
+    /// rates, the roll the ailerons answer, altitude).
+    #[allow(clippy::type_complexity)]
+    fn fly_frames(
+        &mut self,
+        from_ms: u64,
+        to_ms: u64,
+        f: impl Fn(f64) -> (u32, bool, [f32; 3], [f32; 3], f32, f32),
+    ) {
         let mut ms = from_ms;
         while ms < to_ms {
-            let (mode, armed, roll, pitch, yaw, alt) = f(ms as f64 / 1000.0);
+            let (mode, armed, [roll, pitch, yaw], rates, surface_roll, alt) = f(ms as f64 / 1000.0);
             if ms.is_multiple_of(1000) {
                 self.feed(ms, &heartbeat(mode, armed));
                 if self.own_traffic {
@@ -128,9 +178,9 @@ impl Recording {
                     roll,
                     pitch,
                     yaw,
-                    rollspeed: 0.01,
-                    pitchspeed: -0.02,
-                    yawspeed: 0.0,
+                    rollspeed: rates[0],
+                    pitchspeed: rates[1],
+                    yawspeed: rates[2],
                 }),
             );
             if ms.is_multiple_of(100) {
@@ -144,8 +194,8 @@ impl Recording {
                     &MavMessage::SERVO_OUTPUT_RAW(dialect::SERVO_OUTPUT_RAW_DATA {
                         servo1_raw: esc + 12,
                         servo2_raw: esc - 12,
-                        servo3_raw: 1500 + (roll * 500.0) as u16,
-                        servo4_raw: 1500 - (roll * 500.0) as u16,
+                        servo3_raw: 1500 + (surface_roll * 500.0) as u16,
+                        servo4_raw: 1500 - (surface_roll * 500.0) as u16,
                         servo5_raw: 1520,
                         ..Default::default()
                     }),

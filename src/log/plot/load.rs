@@ -115,6 +115,7 @@ struct Scan {
     rel_alt: Points,
     amsl_alt: Points,
     vtol: Vec<(f64, String)>,
+    servo_functions: [Option<f32>; 5],
 }
 
 impl Scan {
@@ -150,6 +151,18 @@ impl Scan {
                 let name = n.name.to_str().unwrap_or("");
                 if let Some(i) = CONTROLLER_OUTPUT_NAMES.iter().position(|c| *c == name) {
                     self.inputs[i].push((t, f64::from(n.value)));
+                }
+            }
+            // What the outputs drive, for the PWM legends.
+            M::PARAM_VALUE(p) => {
+                let name = p.param_id.to_str().unwrap_or("");
+                if let Some(n) = name
+                    .strip_prefix("SERVO")
+                    .and_then(|r| r.strip_suffix("_FUNCTION"))
+                    .and_then(|n| n.parse::<usize>().ok())
+                    .filter(|n| (1..=5).contains(n))
+                {
+                    self.servo_functions[n - 1] = Some(p.param_value);
                 }
             }
             M::SERVO_OUTPUT_RAW(s) => {
@@ -207,6 +220,7 @@ impl Scan {
             throttle: (!self.throttle.is_empty()).then_some(self.throttle),
             altitude,
             vtol_states: self.vtol,
+            servo_functions: self.servo_functions,
         }
     }
 }

@@ -122,6 +122,8 @@ pub struct FlightData {
     pub altitude: Option<Altitude>,
     /// EXTENDED_SYS_STATE's `vtol_state` at each change: (s, "MC", "to FW", "FW", "to MC").
     pub vtol_states: Vec<(f64, String)>,
+    /// `SERVO1..5_FUNCTION` as the log's PARAM_VALUEs last said (labels of the PWM series).
+    pub servo_functions: [Option<f32>; 5],
 }
 
 /// Options of one figure.

@@ -151,14 +151,47 @@ impl Source {
 
 /// One series of a panel before styling: its name and where it comes from.
 struct Spec {
-    name: &'static str,
+    name: String,
     get: Source,
     /// Multiplies the source's value (frame change, unit).
     scale: f64,
 }
 
-fn spec(name: &'static str, get: Source, scale: f64) -> Spec {
-    Spec { name, get, scale }
+fn spec(name: impl Into<String>, get: Source, scale: f64) -> Spec {
+    Spec {
+        name: name.into(),
+        get,
+        scale,
+    }
+}
+
+/// PWM series: (output index, label).
+type Labelled = Vec<(usize, String)>;
+
+/// The PWM series split into motors and the rest, each (output index, label): named by the
+/// log's `SERVOn_FUNCTION` ([`crate::outputs`]) when it has them, else the twin's wiring.
+fn pwm_series(sources: &[&FlightData]) -> (Labelled, Labelled) {
+    let known = sources
+        .iter()
+        .map(|d| d.servo_functions)
+        .find(|f| f.iter().any(Option::is_some));
+    let Some(functions) = known else {
+        let motors = vec![(0, "ESC 1".to_owned()), (1, "ESC 2".to_owned())];
+        let rest = ["aileron L", "aileron R", "elevator"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (i + 2, (*n).to_owned()))
+            .collect();
+        return (motors, rest);
+    };
+    let (motors, rest): (Vec<_>, Vec<_>) = crate::outputs::outputs(&functions)
+        .into_iter()
+        .enumerate()
+        .partition(|(_, o)| o.motor);
+    let named = |v: Vec<(usize, crate::outputs::Output)>| -> Labelled {
+        v.into_iter().map(|(i, o)| (i, o.name)).collect()
+    };
+    (named(motors), named(rest))
 }
 
 /// Panels of one figure, for every source (the compared one in other colours).
@@ -264,13 +297,16 @@ pub(super) fn panels_for(
             push("f_z", "f_z (N)", vec![spec("f_z", inp(3), 1.0)], None);
         }
         (Kind::Pwm, _) => {
-            let esc = vec![spec("ESC 1", pwm(0), 1.0), spec("ESC 2", pwm(1), 1.0)];
+            let (motors, surfaces) = pwm_series(sources);
+            let esc = motors
+                .into_iter()
+                .map(|(i, n)| spec(n, pwm(i), 1.0))
+                .collect();
             push("rotors", "ESC PWM (µs)", esc, None);
-            let surfaces = vec![
-                spec("aileron L", pwm(2), 1.0),
-                spec("aileron R", pwm(3), 1.0),
-                spec("elevator", pwm(4), 1.0),
-            ];
+            let surfaces = surfaces
+                .into_iter()
+                .map(|(i, n)| spec(n, pwm(i), 1.0))
+                .collect();
             push("control surfaces", "servo PWM (µs)", surfaces, None);
         }
         (Kind::Transition, _) => {
@@ -297,7 +333,11 @@ pub(super) fn panels_for(
             let alt = spec("altitude", Altitude, 1.0);
             push("altitude", y, vec![alt], None);
             if sources.iter().any(|d| d.pwm.is_some()) {
-                let esc = vec![spec("ESC 1", pwm(0), 1.0), spec("ESC 2", pwm(1), 1.0)];
+                let (motors, _) = pwm_series(sources);
+                let esc = motors
+                    .into_iter()
+                    .map(|(i, n)| spec(n, pwm(i), 1.0))
+                    .collect();
                 push("thrust", "ESC PWM (µs)", esc, None);
             } else {
                 let thr = spec("throttle", Throttle, 1.0);
@@ -325,7 +365,7 @@ pub(super) fn panels_for(
                         label: if several {
                             format!("{} ({})", s.name, d.label)
                         } else {
-                            s.name.to_owned()
+                            s.name.clone()
                         },
                         points: p.iter().map(|&(t, v)| (t, v * s.scale)).collect(),
                         color: COLORS[si.min(1)][li % 3],
@@ -364,4 +404,35 @@ pub(super) fn panels_for(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{FlightData, pwm_series};
+
+    #[test]
+    fn pwm_series_are_named_by_the_logs_servo_functions() {
+        let plain = FlightData::default();
+        let (motors, rest) = pwm_series(&[&plain]);
+        assert_eq!(motors[0].1, "ESC 1");
+        assert_eq!(rest[2].1, "elevator");
+        // ArduPlane's tailsitter: elevons on 1 and 2, the throttles on 3 and 4.
+        let plane = FlightData {
+            servo_functions: [Some(77.0), Some(78.0), Some(73.0), Some(74.0), None],
+            ..FlightData::default()
+        };
+        let (motors, rest) = pwm_series(&[&plain, &plane]);
+        assert_eq!(
+            motors,
+            [(2, "left motor".to_owned()), (3, "right motor".to_owned())]
+        );
+        assert_eq!(
+            rest,
+            [
+                (0, "left elevon".to_owned()),
+                (1, "right elevon".to_owned()),
+                (4, "SERVO5".to_owned())
+            ]
+        );
+    }
 }

@@ -265,6 +265,26 @@ fn sample_ink(segments: &[[(f64, f64); 2]], ink: &mut Vec<(f64, f64)>) {
     }
 }
 
+/// The row a label from `x` to `x + width` takes: the first whose labels end before it (4 px
+/// apart), else a new one below; `rows_end` keeps where each row is taken up to. Close changes
+/// stack their labels instead of printing one over another.
+fn label_row(rows_end: &mut Vec<f64>, x: f64, width: f64) -> usize {
+    let k = rows_end
+        .iter()
+        .position(|end| *end + 4.0 <= x)
+        .unwrap_or(rows_end.len());
+    if k == rows_end.len() {
+        rows_end.push(0.0);
+    }
+    rows_end[k] = x + width;
+    k
+}
+
+/// A marker label's width in pixels at the 14 px font (about 8 px a character).
+fn marker_label_width(label: &str) -> f64 {
+    8.0 * label.chars().count() as f64
+}
+
 /// The corner where the legend's box covers the fewest drawn points (upper right on a tie).
 fn legend_corner(ink: &[(f64, f64)], lines: &[Line], w: f64, h: f64) -> SeriesLabelPosition {
     let chars = lines
@@ -380,7 +400,9 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             Some((on, off)) => stroke(&plot, &dashed(&segments, on, off), style)?,
         }
     }
-    for (i, (t, label)) in panel.markers.iter().enumerate() {
+    // Where each row of marker labels is taken up to, pixels.
+    let mut rows_end: Vec<f64> = Vec::new();
+    for (t, label) in &panel.markers {
         let px = ((t - x.0) / (x.1 - x.0) * (w - 1.0)).clamp(1.0, w - 2.0);
         let seg = [[(px, 1.0), (px, h - 2.0)]];
         stroke(
@@ -388,11 +410,14 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             &dashed(&seg, 4.0, 4.0),
             SETPOINT_COLOR.stroke_width(1),
         )?;
-        // labels alternate between two rows so that close changes stay readable
-        let row = 4 + 16 * (i32::try_from(i % 2).unwrap_or(0));
+        // The marker's line is data too: the legend keeps off it.
+        sample_ink(&seg, &mut ink);
+        let (lx, lw) = (px + 4.0, marker_label_width(label));
+        let k = label_row(&mut rows_end, lx, lw);
+        let row = 4 + 16 * i32::try_from(k).unwrap_or(0);
         // the label's box, so that the legend avoids it
-        let (lx, ly) = (px + 4.0, f64::from(row));
-        sample_ink(&[[(lx, ly), (lx + 40.0, ly + 14.0)]], &mut ink);
+        let ly = f64::from(row);
+        sample_ink(&[[(lx, ly), (lx + lw, ly + 14.0)]], &mut ink);
         plot.draw(&Text::new(
             label.clone(),
             (px.round() as i32 + 4, row),
@@ -434,6 +459,18 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn close_marker_labels_stack_and_far_ones_share_the_top_row() {
+        let mut rows = Vec::new();
+        let w = marker_label_width("to MC");
+        // Three changes within a label's width of each other: three rows.
+        assert_eq!(label_row(&mut rows, 10.0, w), 0);
+        assert_eq!(label_row(&mut rows, 20.0, w), 1);
+        assert_eq!(label_row(&mut rows, 30.0, w), 2);
+        // Far to the right: the top row again.
+        assert_eq!(label_row(&mut rows, 10.0 + w + 10.0, w), 0);
+    }
 
     #[test]
     fn ticks_are_written_with_the_digits_of_their_step() {

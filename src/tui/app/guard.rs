@@ -10,7 +10,17 @@ use crate::tracker::{VehicleState, VehicleView};
 use crate::tui::vitals::{Vitals, vitals};
 
 /// Modes whose throttle comes from the RC receiver: with no receiver they hold no altitude.
-const MANUAL_THROTTLE: [&str; 2] = ["QSTABILIZE", "QACRO"];
+/// The hover ones first, then ArduPlane's fixed-wing ones (the throttle stick is the throttle).
+const MANUAL_THROTTLE: [&str; 8] = [
+    "QSTABILIZE",
+    "QACRO",
+    "MANUAL",
+    "STABILIZE",
+    "TRAINING",
+    "ACRO",
+    "FBWA",
+    "AUTOTUNE",
+];
 
 impl App {
     fn vitals_of(&self, state: &VehicleState) -> Option<(Vitals, &'static str)> {
@@ -28,11 +38,15 @@ impl App {
             return self.mode(name);
         };
         if MANUAL_THROTTLE.contains(&name) && vit.airborne && vit.rc != Some(true) {
+            let consequence = if name.starts_with('Q') {
+                "no RC receiver gives a throttle: the motors go to zero and the vehicle falls"
+            } else {
+                "no RC receiver gives a throttle: the motors go to zero; in forward flight the \
+                 vehicle glides down, from a hover it falls"
+            };
             self.confirm = Some(Confirm::Mode {
                 name,
-                consequence: "no RC receiver gives a throttle: the motors go to zero and the \
-                              vehicle falls"
-                    .into(),
+                consequence: consequence.into(),
             });
             return Vec::new();
         }

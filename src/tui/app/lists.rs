@@ -93,6 +93,10 @@ impl App {
 
     pub(super) fn on_params_key(&mut self, key: KeyEvent) -> Option<Vec<Request>> {
         let n = self.params.filtered().len();
+        if self.replay && matches!(key.code, KeyCode::Enter | KeyCode::Char('f' | 'r')) {
+            self.refuse_on_replay();
+            return Some(Vec::new());
+        }
         match key.code {
             KeyCode::Up => self.params.selected = self.params.selected.saturating_sub(1),
             KeyCode::Down => {

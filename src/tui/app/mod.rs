@@ -16,6 +16,7 @@ use crate::tui::vitals::with_recovery;
 pub mod fleet;
 mod guard;
 mod lists;
+pub mod picker;
 
 /// Step of the QLOITER position target per arrow key, m.
 pub const TARGET_STEP_M: f32 = 0.5;
@@ -304,6 +305,10 @@ pub struct App {
     pub last_mode: Option<String>,
     /// The vehicle the UI shows and commands (`v`/`V` switch); `None` = the first listed.
     pub selected: Option<(SystemId, ComponentId)>,
+    /// The mode picker, while open (`m`).
+    pub picker: Option<picker::Picker>,
+    /// The shown vehicle is a replayed log: no commands are offered.
+    pub replay: bool,
     /// Set by `q`.
     pub quit: bool,
 }
@@ -323,9 +328,26 @@ impl Default for App {
             last_mode: None,
             log: VecDeque::new(),
             selected: None,
+            picker: None,
+            replay: false,
             quit: false,
         }
     }
+}
+
+/// Horizontal speed under which a vehicle entering QLOITER holds where it was, m/s.
+const SETTLED_M_S: f32 = 1.0;
+
+/// Whether `v` hovers slowly: EXTENDED_SYS_STATE says hover (or is not sent) and it moves
+/// less than [`SETTLED_M_S`] across the ground.
+fn settled_hover(
+    state: &VehicleState,
+    v: &VehicleView,
+    p: &crate::tracker::state::LocalPosition,
+) -> bool {
+    let air = crate::tui::air::air(state, v, None, false);
+    let hovering = matches!(air.vtol, None | Some(crate::tui::air::Vtol::Mc));
+    hovering && p.vel_ned_m_s[0].hypot(p.vel_ned_m_s[1]) < SETTLED_M_S
 }
 
 impl App {
@@ -385,7 +407,10 @@ impl App {
         let entered = self.last_mode.as_deref() != Some(mode.as_str());
         if entered {
             self.target_ned = match (mode.as_str(), v.position) {
-                ("QLOITER", Some(p)) => {
+                // Entered from a hover the vehicle holds where it was. Entered at speed (from
+                // forward flight, through a back transition) it holds where it stops, which
+                // the UI does not know: no setpoint rather than a wrong one.
+                ("QLOITER", Some(p)) if settled_hover(state, v, &p) => {
                     let airborne = crate::tui::vitals::vitals(state, v).airborne;
                     let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
                     let [n, e, d] = p.pos_ned_m;
@@ -457,6 +482,9 @@ impl App {
         if let Some(c) = self.confirm.take() {
             return self.on_confirm(c, key);
         }
+        if let Some(p) = self.picker.take() {
+            return self.on_picker_key(p, key, state);
+        }
         if self.typing {
             return self.on_text(key);
         }
@@ -503,6 +531,10 @@ impl App {
 
     /// Flight commands: arm, modes, QLOITER target, pushes, chart window.
     fn on_command_key(&mut self, key: KeyEvent, state: &VehicleState) -> Vec<Request> {
+        if self.replay && Self::is_command_key(key) {
+            self.refuse_on_replay();
+            return Vec::new();
+        }
         let vehicle = self.vehicle(state);
         match key.code {
             KeyCode::Char('a') => self.confirm = Some(Confirm::Arm { force: false }),
@@ -514,6 +546,7 @@ impl App {
             KeyCode::Char('l') => return self.guarded_mode("QLAND", state),
             KeyCode::Char('p') => return self.guarded_mode("QLOITER", state),
             KeyCode::Char('s') => return self.guarded_mode("QSTABILIZE", state),
+            KeyCode::Char('m') => self.open_picker(state),
             KeyCode::Char(c @ ('x' | 'X' | 'c' | 'C' | 'z' | 'Z')) => {
                 let (axis, sign) = match c {
                     'x' => ("ROLL", 1.0),

@@ -7,10 +7,11 @@ use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
 
-use super::flight::setpoint_ned;
-use super::{Snapshot, servo_names};
+use super::flight::{setpoint_ned, shown_attitude};
+use super::{Snapshot, servo_outputs};
 use crate::tracker::state::VehicleView;
 use crate::tui::app::App;
+use crate::tui::attitude::{AttFrame, wing_to_hover};
 
 /// A chart series: name, colour, points (seconds before now, value).
 pub(super) type Series = (String, Color, Vec<(f64, f64)>);
@@ -20,6 +21,10 @@ fn short(name: &str) -> &str {
     match name {
         "left aileron" => "L ail",
         "right aileron" => "R ail",
+        "left elevon" => "L elvn",
+        "right elevon" => "R elvn",
+        "left motor" => "L mot",
+        "right motor" => "R mot",
         "elevator" => "elev",
         "north" => "N",
         "east" => "E",
@@ -91,6 +96,10 @@ pub(super) fn chart<'a>(
     if hi - lo < 1e-6 {
         lo -= 1.0;
         hi += 1.0;
+    } else if hi - lo < 0.2 {
+        // Hundredths are a float's noise (an angle converted near 90° of pitch), not motion.
+        let mid = (hi + lo) / 2.0;
+        (lo, hi) = (mid - 0.1, mid + 0.1);
     }
     let pad = (hi - lo) * 0.05;
     let (lo, hi) = (lo - pad, hi + pad);
@@ -151,6 +160,8 @@ struct Past<'h> {
     hist: Option<&'h crate::tracker::history::VehicleHistory>,
     now_t: f64,
     from: f64,
+    /// The frame the attitude is shown in now (a tailsitter's hover frame is converted).
+    frame: AttFrame,
 }
 
 impl Past<'_> {
@@ -159,7 +170,17 @@ impl Past<'_> {
             h.attitude
                 .iter()
                 .filter(|(t, _)| *t >= self.from)
-                .map(|(t, a)| (t - self.now_t, f64::from(a[i]).to_degrees()))
+                .map(|(t, a)| {
+                    let a = if self.frame == AttFrame::Hover {
+                        let [r, p, y] = [a[0], a[1], a[2]].map(f64::from);
+                        let q = wing_to_hover(nalgebra::UnitQuaternion::from_euler_angles(r, p, y));
+                        let (r, p, y) = q.euler_angles();
+                        [r, p, y]
+                    } else {
+                        [a[0], a[1], a[2]].map(f64::from)
+                    };
+                    (t - self.now_t, a[i].to_degrees())
+                })
                 .collect()
         })
     }
@@ -191,6 +212,7 @@ fn past<'h>(app: &App, snap: &Snapshot<'h>, v: &VehicleView) -> Past<'h> {
         hist: snap.history.vehicles.get(&(v.system_id, v.component_id)),
         now_t,
         from: now_t - app.window_s,
+        frame: shown_attitude(app, snap, v).map_or(AttFrame::Body, |s| s.frame),
     }
 }
 
@@ -236,7 +258,16 @@ pub(super) fn draw_flight_charts(
         .map(|(i, n)| ((*n).to_owned(), COLOURS[i], p.attitude(i)))
         .collect();
     f.render_widget(
-        chart(" Attitude (°) ".into(), &s, app.window_s, "°", att.width),
+        chart(
+            match p.frame.label() {
+                Some(l) => format!(" Attitude (°, {l}) "),
+                None => " Attitude (°) ".into(),
+            },
+            &s,
+            app.window_s,
+            "°",
+            att.width,
+        ),
         att,
     );
     let s = position_series(app, snap, v, &p);
@@ -252,15 +283,20 @@ pub(super) fn draw_charts(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         return;
     };
     let p = past(app, snap, v);
-    let names = servo_names(app);
+    let outputs = servo_outputs(app);
+    let names: Vec<&str> = outputs.iter().map(|o| o.name.as_str()).collect();
     let [l, r] = Layout::horizontal([Constraint::Percentage(50); 2]).areas(area);
     let left = Layout::vertical([Constraint::Ratio(1, 3); 3]).split(l);
     let right = Layout::vertical([Constraint::Ratio(1, 3); 3]).split(r);
+    let frame = p
+        .frame
+        .label()
+        .map_or_else(String::new, |l| format!(", {l}"));
     for (i, name) in ["Roll", "Pitch", "Yaw"].iter().enumerate() {
         let s = vec![((*name).to_owned(), COLOURS[0], p.attitude(i))];
         f.render_widget(
             chart(
-                format!(" {name} (°) "),
+                format!(" {name} (°{frame}) "),
                 &s,
                 app.window_s,
                 "°",
@@ -270,14 +306,14 @@ pub(super) fn draw_charts(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         );
     }
     let escs: Vec<_> = (0..8)
-        .filter(|i| names[*i].starts_with("ESC") || (*i < 2 && names[*i].starts_with("SERVO")))
+        .filter(|i| outputs[*i].motor || (*i < 2 && names[*i].starts_with("SERVO")))
         .filter(|i| v.servo_us[*i] != 0)
         .enumerate()
-        .map(|(k, i)| (names[i].clone(), COLOURS[k % 8], p.servo(i)))
+        .map(|(k, i)| (names[i].to_owned(), COLOURS[k % 8], p.servo(i)))
         .collect();
     f.render_widget(
         chart(
-            " ESC (µs) ".into(),
+            " Motors (µs) ".into(),
             &escs,
             app.window_s,
             "µs",
@@ -289,7 +325,7 @@ pub(super) fn draw_charts(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         .filter(|i| !escs.iter().any(|(n, _, _)| *n == names[*i]))
         .filter(|i| v.servo_us[*i] != 0)
         .enumerate()
-        .map(|(k, i)| (names[i].clone(), COLOURS[(k + 2) % 8], p.servo(i)))
+        .map(|(k, i)| (names[i].to_owned(), COLOURS[(k + 2) % 8], p.servo(i)))
         .collect();
     f.render_widget(
         chart(

@@ -33,23 +33,46 @@ impl SetpointSource {
     }
 }
 
+/// Modes that fly to no point: the stick modes, fixed-wing and hover, QLOITER (its hold point
+/// is not in ArduPlane's target) and QLAND (straight down).
+const NO_POINT_MODES: [&str; 14] = [
+    "MANUAL",
+    "STABILIZE",
+    "TRAINING",
+    "ACRO",
+    "FBWA",
+    "FBWB",
+    "CRUISE",
+    "AUTOTUNE",
+    "QSTABILIZE",
+    "QHOVER",
+    "QLOITER",
+    "QLAND",
+    "QACRO",
+    "QAUTOTUNE",
+];
+
 /// The setpoint (north, east, down; NaN where none) the view shows: the vehicle's live target
-/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point, else
-/// `HOVER_ALT` in QHOVER.
+/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point when it was
+/// entered from a hover, else `HOVER_ALT` in QHOVER.
 pub(super) fn setpoint_ned(
     app: &App,
     snap: &Snapshot<'_>,
     v: &VehicleView,
 ) -> Option<([f32; 3], SetpointSource)> {
-    if let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now) {
+    // ArduPlane sends its next waypoint as POSITION_TARGET_GLOBAL_INT in every mode but
+    // MANUAL, also where it flies to no point (a stick mode, a hover): there it is stale.
+    let mode = v.mode_name();
+    if !NO_POINT_MODES.contains(&mode.as_str())
+        && let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now)
+    {
         return Some((t, SetpointSource::Vehicle));
     }
     let hover = app.params.value("HOVER_ALT");
-    match v.mode_name().as_str() {
-        "QLOITER" => app
-            .target_ned
-            .map(|t| (t, SetpointSource::Loiter))
-            .or_else(|| hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt))),
+    match mode.as_str() {
+        // Where QLOITER was entered from a hover; none after a back transition (the vehicle
+        // holds where it stopped, and says nothing of it).
+        "QLOITER" => app.target_ned.map(|t| (t, SetpointSource::Loiter)),
         "QHOVER" => hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt)),
         _ => None,
     }
@@ -95,10 +118,14 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     let out_rows = u16::try_from(outputs.len().max(1)).unwrap_or(8) + 2;
     let [horizon_area, pwm] =
         Layout::vertical([Constraint::Min(5), Constraint::Length(out_rows)]).areas(left);
-    draw_horizon(f, snap, vehicle, horizon_area);
+    let shown = vehicle.and_then(|v| shown_attitude(app, snap, v));
+    draw_horizon(f, snap, vehicle, shown, horizon_area);
+    let title = match shown.and_then(|s| s.frame.label()) {
+        Some(frame) => format!(" Attitude ({frame}) and position "),
+        None => " Attitude and position ".to_owned(),
+    };
     f.render_widget(
-        Paragraph::new(numbers(app, snap, vehicle))
-            .block(Block::bordered().title(" Attitude and position ")),
+        Paragraph::new(numbers(app, snap, vehicle, shown)).block(Block::bordered().title(title)),
         right,
     );
     draw_outputs(f, app, vehicle, &outputs, pwm);
@@ -110,12 +137,30 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     }
 }
 
-fn draw_horizon(f: &mut Frame<'_>, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>, area: Rect) {
-    let att = vehicle.and_then(|v| v.attitude);
+/// The attitude of `v` as the operator reads it: a tailsitter in hover in its hover frame.
+pub(super) fn shown_attitude(
+    app: &App,
+    snap: &Snapshot<'_>,
+    v: &VehicleView,
+) -> Option<crate::tui::attitude::Shown> {
+    crate::tui::attitude::shown(snap.state, v, super::q_tailsit_enable(app))
+}
+
+fn draw_horizon(
+    f: &mut Frame<'_>,
+    snap: &Snapshot<'_>,
+    vehicle: Option<&VehicleView>,
+    att: Option<crate::tui::attitude::Shown>,
+    area: Rect,
+) {
     let stale_att = vehicle
         .and_then(|v| age_s(snap, v, 30))
         .filter(|a| *a > STALE_S);
-    let block = Block::bordered().title(" Horizon ");
+    let title = match att.and_then(|a| a.frame.label()) {
+        Some(frame) => format!(" Horizon ({frame}) "),
+        None => " Horizon ".to_owned(),
+    };
+    let block = Block::bordered().title(title);
     let inner = block.inner(area);
     f.render_widget(block, area);
     let [tape, horizon] =
@@ -174,9 +219,14 @@ fn draw_horizon(f: &mut Frame<'_>, snap: &Snapshot<'_>, vehicle: Option<&Vehicle
 }
 
 /// The attitude, position against the setpoint, air data and VTOL state, one line each.
-fn numbers(app: &App, snap: &Snapshot<'_>, vehicle: Option<&VehicleView>) -> Vec<Line<'static>> {
+fn numbers(
+    app: &App,
+    snap: &Snapshot<'_>,
+    vehicle: Option<&VehicleView>,
+    shown: Option<crate::tui::attitude::Shown>,
+) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
-    let (v, a) = match (vehicle, vehicle.and_then(|v| v.attitude)) {
+    let (v, a) = match (vehicle, shown) {
         (Some(v), Some(a)) => (v, a),
         (Some(_), None) => return vec![Line::raw("no attitude yet")],
         (None, _) => return vec![Line::raw("no vehicle yet")],
@@ -281,7 +331,7 @@ fn position_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'
 /// Airspeed, angle of attack and sideslip; the VTOL state and a transition's progress.
 fn air_lines(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Line<'static>> {
     let min = app.params.value("ARSPD_FBW_MIN");
-    let air = crate::tui::air::air(snap.state, v, min);
+    let air = crate::tui::air::air(snap.state, v, min, super::tailsitter(app, v));
     let num = |x: Option<f32>, f: &dyn Fn(f32) -> String| x.map_or_else(|| "-".to_owned(), f);
     let air_line = format!(
         "Air   {:>5} m/s  AoA {:>6}  SSA {:>6}",
@@ -329,9 +379,14 @@ fn draw_outputs(
         height: 1,
         ..inner
     });
+    let w = used
+        .iter()
+        .map(|i| names[*i].chars().count())
+        .max()
+        .unwrap_or(0);
     for (row, i) in rows.zip(used) {
         let us = v.servo_us[*i];
-        let label = format!("{:<13} {us:>4} µs ", names[*i]);
+        let label = format!("{:<w$} {us:>4} µs ", names[*i]);
         let width = usize::from(row.width).saturating_sub(label.chars().count());
         f.render_widget(Paragraph::new(pwm_bar(label, us, width)), row);
     }

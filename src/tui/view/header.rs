@@ -47,6 +47,12 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
                 status_name(v.system_status),
                 status_style(v.system_status),
             ));
+            if app.replay {
+                spans.push(Span::styled(
+                    " │ REPLAY",
+                    Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD),
+                ));
+            }
             // A lost vehicle's clock stops at its last heartbeat: nothing says it still flies.
             let until = if lost { v.last_heartbeat } else { now };
             let flight = v
@@ -141,7 +147,12 @@ pub(super) fn vitals_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> Vec<Li
 /// The VTOL state (with a transition's progress), airspeed and angle of attack; `-` for what
 /// the vehicle does not report.
 fn air_item(app: &App, snap: &Snapshot<'_>, v: &VehicleView) -> Vec<Span<'static>> {
-    let a = air(snap.state, v, app.params.value("ARSPD_FBW_MIN"));
+    let a = air(
+        snap.state,
+        v,
+        app.params.value("ARSPD_FBW_MIN"),
+        super::tailsitter(app, v),
+    );
     let grey = Style::new().fg(Color::DarkGray);
     let mut spans = Vec::new();
     match (a.vtol, a.progress) {
@@ -349,13 +360,36 @@ pub(super) fn vehicle_list_lines(app: &App, snap: &Snapshot<'_>, width: u16) -> 
     lines
 }
 
-pub(super) fn draw_footer(f: &mut Frame<'_>, app: &App, area: Rect) {
-    let line = match app.log.back() {
-        Some((l, t)) => Line::from(Span::styled(format!(" {t}"), level_style(*l))),
-        None => Line::from(Span::styled(
-            " a arm  d disarm  t take off (QHOVER)  l land (QLAND)  p QLOITER  x/c/z push",
+/// The footer's lines at `width`: the operator's last event, wrapped at words (a refusal's
+/// reason whole, up to [`FOOTER_ROWS`] rows), else the keys.
+pub(super) fn footer_lines(app: &App, width: u16) -> Vec<Line<'static>> {
+    match app.log.back() {
+        Some((l, t)) => {
+            let mut rows = super::wrap(t, usize::from(width.saturating_sub(1)));
+            if rows.len() > FOOTER_ROWS {
+                rows.truncate(FOOTER_ROWS);
+                if let Some(last) = rows.last_mut() {
+                    last.push('…');
+                }
+            }
+            rows.into_iter()
+                .map(|r| Line::from(Span::styled(format!(" {r}"), level_style(*l))))
+                .collect()
+        }
+        None if app.replay => vec![Line::from(Span::styled(
+            " replay: a recorded log; no commands  Tab views  ? help  q quit",
             Style::new().fg(Color::DarkGray),
-        )),
-    };
-    f.render_widget(Paragraph::new(line), area);
+        ))],
+        None => vec![Line::from(Span::styled(
+            " a arm  d disarm  t QHOVER  l QLAND  p QLOITER  m modes  x/c/z push",
+            Style::new().fg(Color::DarkGray),
+        ))],
+    }
+}
+
+/// Most rows the footer takes for a long event.
+pub(super) const FOOTER_ROWS: usize = 3;
+
+pub(super) fn draw_footer(f: &mut Frame<'_>, app: &App, area: Rect) {
+    f.render_widget(Paragraph::new(footer_lines(app, area.width)), area);
 }

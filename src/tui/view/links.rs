@@ -31,7 +31,7 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
     // What the narrow layout leaves the peer: the fixed columns and their spacing taken.
     let peer_w = usize::from(
         area.width
-            .saturating_sub(2 + 3 + 7 + 6 + 5 + 11 + 8 + 8 + 4 + 3 + 9),
+            .saturating_sub(2 + 3 + 4 + 5 + 5 + 11 + 7 + 7 + 4 + 3 + 9),
     );
     let rows: Vec<Row> = snap
         .links
@@ -40,7 +40,11 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             let h = snap.state.links.get(&l.id);
             let (rate, loss, heard, lost) = match h {
                 Some(h) => (
-                    format!("{:.1}", h.window.rate_hz(now)),
+                    // Five columns: a thousand frames a second and more without the tenth.
+                    match h.window.rate_hz(now) {
+                        r if r >= 999.95 => format!("{r:.0}"),
+                        r => format!("{r:.1}"),
+                    },
                     format!("{:.1}", h.window.loss_pct(now)),
                     format!(
                         "{:.1} s",
@@ -50,10 +54,13 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
                 ),
                 None => ("0.0".into(), "-".into(), "never".into(), false),
             };
-            let side = match (l.side, l.own) {
-                (_, true) => "own",
-                (Side::Vehicle, _) => "vehicle",
-                (Side::Client, _) => "client",
+            // Narrow, the side takes three letters so that the address keeps its row.
+            let side = match (l.side, l.own, narrow) {
+                (_, true, _) => "own",
+                (Side::Vehicle, _, false) => "vehicle",
+                (Side::Vehicle, _, true) => "veh",
+                (Side::Client, _, false) => "client",
+                (Side::Client, _, true) => "cli",
             };
             let style = if lost {
                 Style::new().fg(Color::Red)
@@ -67,7 +74,7 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             };
             // Narrow, the peer wraps in its column rather than lose its end (the port).
             let peer = if narrow {
-                wrap(&peer, peer_w)
+                peer_lines(&peer, peer_w)
             } else {
                 vec![peer]
             };
@@ -97,13 +104,13 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
     let widths = if narrow {
         [
             Constraint::Length(3),
-            Constraint::Length(7),
+            Constraint::Length(4),
             Constraint::Min(9),
-            Constraint::Length(6),
+            Constraint::Length(5),
             Constraint::Length(5),
             Constraint::Length(11),
-            Constraint::Length(8),
-            Constraint::Length(8),
+            Constraint::Length(7),
+            Constraint::Length(7),
             Constraint::Length(4),
             Constraint::Length(3),
         ]
@@ -190,4 +197,42 @@ pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {
             .block(Block::bordered().title(" Log and endpoints ")),
         tlog,
     );
+}
+
+/// A peer in lines of `width`: words whole where they fit, an address too long for a line
+/// broken after a `:` (host, then port) rather than inside a number.
+fn peer_lines(peer: &str, width: usize) -> Vec<String> {
+    let mut words = Vec::new();
+    for word in peer.split_whitespace() {
+        let mut rest = word;
+        while rest.chars().count() > width {
+            let head: String = rest.chars().take(width).collect();
+            let Some(cut) = head.rfind(':').filter(|c| *c > 0) else {
+                break;
+            };
+            words.push(&rest[..=cut]);
+            rest = &rest[cut + 1..];
+        }
+        words.push(rest);
+    }
+    wrap(&words.join(" "), width)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::peer_lines;
+
+    #[test]
+    fn an_address_breaks_at_its_colon_not_inside_a_number() {
+        assert_eq!(peer_lines("tcp 127.0.0.1:5810", 20), ["tcp 127.0.0.1:5810"]);
+        assert_eq!(
+            peer_lines("udp 192.168.100.200:14550", 20),
+            ["udp 192.168.100.200:", "14550"]
+        );
+        // A host longer than the column is cut where it must, the port kept with its colon.
+        assert_eq!(
+            peer_lines("udp 192.168.100.200:14550", 12),
+            ["udp", "192.168.100.", "200:14550"]
+        );
+    }
 }

@@ -29,10 +29,10 @@ use charts::draw_charts;
 use fleet::draw_fleet;
 use flight::draw_flight;
 pub use flight::heading_tape;
-use header::{draw_footer, draw_header, vehicle_list_lines, vitals_lines};
+use header::{draw_footer, draw_header, footer_lines, vehicle_list_lines, vitals_lines};
 use links::draw_links;
 use messages::draw_messages;
-use overlay::{draw_confirm, draw_help};
+use overlay::{draw_confirm, draw_help, draw_picker};
 use params::draw_params;
 
 /// Smallest terminal the views are laid out for.
@@ -169,39 +169,34 @@ fn level_style(l: Level) -> Style {
     }
 }
 
-/// Name of an output from its `SERVOn_FUNCTION` (ArduPilot's numbers), counting ESCs and
-/// ailerons in output order; `SERVOn` when the function is unknown or not published.
-#[must_use]
-pub fn output_names(functions: &[Option<f32>]) -> Vec<String> {
-    let (mut escs, mut ailerons) = (0, 0);
-    functions
-        .iter()
-        .enumerate()
-        .map(|(i, f)| match f.map(|v| v as i32) {
-            Some(33..=40 | 70 | 73 | 74) => {
-                escs += 1;
-                format!("ESC{escs}")
-            }
-            Some(4) => {
-                ailerons += 1;
-                match ailerons {
-                    1 => "left aileron".to_owned(),
-                    2 => "right aileron".to_owned(),
-                    n => format!("aileron {n}"),
-                }
-            }
-            Some(19) => "elevator".to_owned(),
-            Some(21) => "rudder".to_owned(),
-            _ => format!("SERVO{}", i + 1),
-        })
-        .collect()
-}
-
-fn servo_names(app: &App) -> Vec<String> {
+/// The shown vehicle's outputs 1–8 labelled by their `SERVOn_FUNCTION` ([`crate::outputs`]).
+fn servo_outputs(app: &App) -> Vec<crate::outputs::Output> {
     let f: Vec<Option<f32>> = (1..=8)
         .map(|i| app.params.value(&format!("SERVO{i}_FUNCTION")))
         .collect();
-    output_names(&f)
+    crate::outputs::outputs(&f)
+}
+
+/// Whether the shown vehicle is a tailsitter (its parameters or its MAV_TYPE).
+fn tailsitter(app: &App, v: &VehicleView) -> bool {
+    crate::tui::attitude::is_tailsitter(v, q_tailsit_enable(app))
+}
+
+/// `Q_TAILSIT_ENABLE` as the vehicle's table says it: its value, else 1 when the table has
+/// other `Q_TAILSIT_*` parameters (ArduPilot shows them only while it is enabled; the twin
+/// publishes them without the switch).
+pub(super) fn q_tailsit_enable(app: &App) -> Option<f32> {
+    app.params.value("Q_TAILSIT_ENABLE").or_else(|| {
+        app.params
+            .table
+            .iter()
+            .any(|(n, _)| n.starts_with("Q_TAILSIT_"))
+            .then_some(1.0)
+    })
+}
+
+fn servo_names(app: &App) -> Vec<String> {
+    servo_outputs(app).into_iter().map(|o| o.name).collect()
 }
 
 /// A MAV_STATE as the header shows it (`ACTIVE`, `CRITICAL` …).
@@ -241,6 +236,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         return;
     }
     app.observe(snap.state);
+    app.replay = is_replay(app, snap.state, &snap.links);
     // The Fleet view is the list: the header does not repeat it there.
     let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
@@ -249,10 +245,11 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
     };
     let list_rows = u16::try_from(fleet.len()).unwrap_or(u16::MAX);
     let vitals_rows = u16::try_from(vitals_lines(app, snap, area.width).len()).unwrap_or(1);
+    let footer_rows = u16::try_from(footer_lines(app, area.width).len()).unwrap_or(1);
     let [header, body, footer] = Layout::vertical([
         Constraint::Length(2 + vitals_rows + list_rows),
         Constraint::Min(10),
-        Constraint::Length(1),
+        Constraint::Length(footer_rows),
     ])
     .areas(area);
     draw_header(f, app, snap, header);
@@ -275,12 +272,25 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Fleet => draw_fleet(f, app, snap, body),
     }
     draw_footer(f, app, footer);
+    if let Some(p) = &app.picker {
+        draw_picker(f, app, p, snap.state, area);
+    }
     if let Some(c) = &app.confirm {
         draw_confirm(f, app, c, area);
     }
     if app.help {
         draw_help(f, area);
     }
+}
+
+/// Whether the vehicle `app` shows comes over a replay link (a recorded log).
+#[must_use]
+pub fn is_replay(app: &App, state: &VehicleState, links: &[LinkRow]) -> bool {
+    app.vehicle(state).is_some_and(|v| {
+        links
+            .iter()
+            .any(|l| l.id == v.link && l.peer == crate::daemon::REPLAY_PEER)
+    })
 }
 
 /// Words of `text` in lines of at most `width` characters (a longer word is cut into pieces).

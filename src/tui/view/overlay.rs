@@ -6,6 +6,8 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Cell, Clear, Paragraph, Row, Table, Wrap};
 
+use crate::tracker::state::VehicleState;
+use crate::tui::app::picker::Picker;
 use crate::tui::app::{App, Confirm};
 
 pub(super) fn centered(area: Rect, w: u16, h: u16) -> Rect {
@@ -69,6 +71,7 @@ pub(super) const HELP: &[(&str, &str)] = &[
     ("t", "take off: QHOVER (climbs to HOVER_ALT when armed)"),
     ("l", "land: QLAND"),
     ("p / s", "QLOITER / QSTABILIZE (asks first in the air)"),
+    ("m", "mode picker: the vehicle's modes (↑↓ or type, Enter)"),
     (
         "arrows",
         "QLOITER: move the target 0.5 m north/south/east/west",
@@ -106,6 +109,79 @@ pub(super) fn draw_help(f: &mut Frame<'_>, area: Rect) {
     f.render_widget(
         Table::new(rows, [Constraint::Length(20), Constraint::Min(20)])
             .block(Block::bordered().title(" Keys ")),
+        r,
+    );
+}
+
+/// The mode picker: the vehicle's modes with their numbers, the current one marked, the
+/// selected one highlighted; a fixed-wing mode picked in hover is named as the forward
+/// transition it starts, a Q mode in forward flight as the back transition.
+pub(super) fn draw_picker(
+    f: &mut Frame<'_>,
+    app: &App,
+    p: &Picker,
+    state: &VehicleState,
+    area: Rect,
+) {
+    let v = app.vehicle(state);
+    let listed = p.listed(v);
+    let current = v.map(|v| v.custom_mode);
+    let hover = v.is_some_and(|v| crate::tui::attitude::in_hover(state, v));
+    let h = area.height.saturating_sub(2).clamp(6, 26);
+    let rows = usize::from(h.saturating_sub(4));
+    // Scroll so that the selected row shows.
+    let first = p.selected.saturating_sub(rows.saturating_sub(1));
+    let mut lines = Vec::new();
+    lines.push(Line::from(vec![
+        Span::styled("filter: ", Style::new().fg(Color::DarkGray)),
+        Span::raw(if p.filter.is_empty() {
+            "(type to filter)".to_owned()
+        } else {
+            p.filter.clone()
+        }),
+    ]));
+    if listed.is_empty() {
+        lines.push(Line::styled(
+            "no mode matches",
+            Style::new().fg(Color::Yellow),
+        ));
+    }
+    for (i, (name, number)) in listed.iter().enumerate().skip(first).take(rows) {
+        let q = name.starts_with('Q');
+        // What picking it does, on the selected row only (the list stays readable).
+        let note = match (
+            Some(*number) == current,
+            i == p.selected && v.is_some(),
+            q,
+            hover,
+        ) {
+            (true, _, _, _) => "current",
+            (false, true, false, true) => "forward transition",
+            (false, true, true, false) => "back transition",
+            _ => "",
+        };
+        let text = format!(" {name:<11} {number:>3}  {note}");
+        let style = if i == p.selected {
+            Style::new().add_modifier(Modifier::REVERSED | Modifier::BOLD)
+        } else if Some(*number) == current {
+            Style::new().fg(Color::Green)
+        } else {
+            Style::new()
+        };
+        lines.push(Line::styled(text, style));
+    }
+    lines.push(Line::styled(
+        "Enter: switch  Esc: close",
+        Style::new().fg(Color::DarkGray),
+    ));
+    let r = centered(area, 40, (lines.len() as u16 + 2).min(h + 2));
+    f.render_widget(Clear, r);
+    f.render_widget(
+        Paragraph::new(lines).block(
+            Block::bordered()
+                .title(" Mode ")
+                .border_style(Style::new().fg(Color::Cyan)),
+        ),
         r,
     );
 }
