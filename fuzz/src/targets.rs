@@ -97,8 +97,11 @@ pub fn tlog(data: &[u8]) {
     }
     assert!(reader.bytes_consumed() <= data.len() as u64);
     assert!(reader.skipped_bytes + reader.truncated_tail_bytes <= data.len());
+    // The direction convention is detected from the same records, as `log stats` does.
+    let directions =
+        vtol_gcs::tlog::Directions::detect(vtol_gcs::tlog::TlogReader::from_bytes(data.to_vec()));
     let mut again = vtol_gcs::tlog::TlogReader::from_bytes(data.to_vec());
-    let stats = vtol_gcs::log::stats::scan(&mut again, data.len() as u64, &mut |_| {});
+    let stats = vtol_gcs::log::stats::scan(&mut again, data.len() as u64, directions, &mut |_| {});
     assert_eq!(stats.frames, records, "stats and the reader disagree");
 }
 

@@ -80,9 +80,9 @@ pub fn is_tailsitter(v: &VehicleView, q_tailsit_enable: Option<f32>) -> bool {
     q_tailsit_enable.is_some_and(|x| x > 0.0)
         || matches!(
             v.mav_type,
-            MavType::MAV_TYPE_VTOL_TAILSITTER
-                | MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR
-                | MavType::MAV_TYPE_VTOL_TAILSITTER_QUADROTOR
+            x if x == MavType::MAV_TYPE_VTOL_TAILSITTER as u8
+                || x == MavType::MAV_TYPE_VTOL_TAILSITTER_DUOROTOR as u8
+                || x == MavType::MAV_TYPE_VTOL_TAILSITTER_QUADROTOR as u8
         )
 }
 
