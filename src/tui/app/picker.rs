@@ -31,7 +31,7 @@ pub fn vehicle_modes(v: Option<&VehicleView>) -> Vec<(&'static str, u32)> {
     let Some(v) = v else {
         return Vec::new();
     };
-    crate::modes::modes_for(v.autopilot as u8, v.mav_type as u8)
+    crate::modes::modes_for(v.autopilot, v.mav_type)
         .iter()
         .filter(|(n, _)| !NOT_OFFERED.contains(n))
         .copied()
