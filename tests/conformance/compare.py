@@ -117,3 +117,29 @@ def report(scenario: str, ref: dict, got: dict) -> tuple[str, bool]:
     lines += [f"  STALE expected difference '{e['name']}' ({e['keys']}): the vehicle now does what ArduPlane "
               f"does; remove the entry" for e in stale]
     return "\n".join(lines), not unexpected and not stale
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python compare.py REF_DIR OTHER_DIR [NAME...]`: the report of each scenario traced in
+    both folders (e.g. traces/arduplane and a folder `record.py --twin` wrote)."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("ref", type=Path)
+    ap.add_argument("other", type=Path)
+    ap.add_argument("names", nargs="*")
+    a = ap.parse_args(argv)
+    names = a.names or sorted(p.stem for p in a.ref.glob("*.json") if (a.other / p.name).is_file())
+    ok_all = True
+    for name in names:
+        text, ok = report(name, json.loads((a.ref / f"{name}.json").read_text()),
+                          json.loads((a.other / f"{name}.json").read_text()))
+        ok_all &= ok
+        print(text)
+    return 0 if ok_all else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -43,7 +43,7 @@ from vehicle import suite  # noqa: E402
 
 # The twin's speed per kind of scenario: as fast as its telemetry still samples each flight
 # phase (its telemetry rates count wall time).
-TWIN_SPEED = {False: 10.0, True: 20.0}
+TWIN_SPEED = {False: 4.0, True: 20.0}
 
 
 @contextmanager

@@ -154,8 +154,10 @@ def prearm(v: Vehicle, tr: Trace) -> None:
 def arm_disarm(v: Vehicle, tr: Trace) -> None:
     begin(v, tr)
     tr.proto("boot_mode", v.modes[-1] if v.modes else None)
-    for mode in ("QSTABILIZE", "QHOVER", "QLOITER", "MANUAL", "FBWA"):
+    for mode in ("QSTABILIZE", "QHOVER", "MANUAL", "FBWA"):
         tr.proto(f"{mode}.mode", v.mode(mode))
+        if not v.wait_mode(mode, timeout=5):
+            continue  # refused: arming here would repeat the previous mode's round
         mark = len(v.statustexts)
         tr.proto(f"{mode}.arm", v.arm())
         tr.proto(f"{mode}.armed_seen", v.until(v.armed, timeout=10, vehicle_s=5, ok_on_time=True))
@@ -164,6 +166,8 @@ def arm_disarm(v: Vehicle, tr: Trace) -> None:
         tr.proto(f"{mode}.disarmed_seen", v.until(lambda: not v.armed(), timeout=10, vehicle_s=5, ok_on_time=True))
         tr.proto(f"{mode}.disarm_again", v.disarm())
         reasons(v, mark, tr, mode)
+        if v.armed():  # a refused disarm: end the round on the ground, disarmed
+            tr.proto(f"{mode}.force_disarm", v.cmd(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196))
     tr.proto("armed_sequence", v.armed_seen)
 
 
@@ -438,7 +442,8 @@ def box_mission(v: Vehicle, tr: Trace) -> None:
         if cur is not None:
             phases.setdefault(cur, []).append((t, m))
     for seq, msgs in sorted(phases.items()):
-        tr.phys(f"item{seq}", phase_summary(msgs))
+        if seq < len(items):
+            tr.phys(f"item{seq}", phase_summary(msgs))
     g = v.last["GLOBAL_POSITION_INT"]
     tr.phys("landed_from_land_point_m", round(distance_m(lat, lon, g.lat, g.lon), 1))
 
