@@ -48,10 +48,11 @@ TWIN_SPEED = {False: 4.0, True: 20.0}
 
 @contextmanager
 def sitl(binary: str, defaults: str, instance: int, speedup: float, model: str) -> Iterator[tuple[str, list[str]]]:
-    """A fresh ArduPlane SITL in a temporary directory; yields its SERIAL0 URL and command line."""
+    """A fresh ArduPlane SITL in a temporary directory, booting at once (`--serial0 tcp:0`:
+    SERIAL0 on its TCP port without waiting for a client); yields that URL and the command line."""
     with tempfile.TemporaryDirectory(prefix="conformance-sitl-") as cwd:
         cmd = [binary, "--model", model, "--speedup", f"{speedup:g}", "--defaults", defaults,
-               "-I", str(instance)]
+               "-I", str(instance), "--serial0", "tcp:0"]
         with open(Path(cwd) / "sitl.out", "wb") as out:
             proc = subprocess.Popen(cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
         try:

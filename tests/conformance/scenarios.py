@@ -89,7 +89,7 @@ def identify(v: Vehicle, tr: Trace) -> None:
 
 PARAMS_READ = ["WP_RADIUS", "Q_A_RAT_RLL_P", "Q_A_RAT_RLL_I", "Q_A_RAT_RLL_D", "Q_A_RAT_RLL_FF",
                "Q_A_RAT_PIT_P", "Q_A_RAT_PIT_I", "Q_A_RAT_PIT_D", "Q_A_RAT_YAW_P", "Q_A_RAT_YAW_I",
-               "Q_A_RAT_YAW_D", "SYSID_THISMAV", "Q_TAILSIT_ENABLE", "Q_RTL_MODE", "Q_GUIDED_MODE",
+               "Q_A_RAT_YAW_D", "SYSID_THISMAV", "MAV_SYSID", "Q_TAILSIT_ENABLE", "Q_RTL_MODE", "Q_GUIDED_MODE",
                "RTL_ALTITUDE", "Q_WP_SPEED"]
 
 
@@ -104,7 +104,7 @@ def _param(tr: Trace, key: str, pv) -> None:
 
 def params(v: Vehicle, tr: Trace) -> None:
     begin(v, tr, armable=False)
-    first = v.param_read("SYSID_THISMAV")
+    first = v.param_read("WP_RADIUS")
     tr.info("param_count", first.param_count if first else None)
     # All reads at once; a name the vehicle does not have gets no answer.
     got = {}
@@ -177,7 +177,7 @@ GROUND_MODES = ["QSTABILIZE", "QHOVER", "QLOITER", "QLAND", "QRTL", "QACRO", "QA
 
 
 def modes_ground(v: Vehicle, tr: Trace) -> None:
-    begin(v, tr, armable=False)
+    begin(v, tr)  # ArduPlane stalls mode changes while it initialises
     for name in GROUND_MODES:
         mark = len(v.statustexts)
         tr.proto(f"{name}.ack", v.mode(name))
@@ -188,8 +188,11 @@ def modes_ground(v: Vehicle, tr: Trace) -> None:
     tr.proto("mode_99.ack", v.cmd(MAV.MAV_CMD_DO_SET_MODE, 1, 99))
     v.drain()
     v.m.mav.set_mode_send(1, 1, PLANE_MODES["QHOVER"])
-    ack = v.recv("COMMAND_ACK", timeout=10)
-    tr.proto("set_mode_message.ack", [ack.command, MAV_RESULTS.get(ack.result)])
+    try:
+        ack = v.recv("COMMAND_ACK", timeout=5)
+        tr.proto("set_mode_message.ack", [ack.command, MAV_RESULTS.get(ack.result)])
+    except Timeout:
+        tr.proto("set_mode_message.ack", None)
     tr.proto("set_mode_message.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
 
 

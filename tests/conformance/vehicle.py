@@ -211,8 +211,13 @@ class Vehicle(Gcs):
                 raise Timeout(f"{what}: not within {vehicle_s} s of vehicle time")
             if time.monotonic() > deadline:
                 raise Timeout(f"{what}: not within {timeout} s")
-            self.beat()
-            self.m.recv_match(blocking=True, timeout=0.1)
+            try:
+                self.beat()
+                self.m.recv_match(blocking=True, timeout=0.1)
+            except ConnectionError:
+                # A vehicle that restarts closes its TCP side; pymavlink reconnects (autoreconnect).
+                if hasattr(self.m, "reconnect"):
+                    self.m.reconnect()
         return True
 
     @contextmanager
