@@ -12,7 +12,8 @@ flight phases are not strict (they may or may not match on a given run).
 # The reference flights: ArduPlane SITL's plane-tailsitter model with its default parameter
 # file did not hold a steady VTOL hover in the recordings (pitch 20–50° from the fixed-wing
 # body axis, 4–11 m/s through the air, repeated "SIM Hit ground"), so a flight phase's medians
-# say how that model flew, not how a tailsitter hovers.
+# say how that model flew, not how a tailsitter hovers. ArduPilot's autotest lists the model as
+# known-broken: "unstable in hover; unflyable in cruise" (FlyEachFrame, Tools/autotest/arduplane.py).
 _SITL_HOVER = ("ArduPlane SITL (plane-tailsitter, default parameters) wanders in its VTOL hover: "
                "pitch 20–50°, 4–11 m/s, touching the ground repeatedly (\"SIM Hit ground\")")
 
