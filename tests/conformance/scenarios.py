@@ -481,6 +481,10 @@ def run(name: str, url: str) -> dict:
         tr.data["error"] = f"{type(e).__name__}: {e}"
     finally:
         tr.proto("mode_sequence", [MODE_NAMES.get(m, m) for m in v.modes])
+        # From the mode the vehicle was in when the scenario first set one: the boot modes
+        # (ArduPlane's INITIALISING and INITIAL_MODE) left out.
+        if v.first_commanded is not None:
+            tr.proto("mode_sequence_commanded", [MODE_NAMES.get(m, m) for m in v.modes[v.first_commanded:]])
         tr.proto("extended_sys_state", [list(s) for s in v.ext_states])
         tr.info("statustext", [f"{s['t_ms'] / 1000:.1f} s [{s['severity']}] {s['text']}" for s in v.statustexts])
         v.close()

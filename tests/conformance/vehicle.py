@@ -135,6 +135,7 @@ class Vehicle(Gcs):
         self.statustexts: list[dict] = []
         self.ext_states: list[tuple[int, int]] = []  # (vtol_state, landed_state), changes only
         self.modes: list[int] = []  # HEARTBEAT custom_mode, changes only
+        self.first_commanded: int | None = None  # len(modes) at the scenario's first mode command
         self.armed_seen: list[bool] = []  # HEARTBEAT armed bit, changes only
         self.last: dict[str, object] = {}
         self.t_ms = 0  # latest vehicle time (time_boot_ms)
@@ -260,6 +261,11 @@ class Vehicle(Gcs):
         return MAV_RESULTS.get(self.command(command, *params, timeout=timeout).result, "?")
 
     def mode(self, name: str) -> str:
+        if self.first_commanded is None:
+            # Where the modes the scenario chose begin: at the current one if it is the mode
+            # asked for, else at the next change.
+            here = len(self.modes) - 1
+            self.first_commanded = here if here >= 0 and self.modes[here] == PLANE_MODES[name] else here + 1
         return self.cmd(MAV.MAV_CMD_DO_SET_MODE, suite.FLAG_CUSTOM_MODE, PLANE_MODES[name])
 
     def wait_mode(self, name: str, timeout: float = 15.0) -> bool:
