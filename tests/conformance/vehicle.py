@@ -182,18 +182,6 @@ class Vehicle(Gcs):
     def texts_since(self, mark: int) -> list[str]:
         return [s["text"] for s in self.statustexts[mark:]]
 
-    def pump(self, seconds: float = 0.0) -> None:
-        """Reads (and so records) whatever arrives for `seconds` of wall time."""
-        deadline = time.monotonic() + seconds
-        while True:
-            self.beat()
-            left = deadline - time.monotonic()
-            self.m.recv_match(blocking=left > 0, timeout=max(0.0, min(left, 0.1)))
-            if left <= 0:
-                while self.m.recv_match(blocking=False) is not None:
-                    pass
-                return
-
     def wait_vehicle_time(self, seconds: float, timeout: float = 120.0) -> None:
         """Reads until `seconds` of vehicle time have passed."""
         self.until(lambda: False, timeout=timeout, vehicle_s=seconds, what=f"{seconds} s of vehicle time",
