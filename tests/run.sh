@@ -133,6 +133,11 @@ export VTOL_GCS_BIN="$BIN_DIR/vtol-gcs"
 stage "pytest tests/pymavlink"
 "$VENV/bin/python" -m pytest -n 4 --dist loadfile tests/pymavlink
 
+# --- conformance with ArduPlane (tests/conformance/README.md): every scenario against a fresh
+# twin, compared with the traces recorded from ArduPlane SITL; one scenario per worker.
+stage "pytest tests/conformance"
+"$VENV/bin/python" -m pytest -n 4 tests/conformance
+
 # --- the fleet soak (docs/fleet.md): 60 vehicles over four ground daemons on one Zenoh router,
 # vehicles leaving and joining, 130 s for the daemons' chart history to fill and 60 s measured;
 # fails unless memory, descriptors and Zenoh sessions stay flat and no frame that reached a
