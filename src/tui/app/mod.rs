@@ -46,16 +46,19 @@ pub enum View {
     Params,
     /// Every vehicle, the lost ones first, searchable.
     Fleet,
+    /// Mission, home, track, vehicle and target on a map.
+    Map,
 }
 
 impl View {
-    const ALL: [View; 6] = [
+    const ALL: [View; 7] = [
         View::Flight,
         View::Charts,
         View::Links,
         View::Messages,
         View::Params,
         View::Fleet,
+        View::Map,
     ];
 
     /// Tab title.
@@ -68,6 +71,7 @@ impl View {
             View::Messages => "Messages",
             View::Params => "Params",
             View::Fleet => "Fleet",
+            View::Map => "Map",
         }
     }
 
@@ -304,6 +308,8 @@ pub struct App {
     pub last_mode: Option<String>,
     /// The vehicle the UI shows and commands (`v`/`V` switch); `None` = the first listed.
     pub selected: Option<(SystemId, ComponentId)>,
+    /// The Map view's camera and mission.
+    pub map: crate::tui::view::map::MapState,
     /// Set by `q`.
     pub quit: bool,
 }
@@ -323,6 +329,7 @@ impl Default for App {
             last_mode: None,
             log: VecDeque::new(),
             selected: None,
+            map: Default::default(),
             quit: false,
         }
     }
@@ -494,6 +501,7 @@ impl App {
             View::Messages => self.on_messages_key(key),
             View::Params => self.on_params_key(key),
             View::Fleet => self.on_fleet_key(key),
+            View::Map => self.map.on_key(key.code),
             View::Flight | View::Charts | View::Links => None,
         } {
             return reqs;

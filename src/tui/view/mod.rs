@@ -21,6 +21,7 @@ mod fleet;
 mod flight;
 mod header;
 mod links;
+pub mod map;
 mod messages;
 mod overlay;
 mod params;
@@ -123,6 +124,8 @@ pub struct Snapshot<'a> {
 #[derive(Debug, Default)]
 pub struct SeriesCache {
     series: BTreeMap<SeriesKey, (u64, Vec<(f64, f64)>)>,
+    /// The shown vehicle's track for the Map view.
+    track: map::TrackCache,
 }
 
 impl SeriesCache {
@@ -273,6 +276,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Messages => draw_messages(f, app, snap, cache, body),
         View::Params => draw_params(f, app, body),
         View::Fleet => draw_fleet(f, app, snap, body),
+        View::Map => map::draw_map_view(f, app, snap, &mut cache.track, body),
     }
     draw_footer(f, app, footer);
     if let Some(c) = &app.confirm {
