@@ -170,3 +170,42 @@ fn the_map_view_follows_the_recorded_vehicle() {
     rec.render(&mut app, 7_000, (80, 24));
     assert_eq!(app.map.camera.shown, Some(vehicle));
 }
+
+/// The track reads the history's GLOBAL_POSITION_INT frames once each and keeps them after the
+/// history has let them go (it keeps 120 s).
+#[test]
+fn the_track_outlives_the_history() {
+    use vtol_gcs::tui::view::map::TrackCache;
+    use vtol_link::{ComponentId, SystemId};
+    let mut rec = Recording::new();
+    let mut track = TrackCache::default();
+    let fix = |s: u64| {
+        let mut g = dialect::GLOBAL_POSITION_INT_DATA::default();
+        (g.lat, g.lon) = at(s as f64, 0.0);
+        MavMessage::GLOBAL_POSITION_INT(g)
+    };
+    for s in 0..250 {
+        rec.feed(s * 1000, &heartbeat(10, true));
+        rec.feed(s * 1000, &fix(s));
+        if s % 100 == 99 {
+            track.update(&rec.history, SystemId(1), ComponentId(1));
+        }
+    }
+    let points = track.update(&rec.history, SystemId(1), ComponentId(1));
+    assert_eq!(points.len(), 250);
+    assert_eq!(points[0], at(0.0, 0.0));
+    assert_eq!(points[249], at(249.0, 0.0));
+    let oldest = rec.history.frames[&(SystemId(1), ComponentId(1), 33)]
+        .oldest_t_s()
+        .expect("frames");
+    assert!(
+        oldest > 100.0,
+        "the history let the first frames go: {oldest}"
+    );
+    // Another vehicle starts its own track.
+    assert!(
+        track
+            .update(&rec.history, SystemId(2), ComponentId(1))
+            .is_empty()
+    );
+}

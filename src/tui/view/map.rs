@@ -497,19 +497,31 @@ impl TrackCache {
     }
 }
 
+/// Takes the shown vehicle's new positions into its track (every frame, whatever the view, so
+/// the track reaches further back than the history).
+pub(super) fn keep_track(
+    app: &crate::tui::app::App,
+    snap: &super::Snapshot<'_>,
+    track: &mut TrackCache,
+) {
+    if let Some(v) = app.vehicle(snap.state) {
+        track.update(snap.history, v.system_id, v.component_id);
+    }
+}
+
 /// Draws the Map view of the shown vehicle with the app's camera and mission.
 pub(super) fn draw_map_view(
     f: &mut Frame<'_>,
     app: &mut crate::tui::app::App,
     snap: &super::Snapshot<'_>,
-    track: &mut TrackCache,
+    track: &TrackCache,
     area: Rect,
 ) {
     let (mut vehicle, mut home, mut target, mut current_seq) = (None, None, None, None);
     let mut points: &[LatLon] = &[];
     if let Some(v) = app.vehicle(snap.state) {
         (vehicle, home, target, current_seq) = scene_parts(snap.state, v);
-        points = track.update(snap.history, v.system_id, v.component_id);
+        points = track.points();
     }
     let scene = MapScene {
         home,

@@ -244,6 +244,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         return;
     }
     app.observe(snap.state);
+    map::keep_track(app, snap, &mut cache.track);
     // The Fleet view is the list: the header does not repeat it there.
     let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
@@ -276,7 +277,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Messages => draw_messages(f, app, snap, cache, body),
         View::Params => draw_params(f, app, body),
         View::Fleet => draw_fleet(f, app, snap, body),
-        View::Map => map::draw_map_view(f, app, snap, &mut cache.track, body),
+        View::Map => map::draw_map_view(f, app, snap, &cache.track, body),
     }
     draw_footer(f, app, footer);
     if let Some(c) = &app.confirm {
