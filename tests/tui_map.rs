@@ -106,7 +106,17 @@ fn the_mission_at_200_by_50() {
         ..MapCamera::default()
     };
     let frame = render(&scene(&items, &track), &camera, (200, 50));
-    for w in ["H home", "200 m", "5 m/cell", "f: follow", "L6"] {
+    for w in [
+        "H home",
+        "100 m",
+        "5 m/cell",
+        "f: follow",
+        "L6",
+        "▶   3 waypoint              80 m",
+        "5 loiter    r 50 m",
+        "target  80 m",
+        "home    233 m",
+    ] {
         assert!(frame.contains(w), "no {w:?}\n{frame}");
     }
     insta::assert_snapshot!("map_200x50", frame);

@@ -8,12 +8,12 @@
 use firmware_sim::nav::globe::{GeoPoint, Origin};
 use nalgebra::Vector3;
 use ratatui::Frame;
-use ratatui::layout::Rect;
+use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
 use ratatui::text::{Line as TextLine, Span};
-use ratatui::widgets::Block;
 use ratatui::widgets::canvas::{Canvas, Circle, Context, Line};
+use ratatui::widgets::{Block, Paragraph};
 use vtol_link::dialect::MavMessage;
 use vtol_link::{ComponentId, SystemId};
 
@@ -257,6 +257,15 @@ fn is_leg(kind: ItemKind) -> bool {
 
 /// Draws the map of `scene` as `camera` sees it into `area`.
 pub fn draw_map(f: &mut Frame<'_>, scene: &MapScene<'_>, camera: &MapCamera, area: Rect) {
+    // From 160 columns the mission and the distances sit beside the map.
+    let area = if area.width >= 160 {
+        let [map, side] =
+            Layout::horizontal([Constraint::Min(100), Constraint::Length(40)]).areas(area);
+        draw_side(f, scene, side);
+        map
+    } else {
+        area
+    };
     let mpc = camera.metres_per_cell();
     let follow = if camera.follow {
         "following"
@@ -305,6 +314,61 @@ pub fn draw_map(f: &mut Frame<'_>, scene: &MapScene<'_>, camera: &MapCamera, are
             Style::new().add_modifier(Modifier::BOLD),
         );
     }
+}
+
+fn kind_name(kind: ItemKind) -> &'static str {
+    match kind {
+        ItemKind::Takeoff => "take-off",
+        ItemKind::Waypoint => "waypoint",
+        ItemKind::Loiter { .. } => "loiter",
+        ItemKind::Land => "land",
+        ItemKind::Other => "command",
+    }
+}
+
+/// The mission as a list, with each placed item's distance from the vehicle, and the vehicle's
+/// distances to home and to its target.
+fn draw_side(f: &mut Frame<'_>, scene: &MapScene<'_>, area: Rect) {
+    let from = scene.vehicle.map(|v| v.at);
+    let dist = |p: LatLon| {
+        from.filter(|_| p != (0, 0)).map_or_else(String::new, |v| {
+            let (e, n) = east_north_m(v, p);
+            format!("{:.0} m", e.hypot(n))
+        })
+    };
+    let mut lines = vec![
+        TextLine::raw(format!("home    {}", scene.home.map_or("-".into(), dist))),
+        TextLine::raw(format!("target  {}", scene.target.map_or("-".into(), dist))),
+        TextLine::raw(""),
+    ];
+    if scene.items.is_empty() {
+        lines.push(TextLine::raw("no mission loaded"));
+    }
+    for item in scene.items {
+        let current = scene.current_seq == Some(item.seq);
+        let radius = match item.kind {
+            ItemKind::Loiter { radius_m } => format!(" r {radius_m:.0} m"),
+            _ => String::new(),
+        };
+        let text = format!(
+            "{} {:>3} {:<9}{:<9}{:>8}",
+            if current { "▶" } else { " " },
+            item.seq,
+            kind_name(item.kind),
+            radius,
+            dist(item.at)
+        );
+        let style = if current {
+            Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD)
+        } else {
+            Style::new()
+        };
+        lines.push(TextLine::styled(text, style));
+    }
+    f.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title(" Mission ")),
+        area,
+    );
 }
 
 fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) {
