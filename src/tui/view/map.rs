@@ -65,6 +65,44 @@ pub struct MapItem {
     pub kind: ItemKind,
 }
 
+impl MapItem {
+    /// A mission item as MISSION_ITEM_INT carries it: its MAV_CMD, params 1 to 4 and place.
+    /// A loiter's radius is its param 3 (param 2 for LOITER_TO_ALT), `default_radius_m`
+    /// (`WP_LOITER_RAD`) when that is 0, as on ArduPlane; the sign (the turn's direction)
+    /// is dropped.
+    #[must_use]
+    pub fn from_mission(
+        seq: u16,
+        command: u16,
+        params: [f32; 4],
+        at: LatLon,
+        default_radius_m: f32,
+    ) -> Self {
+        let loiter = |r: f32| ItemKind::Loiter {
+            radius_m: if r == 0.0 { default_radius_m } else { r.abs() },
+        };
+        use vtol_link::dialect::MavCmd as C;
+        let is = |c: C| command == c as u16;
+        let kind = if is(C::MAV_CMD_NAV_WAYPOINT) || is(C::MAV_CMD_NAV_SPLINE_WAYPOINT) {
+            ItemKind::Waypoint
+        } else if is(C::MAV_CMD_NAV_LOITER_UNLIM)
+            || is(C::MAV_CMD_NAV_LOITER_TURNS)
+            || is(C::MAV_CMD_NAV_LOITER_TIME)
+        {
+            loiter(params[2])
+        } else if is(C::MAV_CMD_NAV_LOITER_TO_ALT) {
+            loiter(params[1])
+        } else if is(C::MAV_CMD_NAV_TAKEOFF) || is(C::MAV_CMD_NAV_VTOL_TAKEOFF) {
+            ItemKind::Takeoff
+        } else if is(C::MAV_CMD_NAV_LAND) || is(C::MAV_CMD_NAV_VTOL_LAND) {
+            ItemKind::Land
+        } else {
+            ItemKind::Other
+        };
+        Self { seq, at, kind }
+    }
+}
+
 /// The vehicle on the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapVehicle {

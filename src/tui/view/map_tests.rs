@@ -104,3 +104,23 @@ fn the_track_is_thinned_and_bounded() {
     assert_eq!(t.points()[0], HOME);
     assert_eq!(*t.points().last().unwrap(), (HOME.0 + 100 * 9999, HOME.1));
 }
+
+#[test]
+fn mission_items_take_their_kind_and_loiter_radius_from_the_command() {
+    let p = at(10.0, 10.0);
+    let kind = |cmd, params| MapItem::from_mission(1, cmd, params, p, 80.0).kind;
+    assert_eq!(kind(16, [0.0; 4]), ItemKind::Waypoint);
+    assert_eq!(kind(84, [0.0; 4]), ItemKind::Takeoff);
+    assert_eq!(kind(85, [0.0; 4]), ItemKind::Land);
+    assert_eq!(
+        kind(18, [2.0, 0.0, -60.0, 0.0]),
+        ItemKind::Loiter { radius_m: 60.0 }
+    );
+    assert_eq!(kind(17, [0.0; 4]), ItemKind::Loiter { radius_m: 80.0 });
+    assert_eq!(
+        kind(31, [0.0, 45.0, 0.0, 0.0]),
+        ItemKind::Loiter { radius_m: 45.0 }
+    );
+    // DO_CHANGE_SPEED: not a leg.
+    assert_eq!(kind(178, [0.0; 4]), ItemKind::Other);
+}
