@@ -85,6 +85,7 @@ fn check_view(app: &mut App, rec: &Recording, view: View, size: (u16, u16)) -> S
         View::Fleet => &[
             "sys", "state", "mode", "status", "Hz", "loss%", "heard", "battery", "QHOVER",
         ],
+        View::Map => &[" Map ", "no position yet"],
     };
     for w in want {
         assert!(frame.contains(w), "{view:?} at {size:?}: no {w:?}\n{frame}");
@@ -109,6 +110,7 @@ fn every_view_whole_at_80_by_24() {
         (View::Messages, "messages_80x24"),
         (View::Params, "params_80x24"),
         (View::Fleet, "fleet_80x24"),
+        (View::Map, "map_80x24"),
     ] {
         let frame = check_view(&mut app, &rec, view, (80, 24));
         // Every chart keeps a legend: in its title when ratatui's would not fit.
@@ -134,6 +136,7 @@ fn every_view_uses_the_space_at_200_by_50() {
         (View::Messages, "messages_200x50"),
         (View::Params, "params_200x50"),
         (View::Fleet, "fleet_200x50"),
+        (View::Map, "map_200x50"),
     ] {
         let frame = check_view(&mut app, &rec, view, (200, 50));
         let wide: &[&str] = match view {
@@ -148,6 +151,7 @@ fn every_view_uses_the_space_at_200_by_50() {
             // The editor beside the table, with the selected row's whole status.
             View::Params => &["refused: LAT_SAT_B", "idle"],
             View::Fleet => &["Fleet: 1 vehicle, 0 lost"],
+            View::Map => &["H home"],
         };
         for w in wide {
             assert!(frame.contains(w), "{view:?}: no {w:?}\n{frame}");

@@ -46,6 +46,10 @@ def test_every_view_at_80x24_and_the_live_target(screen_factory):  # noqa: F811
     s.keys("Tab")
     s.wait(r"Fleet: 1 vehicle, 0 lost")
     s.keys("Tab")
+    s.wait(r"Map\s+10 m/cell\s+following")
+    s.wait(r"N↑")  # drawn once the twin's GLOBAL_POSITION_INT placed the vehicle
+    s.wait(r"├─+┤ 100 m")
+    s.keys("Tab")
     s.wait(r"Horizon")
 
     with Gcs(f"tcp:127.0.0.1:{port}") as g:

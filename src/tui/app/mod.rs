@@ -47,16 +47,19 @@ pub enum View {
     Params,
     /// Every vehicle, the lost ones first, searchable.
     Fleet,
+    /// Mission, home, track, vehicle and target on a map.
+    Map,
 }
 
 impl View {
-    const ALL: [View; 6] = [
+    const ALL: [View; 7] = [
         View::Flight,
         View::Charts,
         View::Links,
         View::Messages,
         View::Params,
         View::Fleet,
+        View::Map,
     ];
 
     /// Tab title.
@@ -69,6 +72,7 @@ impl View {
             View::Messages => "Messages",
             View::Params => "Params",
             View::Fleet => "Fleet",
+            View::Map => "Map",
         }
     }
 
@@ -309,6 +313,8 @@ pub struct App {
     pub picker: Option<picker::Picker>,
     /// The shown vehicle is a replayed log: no commands are offered.
     pub replay: bool,
+    /// The Map view's camera and mission.
+    pub map: crate::tui::view::map::MapState,
     /// Set by `q`.
     pub quit: bool,
 }
@@ -330,6 +336,7 @@ impl Default for App {
             selected: None,
             picker: None,
             replay: false,
+            map: Default::default(),
             quit: false,
         }
     }
@@ -522,6 +529,7 @@ impl App {
             View::Messages => self.on_messages_key(key),
             View::Params => self.on_params_key(key),
             View::Fleet => self.on_fleet_key(key),
+            View::Map => self.map.on_key(key.code),
             View::Flight | View::Charts | View::Links => None,
         } {
             return reqs;

@@ -21,6 +21,7 @@ mod fleet;
 mod flight;
 mod header;
 mod links;
+pub mod map;
 mod messages;
 mod overlay;
 mod params;
@@ -123,6 +124,8 @@ pub struct Snapshot<'a> {
 #[derive(Debug, Default)]
 pub struct SeriesCache {
     series: BTreeMap<SeriesKey, (u64, Vec<(f64, f64)>)>,
+    /// The shown vehicle's track for the Map view.
+    track: map::TrackCache,
 }
 
 impl SeriesCache {
@@ -237,6 +240,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
     }
     app.observe(snap.state);
     app.replay = is_replay(app, snap.state, &snap.links);
+    map::keep_track(app, snap, &mut cache.track);
     // The Fleet view is the list: the header does not repeat it there.
     let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
@@ -270,6 +274,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Messages => draw_messages(f, app, snap, cache, body),
         View::Params => draw_params(f, app, body),
         View::Fleet => draw_fleet(f, app, snap, body),
+        View::Map => map::draw_map_view(f, app, snap, &cache.track, body),
     }
     draw_footer(f, app, footer);
     if let Some(p) = &app.picker {

@@ -74,14 +74,14 @@ pub(super) const HELP: &[(&str, &str)] = &[
     ("m", "mode picker: the vehicle's modes (↑↓ or type, Enter)"),
     (
         "arrows",
-        "QLOITER: move the target 0.5 m north/south/east/west",
+        "QLOITER: target 0.5 m N/S/E/W; Map: pan (f: follow)",
     ),
     ("PgUp / PgDn", "QLOITER: target 0.5 m up / down"),
     (
         "x X / c C / z Z",
         "push roll / pitch / yaw, + and - (SIM_PUSH_*)",
     ),
-    ("+ / -", "chart window longer / shorter (5..120 s)"),
+    ("+ / -", "chart window (5..120 s); Map: zoom in / out"),
     ("Messages: ↑↓ ← →", "select message / field"),
     (
         "Messages: Enter",

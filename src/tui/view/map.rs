@@ -1,0 +1,642 @@
+//! The Map view: the mission's items and legs, home, the track flown, the vehicle with its
+//! heading and its live target, on a flat-earth projection around the camera's centre
+//! (ArduPilot's, [`firmware_sim::nav::globe`]: metres north and east of a reference point).
+//!
+//! [`draw_map`] is a pure function of a [`MapScene`] and a [`MapCamera`]; [`scene_parts`] and
+//! [`TrackCache`] build the scene from the tracker's state and history.
+
+use firmware_sim::nav::globe::{GeoPoint, Origin};
+use nalgebra::Vector3;
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line as TextLine, Span};
+use ratatui::widgets::canvas::{Canvas, Circle, Context, Line};
+use ratatui::widgets::{Block, Paragraph};
+use vtol_link::dialect::MavMessage;
+use vtol_link::{ComponentId, SystemId};
+
+use crate::tracker::history::History;
+use crate::tracker::state::{VehicleState, VehicleView};
+
+/// A latitude and longitude, 1e-7 degree (as MAVLink carries them).
+pub type LatLon = (i32, i32);
+
+/// Metres per terminal cell (its width; a cell is twice as tall), zoom level by level.
+pub const ZOOMS_M: [f64; 13] = [
+    0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
+];
+/// The zoom level a camera starts at (10 m per cell).
+pub const DEFAULT_ZOOM: usize = 4;
+/// Cells a pan moves the centre by (rows count twice: a cell is twice as tall as wide).
+pub const PAN_CELLS: f64 = 8.0;
+/// Most points the track keeps: past it, every other point goes.
+pub const MAX_TRACK: usize = 3000;
+/// Closest two successive track points are kept, 1e-7 degree (about 0.3 m).
+const TRACK_STEP_E7: i32 = 30;
+
+/// What a mission item is, as the map draws it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ItemKind {
+    /// A take-off.
+    Takeoff,
+    /// A waypoint.
+    Waypoint,
+    /// A loiter, drawn as a circle of this radius, m.
+    Loiter {
+        /// Radius, m.
+        radius_m: f32,
+    },
+    /// A landing (VTOL or fixed-wing).
+    Land,
+    /// Anything else (not a leg of the route).
+    Other,
+}
+
+/// One mission item on the map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapItem {
+    /// Sequence number.
+    pub seq: u16,
+    /// Where, 1e-7 degree; (0, 0) for an item without a place (a take-off where it stands).
+    pub at: LatLon,
+    /// What.
+    pub kind: ItemKind,
+}
+
+impl MapItem {
+    /// A mission item as MISSION_ITEM_INT carries it: its MAV_CMD, params 1 to 4 and place.
+    /// A loiter's radius is its param 3 (param 2 for LOITER_TO_ALT), `default_radius_m`
+    /// (`WP_LOITER_RAD`) when that is 0, as on ArduPlane; the sign (the turn's direction)
+    /// is dropped.
+    #[must_use]
+    pub fn from_mission(
+        seq: u16,
+        command: u16,
+        params: [f32; 4],
+        at: LatLon,
+        default_radius_m: f32,
+    ) -> Self {
+        let loiter = |r: f32| ItemKind::Loiter {
+            radius_m: if r == 0.0 { default_radius_m } else { r.abs() },
+        };
+        use vtol_link::dialect::MavCmd as C;
+        let is = |c: C| command == c as u16;
+        let kind = if is(C::MAV_CMD_NAV_WAYPOINT) || is(C::MAV_CMD_NAV_SPLINE_WAYPOINT) {
+            ItemKind::Waypoint
+        } else if is(C::MAV_CMD_NAV_LOITER_UNLIM)
+            || is(C::MAV_CMD_NAV_LOITER_TURNS)
+            || is(C::MAV_CMD_NAV_LOITER_TIME)
+        {
+            loiter(params[2])
+        } else if is(C::MAV_CMD_NAV_LOITER_TO_ALT) {
+            loiter(params[1])
+        } else if is(C::MAV_CMD_NAV_TAKEOFF) || is(C::MAV_CMD_NAV_VTOL_TAKEOFF) {
+            ItemKind::Takeoff
+        } else if is(C::MAV_CMD_NAV_LAND) || is(C::MAV_CMD_NAV_VTOL_LAND) {
+            ItemKind::Land
+        } else {
+            ItemKind::Other
+        };
+        Self { seq, at, kind }
+    }
+}
+
+/// The vehicle on the map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapVehicle {
+    /// Where, 1e-7 degree.
+    pub at: LatLon,
+    /// Heading, degrees clockwise from north, when known.
+    pub heading_deg: Option<f32>,
+}
+
+/// Everything the map draws.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MapScene<'a> {
+    /// Home.
+    pub home: Option<LatLon>,
+    /// The vehicle.
+    pub vehicle: Option<MapVehicle>,
+    /// The vehicle's live position target.
+    pub target: Option<LatLon>,
+    /// The mission, in order.
+    pub items: &'a [MapItem],
+    /// The item the vehicle flies to.
+    pub current_seq: Option<u16>,
+    /// The track flown, oldest first.
+    pub track: &'a [LatLon],
+}
+
+/// Where the map looks and how far it sees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapCamera {
+    /// The centre while not following.
+    pub center: Option<LatLon>,
+    /// Index into [`ZOOMS_M`].
+    pub zoom: usize,
+    /// Whether the centre follows the vehicle.
+    pub follow: bool,
+    /// The centre the last frame showed (where a pan starts).
+    pub shown: Option<LatLon>,
+}
+
+impl Default for MapCamera {
+    fn default() -> Self {
+        Self {
+            center: None,
+            zoom: DEFAULT_ZOOM,
+            follow: true,
+            shown: None,
+        }
+    }
+}
+
+impl MapCamera {
+    /// Metres per cell width.
+    #[must_use]
+    pub fn metres_per_cell(&self) -> f64 {
+        ZOOMS_M[self.zoom.min(ZOOMS_M.len() - 1)]
+    }
+
+    /// Closer in (fewer metres per cell).
+    pub fn zoom_in(&mut self) {
+        self.zoom = self.zoom.saturating_sub(1);
+    }
+
+    /// Further out.
+    pub fn zoom_out(&mut self) {
+        self.zoom = (self.zoom + 1).min(ZOOMS_M.len() - 1);
+    }
+
+    /// Moves the centre by `cells_east` cell widths and `cells_north` cell widths from where
+    /// the last frame was centred; the camera stops following the vehicle.
+    pub fn pan(&mut self, cells_north: f64, cells_east: f64) {
+        let Some(from) = self.center.filter(|_| !self.follow).or(self.shown) else {
+            return;
+        };
+        let m = self.metres_per_cell();
+        let p = origin(from).to_global(&Vector3::new(cells_north * m, cells_east * m, 0.0));
+        self.center = Some((p.lat_e7, p.lon_e7));
+        self.follow = false;
+    }
+
+    /// Follows the vehicle again.
+    pub fn follow(&mut self) {
+        self.follow = true;
+        self.center = None;
+    }
+
+    /// The centre for `scene`: the vehicle while following, else the chosen centre, else
+    /// whatever the scene has (vehicle, home, first placed item).
+    #[must_use]
+    pub fn center_for(&self, scene: &MapScene<'_>) -> Option<LatLon> {
+        let vehicle = scene.vehicle.map(|v| v.at);
+        let fallback = || {
+            vehicle
+                .or(scene.home)
+                .or_else(|| scene.items.iter().map(|i| i.at).find(|a| *a != (0, 0)))
+        };
+        if self.follow {
+            vehicle.or(self.center).or_else(fallback)
+        } else {
+            self.center.or_else(fallback)
+        }
+    }
+}
+
+/// The Map view's state in the app: camera and the mission shown.
+#[derive(Debug, Clone, Default)]
+pub struct MapState {
+    /// Camera.
+    pub camera: MapCamera,
+    /// The mission drawn (the caller loads it).
+    pub items: Vec<MapItem>,
+}
+
+impl MapState {
+    /// The Map view's keys: `+`/`-` zoom, arrows pan, `f` or `0` follow the vehicle again.
+    /// `None` for a key it does not take.
+    pub fn on_key(
+        &mut self,
+        code: ratatui::crossterm::event::KeyCode,
+    ) -> Option<Vec<crate::tui::app::Request>> {
+        use ratatui::crossterm::event::KeyCode;
+        let c = &mut self.camera;
+        match code {
+            KeyCode::Char('+' | '=') => c.zoom_in(),
+            KeyCode::Char('-') => c.zoom_out(),
+            KeyCode::Up => c.pan(PAN_CELLS, 0.0),
+            KeyCode::Down => c.pan(-PAN_CELLS, 0.0),
+            KeyCode::Right => c.pan(0.0, PAN_CELLS),
+            KeyCode::Left => c.pan(0.0, -PAN_CELLS),
+            KeyCode::Char('f' | '0') => c.follow(),
+            _ => return None,
+        }
+        Some(Vec::new())
+    }
+}
+
+fn origin(at: LatLon) -> Origin {
+    Origin(GeoPoint {
+        lat_e7: at.0,
+        lon_e7: at.1,
+        alt_amsl_m: 0.0,
+    })
+}
+
+/// Metres (east, north) of `p` from `reference` (x east, y north, as the canvas draws).
+#[must_use]
+pub fn east_north_m(reference: LatLon, p: LatLon) -> (f64, f64) {
+    let ned = origin(reference).to_local_ned(&GeoPoint {
+        lat_e7: p.0,
+        lon_e7: p.1,
+        alt_amsl_m: 0.0,
+    });
+    (ned.y, ned.x)
+}
+
+/// A round length (1, 2 or 5 × 10ⁿ m) no longer than `max_m`.
+#[must_use]
+pub fn scale_length_m(max_m: f64) -> f64 {
+    let mut best = 0.5;
+    let mut decade = 1.0;
+    while decade <= max_m {
+        for f in [1.0, 2.0, 5.0] {
+            if f * decade <= max_m {
+                best = f * decade;
+            }
+        }
+        decade *= 10.0;
+    }
+    best
+}
+
+fn metres_text(m: f64) -> String {
+    if m >= 1000.0 {
+        format!("{} km", m / 1000.0)
+    } else {
+        format!("{m} m")
+    }
+}
+
+/// The arrow for a heading, degrees clockwise from north.
+#[must_use]
+pub fn heading_arrow(deg: f32) -> &'static str {
+    const ARROWS: [&str; 8] = ["↑", "↗", "→", "↘", "↓", "↙", "←", "↖"];
+    let i = ((f64::from(deg).rem_euclid(360.0) + 22.5) / 45.0) as usize % 8;
+    ARROWS[i]
+}
+
+fn is_leg(kind: ItemKind) -> bool {
+    !matches!(kind, ItemKind::Other)
+}
+
+/// Draws the map of `scene` as `camera` sees it into `area`.
+pub fn draw_map(f: &mut Frame<'_>, scene: &MapScene<'_>, camera: &MapCamera, area: Rect) {
+    // From 160 columns the mission and the distances sit beside the map.
+    let area = if area.width >= 160 {
+        let [map, side] =
+            Layout::horizontal([Constraint::Min(100), Constraint::Length(40)]).areas(area);
+        draw_side(f, scene, side);
+        map
+    } else {
+        area
+    };
+    let mpc = camera.metres_per_cell();
+    let follow = if camera.follow {
+        "following"
+    } else {
+        "f: follow"
+    };
+    let title = format!(" Map  {mpc} m/cell  {follow} ");
+    let mut block = Block::bordered().title(title);
+    if area.width >= 120 {
+        block = block
+            .title_bottom(" H home  ↑ vehicle  ✛ target  · track  ○ loiter  +/- zoom  arrows pan ");
+    }
+    let inner = block.inner(area);
+    let Some(center) = camera.center_for(scene) else {
+        f.render_widget(block, area);
+        let msg = "no position yet: the map appears with the vehicle's first GLOBAL_POSITION_INT";
+        f.buffer_mut()
+            .set_stringn(inner.x, inner.y, msg, inner.width as usize, Style::new());
+        return;
+    };
+    let half_w = f64::from(inner.width) * mpc / 2.0;
+    let half_h = f64::from(inner.height) * mpc;
+    let canvas = Canvas::default()
+        .block(block)
+        .marker(Marker::Braille)
+        .x_bounds([-half_w, half_w])
+        .y_bounds([-half_h, half_h])
+        .paint(|ctx| paint(ctx, scene, center, mpc));
+    f.render_widget(canvas, area);
+    // Scale bar at the bottom left, north marker at the top right.
+    if inner.width >= 12 && inner.height >= 3 {
+        let len = scale_length_m(f64::from(inner.width / 4) * mpc);
+        let cells = ((len / mpc).round() as usize).max(1);
+        let bar = format!(
+            "├{}┤ {}",
+            "─".repeat(cells.saturating_sub(1)),
+            metres_text(len)
+        );
+        let buf = f.buffer_mut();
+        let y = inner.y + inner.height - 1;
+        buf.set_stringn(inner.x, y, &bar, inner.width as usize, Style::new());
+        buf.set_string(
+            inner.x + inner.width - 3,
+            inner.y,
+            "N↑",
+            Style::new().add_modifier(Modifier::BOLD),
+        );
+    }
+}
+
+fn kind_name(kind: ItemKind) -> &'static str {
+    match kind {
+        ItemKind::Takeoff => "take-off",
+        ItemKind::Waypoint => "waypoint",
+        ItemKind::Loiter { .. } => "loiter",
+        ItemKind::Land => "land",
+        ItemKind::Other => "command",
+    }
+}
+
+/// The mission as a list, with each placed item's distance from the vehicle, and the vehicle's
+/// distances to home and to its target.
+fn draw_side(f: &mut Frame<'_>, scene: &MapScene<'_>, area: Rect) {
+    let from = scene.vehicle.map(|v| v.at);
+    let dist = |p: LatLon| {
+        from.filter(|_| p != (0, 0)).map_or_else(String::new, |v| {
+            let (e, n) = east_north_m(v, p);
+            format!("{:.0} m", e.hypot(n))
+        })
+    };
+    let mut lines = vec![
+        TextLine::raw(format!("home    {}", scene.home.map_or("-".into(), dist))),
+        TextLine::raw(format!("target  {}", scene.target.map_or("-".into(), dist))),
+        TextLine::raw(""),
+    ];
+    if scene.items.is_empty() {
+        lines.push(TextLine::raw("no mission loaded"));
+    }
+    for item in scene.items {
+        let current = scene.current_seq == Some(item.seq);
+        let radius = match item.kind {
+            ItemKind::Loiter { radius_m } => format!(" r {radius_m:.0} m"),
+            _ => String::new(),
+        };
+        let text = format!(
+            "{} {:>3} {:<9}{:<9}{:>8}",
+            if current { "▶" } else { " " },
+            item.seq,
+            kind_name(item.kind),
+            radius,
+            dist(item.at)
+        );
+        let style = if current {
+            Style::new().fg(Color::Yellow).add_modifier(Modifier::BOLD)
+        } else {
+            Style::new()
+        };
+        lines.push(TextLine::styled(text, style));
+    }
+    f.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title(" Mission ")),
+        area,
+    );
+}
+
+fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) {
+    let xy = |p: LatLon| east_north_m(center, p);
+    // The track, as segments (no list of points to build).
+    let mut last: Option<(f64, f64)> = None;
+    for p in scene.track {
+        let (x, y) = xy(*p);
+        if let Some((x0, y0)) = last {
+            ctx.draw(&Line::new(x0, y0, x, y, Color::DarkGray));
+        }
+        last = Some((x, y));
+    }
+    ctx.layer();
+    // Legs between successive placed nav items; the leg to the current item in yellow.
+    let mut prev: Option<(f64, f64)> = None;
+    for item in scene
+        .items
+        .iter()
+        .filter(|i| is_leg(i.kind) && i.at != (0, 0))
+    {
+        let (x, y) = xy(item.at);
+        let current = scene.current_seq == Some(item.seq);
+        if let Some((x0, y0)) = prev {
+            let colour = if current { Color::Yellow } else { Color::Blue };
+            ctx.draw(&Line::new(x0, y0, x, y, colour));
+        }
+        if let ItemKind::Loiter { radius_m } = item.kind {
+            ctx.draw(&Circle::new(x, y, f64::from(radius_m), Color::Cyan));
+        }
+        prev = Some((x, y));
+    }
+    ctx.layer();
+    for item in scene.items.iter().filter(|i| i.at != (0, 0)) {
+        let (x, y) = xy(item.at);
+        let label = match item.kind {
+            ItemKind::Takeoff => format!("T{}", item.seq),
+            ItemKind::Land => format!("L{}", item.seq),
+            _ => item.seq.to_string(),
+        };
+        let style = if scene.current_seq == Some(item.seq) {
+            Style::new()
+                .fg(Color::Black)
+                .bg(Color::Yellow)
+                .add_modifier(Modifier::BOLD)
+        } else {
+            Style::new().fg(Color::Cyan)
+        };
+        // Beside the point, so that home, target or vehicle on it leave it readable.
+        ctx.print(x + mpc, y, Span::styled(label, style));
+    }
+    if let Some(h) = scene.home {
+        let (x, y) = xy(h);
+        ctx.print(
+            x,
+            y,
+            Span::styled(
+                "H",
+                Style::new().fg(Color::Green).add_modifier(Modifier::BOLD),
+            ),
+        );
+    }
+    if let Some(t) = scene.target {
+        let (x, y) = xy(t);
+        ctx.print(x, y, Span::styled("✛", Style::new().fg(Color::Magenta)));
+    }
+    if let Some(v) = scene.vehicle {
+        let (x, y) = xy(v.at);
+        let arrow = v.heading_deg.map_or("●", heading_arrow);
+        ctx.print(
+            x,
+            y,
+            TextLine::from(Span::styled(
+                arrow,
+                Style::new().fg(Color::White).add_modifier(Modifier::BOLD),
+            )),
+        );
+    }
+}
+
+/// Vehicle, home, live target and current mission item of `v` from the tracker's last
+/// GLOBAL_POSITION_INT, HOME_POSITION, POSITION_TARGET_GLOBAL_INT and MISSION_CURRENT.
+#[must_use]
+pub fn scene_parts(
+    state: &VehicleState,
+    v: &VehicleView,
+) -> (
+    Option<MapVehicle>,
+    Option<LatLon>,
+    Option<LatLon>,
+    Option<u16>,
+) {
+    let last = |id: u32| {
+        state
+            .messages
+            .get(&(v.system_id, v.component_id, id))
+            .and_then(|m| m.last.decode().ok())
+    };
+    let vehicle = match last(33) {
+        Some(MavMessage::GLOBAL_POSITION_INT(g)) if (g.lat, g.lon) != (0, 0) => {
+            let heading_deg = if g.hdg == u16::MAX {
+                v.attitude.map(|a| a.rpy_rad[2].to_degrees())
+            } else {
+                Some(f32::from(g.hdg) / 100.0)
+            };
+            Some(MapVehicle {
+                at: (g.lat, g.lon),
+                heading_deg,
+            })
+        }
+        _ => None,
+    };
+    let home = match last(242) {
+        Some(MavMessage::HOME_POSITION(h)) => Some((h.latitude, h.longitude)),
+        _ => None,
+    };
+    let target = match last(87) {
+        Some(MavMessage::POSITION_TARGET_GLOBAL_INT(t)) if (t.lat_int, t.lon_int) != (0, 0) => {
+            Some((t.lat_int, t.lon_int))
+        }
+        _ => None,
+    };
+    let current = match last(42) {
+        Some(MavMessage::MISSION_CURRENT(m)) => Some(m.seq),
+        _ => None,
+    };
+    (vehicle, home, target, current)
+}
+
+/// The track flown by one vehicle, read incrementally from the history's GLOBAL_POSITION_INT
+/// frames (each decoded once), thinned to points at least 0.3 m apart and to at most
+/// [`MAX_TRACK`] points. It outlives the history's two minutes.
+#[derive(Debug, Clone, Default)]
+pub struct TrackCache {
+    vehicle: Option<(SystemId, ComponentId)>,
+    next_index: u64,
+    points: Vec<LatLon>,
+}
+
+impl TrackCache {
+    /// The track of `(system, component)` so far, taking in the frames not read before.
+    pub fn update(
+        &mut self,
+        history: &History,
+        system: SystemId,
+        component: ComponentId,
+    ) -> &[LatLon] {
+        if self.vehicle != Some((system, component)) {
+            *self = Self {
+                vehicle: Some((system, component)),
+                ..Self::default()
+            };
+        }
+        if let Some(ring) = history.frames.get(&(system, component, 33)) {
+            for tf in ring.since(self.next_index) {
+                self.next_index = tf.index + 1;
+                if let Ok(MavMessage::GLOBAL_POSITION_INT(g)) = tf.frame.decode() {
+                    self.push((g.lat, g.lon));
+                }
+            }
+        }
+        &self.points
+    }
+
+    /// Adds a point unless it is (0, 0) or next to the last one; halves the track when full.
+    pub fn push(&mut self, p: LatLon) {
+        if p == (0, 0) {
+            return;
+        }
+        if let Some(l) = self.points.last()
+            && (p.0 - l.0).abs() < TRACK_STEP_E7
+            && (p.1 - l.1).abs() < TRACK_STEP_E7
+        {
+            return;
+        }
+        if self.points.len() >= MAX_TRACK {
+            let mut i = 0;
+            self.points.retain(|_| {
+                i += 1;
+                i % 2 == 1
+            });
+        }
+        self.points.push(p);
+    }
+
+    /// The points kept.
+    #[must_use]
+    pub fn points(&self) -> &[LatLon] {
+        &self.points
+    }
+}
+
+/// Takes the shown vehicle's new positions into its track (every frame, whatever the view, so
+/// the track reaches further back than the history).
+pub(super) fn keep_track(
+    app: &crate::tui::app::App,
+    snap: &super::Snapshot<'_>,
+    track: &mut TrackCache,
+) {
+    if let Some(v) = app.vehicle(snap.state) {
+        track.update(snap.history, v.system_id, v.component_id);
+    }
+}
+
+/// Draws the Map view of the shown vehicle with the app's camera and mission.
+pub(super) fn draw_map_view(
+    f: &mut Frame<'_>,
+    app: &mut crate::tui::app::App,
+    snap: &super::Snapshot<'_>,
+    track: &TrackCache,
+    area: Rect,
+) {
+    let (mut vehicle, mut home, mut target, mut current_seq) = (None, None, None, None);
+    let mut points: &[LatLon] = &[];
+    if let Some(v) = app.vehicle(snap.state) {
+        (vehicle, home, target, current_seq) = scene_parts(snap.state, v);
+        points = track.points();
+    }
+    let scene = MapScene {
+        home,
+        vehicle,
+        target,
+        items: &app.map.items,
+        current_seq,
+        track: points,
+    };
+    app.map.camera.shown = app.map.camera.center_for(&scene);
+    draw_map(f, &scene, &app.map.camera, area);
+}
+
+#[cfg(test)]
+#[path = "map_tests.rs"]
+mod tests;
