@@ -22,6 +22,10 @@ use super::{
 pub struct ParamsArgs {
     #[command(subcommand)]
     command: ParamsCommand,
+    /// Read the table with the parameter protocol even when the vehicle offers it as a file
+    /// over MAVLink FTP.
+    #[arg(long, global = true)]
+    no_ftp: bool,
     #[command(flatten)]
     link: LinkArgs,
 }
@@ -97,11 +101,12 @@ pub fn params(args: ParamsArgs) -> ExitCode {
         _ => None,
     };
     let command = args.command;
+    let ftp = !args.no_ftp;
     with_client(&args.link, |c| async move {
         match command {
             ParamsCommand::Pull { output, format } => {
                 let t0 = std::time::Instant::now();
-                let set = pull(&c).await?;
+                let set = pull(&c, ftp).await?;
                 let took = t0.elapsed();
                 let vehicle = c.target().unwrap_or((SystemId(1), ComponentId(1)));
                 match output {
@@ -120,7 +125,7 @@ pub fn params(args: ParamsArgs) -> ExitCode {
                 Ok(())
             }
             ParamsCommand::Save { file: path, format } => {
-                let set = pull(&c).await?;
+                let set = pull(&c, ftp).await?;
                 file::save(
                     &path,
                     &set,
@@ -140,7 +145,7 @@ pub fn params(args: ParamsArgs) -> ExitCode {
             }
             ParamsCommand::Diff { file: path } => {
                 let wanted = wanted.ok_or_else(|| usage("no file loaded"))?;
-                let current = pull(&c).await?;
+                let current = pull(&c, ftp).await?;
                 check_names(&current, &wanted)?;
                 let changes = params::diff(&current, &wanted.params);
                 if !changes.is_empty() {
@@ -167,11 +172,11 @@ pub fn params(args: ParamsArgs) -> ExitCode {
             }
             ParamsCommand::Push { dry_run, .. } => {
                 let wanted = wanted.ok_or_else(|| usage("no file loaded"))?;
-                push(&c, &wanted, dry_run, "push").await
+                push(&c, &wanted, dry_run, "push", ftp).await
             }
             ParamsCommand::Set { .. } => {
                 let wanted = wanted.ok_or_else(|| usage("no values given"))?;
-                push(&c, &wanted, false, "set").await
+                push(&c, &wanted, false, "set", ftp).await
             }
         }
     })
@@ -263,28 +268,30 @@ fn show_progress(what: &'static str) -> Progress {
     (Some(tx), Some(task))
 }
 
-async fn pull(c: &ClientHandle) -> Result<ParamSet, Failure> {
+async fn pull(c: &ClientHandle, ftp: bool) -> Result<ParamSet, Failure> {
     let (tx, task) = show_progress("parameters");
-    let r = c.params_pull(tx).await;
+    let r = c.params_pull_via(tx, ftp).await;
     if let Some(t) = task {
         let _ = t.await;
     }
     Ok(r?)
 }
 
-/// Whole-number values for the vehicle's integer parameters: a fraction would be rounded by the
-/// vehicle without a word, so it is refused here, before anything is sent.
+/// Whole numbers within their type's range for the vehicle's integer parameters: anything
+/// else would be rounded or clamped by the vehicle without a word, so it is refused here,
+/// before anything is sent.
 fn check_integers(current: &ParamSet, wanted: &ParamFile) -> Result<(), Failure> {
     let rounded: Vec<String> = wanted
         .params
         .iter()
         .filter_map(|(name, p)| {
             let now = current.get(name)?;
-            (params::is_integer(now.ty) && p.value.fract() != 0.0).then(|| {
+            let stored = params::stored_value(now.ty, p.value);
+            (params::is_integer(now.ty) && stored != p.value).then(|| {
                 format!(
                     "{name} is an integer parameter: {} would be stored as {}",
                     file::format_value(p.value),
-                    file::format_value(p.value.round())
+                    file::format_value(stored)
                 )
             })
         })
@@ -314,8 +321,9 @@ async fn push(
     wanted: &ParamFile,
     dry_run: bool,
     what: &str,
+    ftp: bool,
 ) -> Result<(), Failure> {
-    let current = pull(c).await?;
+    let current = pull(c, ftp).await?;
     check_names(&current, wanted)?;
     check_integers(&current, wanted)?;
     let changes = params::diff(&current, &wanted.params);

@@ -52,12 +52,30 @@ const LIST_RTO_FACTOR: f64 = 1.5;
 /// The stream counts as over after this share of a round trip without a value, and a hole is
 /// asked for once it has been missing for as long (the reorder allowance)…
 const QUIET_SHARE: f64 = 0.25;
-/// …and at least this long: a vehicle paces its stream over a few ticks.
-const MIN_QUIET: Duration = Duration::from_millis(20);
+/// …and at least this long: a vehicle paces its stream over a few ticks, and its main loop
+/// (or the machine running it) pauses now and then.
+const MIN_QUIET: Duration = Duration::from_millis(50);
 /// Values added to those heard when the stream's holes give the loss.
 const LOSS_PRIOR: f64 = 4.0;
 /// Recent request round trips kept for the timeout.
 const RECENT: usize = 16;
+/// Request frames (copies included) outstanding at once on a fast link. ArduPilot queues 20
+/// PARAM_REQUEST_READs, shared by all its links, and drops what finds the queue full; on a
+/// fast link a round of requests arrives at once, so more than this would be dropped (and
+/// taken for loss, and asked again in more copies). On a slow link the requests arrive spread
+/// out, as fast as the vehicle answers them.
+pub const FAST_LINK_FRAMES: u32 = 16;
+/// A link with a round trip under this is fast.
+pub const FAST_LINK: Duration = Duration::from_millis(20);
+/// On a fast link the stream counts as over only after this many times its longest gap so
+/// far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and then pauses for
+/// longer.
+const GAP_FACTOR: u32 = 4;
+/// How long a vehicle takes to answer one queued read (ArduPilot's IO thread: one a
+/// millisecond).
+const READ_SERVICE: Duration = Duration::from_millis(1);
+/// Restarts for a table that changed size during the download (an `*_ENABLE` written).
+const MAX_RESTARTS: u8 = 3;
 
 /// Why a download did not complete.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -111,6 +129,12 @@ pub struct PullMachine {
     check: Instant,
     stalls: u32,
     list_sends: u8,
+    /// The last value of the list stream and the longest gap between two so far.
+    last_streamed: Option<Instant>,
+    gap_max: Duration,
+    restarts: u8,
+    /// Sizes the table had before it changed: values announcing them are from before.
+    stale_counts: Vec<u16>,
     /// PARAM_REQUEST_READs sent, copies included (for the benchmark's report).
     pub rerequests: usize,
     done: Option<Result<ParamSet, PullStalled>>,
@@ -145,9 +169,28 @@ impl PullMachine {
             check: now,
             stalls: 0,
             list_sends: 0,
+            last_streamed: None,
+            gap_max: Duration::ZERO,
+            restarts: 0,
+            stale_counts: Vec::new(),
             rerequests: 0,
             done: None,
         }
+    }
+
+    /// What the download did, for the debug log.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        format!(
+            "{} reads, {} holes seen, {} timed out, {} lists, {} restarts, srtt {:?}, longest gap {:?}",
+            self.rerequests,
+            self.holes_seen,
+            self.timed_out,
+            self.list_sends,
+            self.restarts,
+            self.rtt.srtt(),
+            self.gap_max
+        )
     }
 
     /// (received, total) for a progress bar; total is 0 until the first value.
@@ -177,7 +220,42 @@ impl PullMachine {
     }
 
     fn quiet(&self) -> Duration {
-        self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET)
+        let quiet = self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET);
+        if self.srtt() < FAST_LINK {
+            // The link's delay is nothing; the vehicle's pacing is what counts.
+            quiet.max(self.gap_max * GAP_FACTOR)
+        } else {
+            quiet
+        }
+    }
+
+    /// Request frames that may go now: the window, in copies, on a fast link.
+    fn frame_room(&self) -> u32 {
+        if self.srtt() >= FAST_LINK {
+            return u32::MAX;
+        }
+        let out: u32 = self.outstanding.values().map(|a| a.copies).sum();
+        FAST_LINK_FRAMES.saturating_sub(out)
+    }
+
+    /// The table changed size (an enable parameter written while the download ran): its
+    /// indices moved, so the download starts again.
+    fn restart(&mut self, now: Instant) -> Vec<MavMessage> {
+        self.restarts += 1;
+        if let Some(old) = self.count.take() {
+            self.stale_counts.push(old);
+        }
+        self.values.clear();
+        self.by_name.clear();
+        self.outstanding.clear();
+        self.asked.clear();
+        self.shown.clear();
+        self.highest = None;
+        self.stream_over = false;
+        self.last_streamed = None;
+        self.list_sends = 0;
+        self.last_rx = now;
+        self.list(now)
     }
 
     /// One exchange's chance of failing, from what the download has seen so far: the stream's
@@ -204,6 +282,11 @@ impl PullMachine {
 
     /// Copies for each request of a round of `holes`.
     fn copies(&self, holes: usize) -> u32 {
+        // On a fast link a lost request costs a few milliseconds; copies would only crowd the
+        // vehicle's read queue.
+        if self.srtt() < FAST_LINK {
+            return 1;
+        }
         let f = self.exchange_loss();
         if f <= 0.0 {
             return 1;
@@ -235,7 +318,16 @@ impl PullMachine {
 
     /// PARAM_REQUEST_READ of each index in `indices`, in `copies` copies.
     fn read(&mut self, indices: &[u16], copies: u32, now: Instant) -> Vec<MavMessage> {
-        let rto = self.hole_rto();
+        // The vehicle answers queued reads one at a time: on a fast link the last of a round
+        // waits for the others more than for the link (ArduPilot's IO thread takes one a
+        // millisecond).
+        let queued = if self.srtt() < FAST_LINK {
+            self.outstanding.values().map(|a| a.copies).sum::<u32>()
+                + copies * u32::try_from(indices.len()).unwrap_or(u32::MAX)
+        } else {
+            0
+        };
+        let rto = self.hole_rto() + READ_SERVICE * queued;
         let mut out = Vec::new();
         for &index in indices {
             self.asked.insert(index);
@@ -272,7 +364,15 @@ impl PullMachine {
         let Some(count) = self.count else {
             return Vec::new();
         };
-        let room = PULL_WINDOW.saturating_sub(self.outstanding.len());
+        let missing = usize::from(count) - self.values.len();
+        let copies = self.copies(missing);
+        let frames = usize::try_from(self.frame_room() / copies).unwrap_or(usize::MAX);
+        let room = PULL_WINDOW
+            .saturating_sub(self.outstanding.len())
+            .min(frames);
+        if room == 0 {
+            return Vec::new();
+        }
         let holes: Vec<u16> = if self.stream_over {
             (0..count)
                 .filter(|i| !self.values.contains_key(i) && !self.outstanding.contains_key(i))
@@ -290,8 +390,6 @@ impl PullMachine {
         if holes.is_empty() {
             return Vec::new();
         }
-        let missing = usize::from(count) - self.values.len();
-        let copies = self.copies(missing);
         self.read(&holes, copies, now)
     }
 
@@ -313,8 +411,14 @@ impl PullMachine {
     /// A value from the list stream (not an answer to a request): the indices it passed over
     /// are holes; one that fills a hole shown before was late, not lost.
     fn streamed(&mut self, index: u16, now: Instant) {
+        if let Some(last) = self.last_streamed {
+            self.gap_max = self.gap_max.max(now.duration_since(last));
+        }
+        self.last_streamed = Some(now);
         let from = self.highest.map_or(0, |h| h + 1);
         if index >= from {
+            // The stream goes on after a pause that looked like its end.
+            self.stream_over = false;
             self.holes_seen += u32::from(index - from);
             for i in from..index {
                 self.shown.insert(i, now);
@@ -348,7 +452,13 @@ impl Machine for PullMachine {
             value: v.param_value,
             ty: v.param_type,
         };
+        if self.stale_counts.contains(&v.param_count) {
+            return Vec::new();
+        }
         let count = *self.count.get_or_insert(v.param_count);
+        if v.param_count != count && self.restarts < MAX_RESTARTS {
+            return self.restart(now);
+        }
         let index = if v.param_index == u16::MAX {
             match self.by_name.get(&name) {
                 Some(&i) => i,

@@ -385,3 +385,77 @@ fn at_30_percent_loss_and_200_ms_the_pull_takes_about_two_round_trips_more_than_
         "{reads} reads in {runs} pulls"
     );
 }
+
+/// ArduPilot's stream on a fast link: a few values every 2.5 ms tick, with now and then a pause
+/// of its main loop. The pause is taken for the end of the stream only after three times the
+/// longest gap so far, and the indices asked for then stay within ArduPilot's read queue.
+#[test]
+fn on_a_fast_link_a_pause_asks_for_few_indices_and_the_stream_finishes_the_table() {
+    let t0 = Instant::now();
+    let ms = |x: f64| Duration::from_secs_f64(x / 1e3);
+    let count = 1566;
+    let mut m = PullMachine::new(V, rtt(1));
+    m.start(t0);
+    let mut now = t0 + ms(2.0);
+    let mut asked = 0;
+    for i in 0..600u16 {
+        // Five values a 2.5 ms tick.
+        if i % 5 == 0 {
+            now += ms(2.5);
+        }
+        asked += read_indices(&m.on_message(now, &indexed(i, count))).len();
+    }
+    assert_eq!(asked, 0, "no hole, no read");
+    // The ticks' gap is the longest so far: a pause of twice that is no end of the stream.
+    let quiet = m.deadline().duration_since(now);
+    assert!(quiet >= ms(7.5), "{quiet:?}");
+    assert!(m.on_time(now + ms(5.0)).is_empty());
+    // A long pause: the missing indices are asked for, no more than the vehicle's queue takes.
+    let later = now + ms(100.0);
+    let asks = read_indices(&m.on_time(later));
+    assert!(!asks.is_empty());
+    assert!(
+        asks.len() <= FAST_LINK_FRAMES as usize,
+        "{} reads at once",
+        asks.len()
+    );
+    // The stream resumes and brings the rest; the answers to the reads come too.
+    let mut now = later + ms(1.0);
+    for &i in &asks {
+        m.on_message(now, &indexed(u16::try_from(i).expect("index"), count));
+    }
+    for i in 600..count {
+        if i % 5 == 0 {
+            now += ms(2.5);
+        }
+        let out = read_indices(&m.on_message(now, &indexed(i, count)));
+        assert!(out.len() <= FAST_LINK_FRAMES as usize);
+    }
+    let set = m.result().expect("done").expect("complete");
+    assert_eq!(set.len(), usize::from(count));
+}
+
+/// A value announcing another table size (an enable parameter written meanwhile) starts the
+/// download again; values announcing the old size are ignored from then on.
+#[test]
+fn a_table_that_changes_size_is_downloaded_again() {
+    let t0 = Instant::now();
+    let mut m = PullMachine::new(V, rtt(10));
+    m.start(t0);
+    for i in 0..5 {
+        m.on_message(t0, &indexed(i, 10));
+    }
+    let again = m.on_message(t0, &indexed(5, 12));
+    assert!(
+        again
+            .iter()
+            .all(|m| matches!(m, MavMessage::PARAM_REQUEST_LIST(_)))
+            && !again.is_empty(),
+        "{again:?}"
+    );
+    assert!(m.on_message(t0, &indexed(6, 10)).is_empty());
+    for i in 0..12 {
+        m.on_message(t0, &indexed(i, 12));
+    }
+    assert_eq!(m.result().expect("done").expect("complete").len(), 12);
+}
