@@ -25,7 +25,7 @@ use crate::params::{Param, stored_value};
 mod ftp;
 mod pull;
 pub use ftp::{FtpPullMachine, PARAM_FILE, PckError, decode_pck};
-pub use pull::{PULL_WINDOW, PullMachine, PullStalled};
+pub use pull::{CLEAN_WINDOW, PULL_WINDOW, PullMachine, PullStalled};
 
 /// Sends of one write or read before giving up. At 30 % loss each way one exchange fails about
 /// half the time, so twelve sends leave a 0.03 % chance of a false "no answer"; with the
@@ -356,6 +356,57 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    fn text(s: &str) -> Inbound {
+        Inbound {
+            sys: SystemId(1),
+            comp: ComponentId(1),
+            msg: MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
+                severity: apm::MavSeverity::MAV_SEVERITY_WARNING,
+                text: s.into(),
+                id: 0,
+                chunk_seq: 0,
+            }),
+        }
+    }
+
+    /// ArduPilot has no PARAM_ERROR: "Param write denied (NAME)" and the unchanged value.
+    #[test]
+    fn ardupilots_denial_text_is_a_refusal() {
+        let t0 = Instant::now();
+        let i16t = MavParamType::MAV_PARAM_TYPE_INT16;
+        let mut m = ParamMachine::write(V, "MIS_TOTAL", 3.0, i16t, Duration::from_millis(20));
+        m.start(t0);
+        // Another parameter's denial is not this one's.
+        m.on_message(t0, &text("Param write denied (MIS_TOTAL_X)"));
+        m.on_message(t0, &text("Param write denied (MIS_TOTAL)"));
+        m.on_message(t0, &value("MIS_TOTAL", 0.0, u16::MAX, 1566, i16t));
+        assert!(m.result().is_none(), "the grace for a fuller reason");
+        m.on_time(m.deadline());
+        match m.result() {
+            Some(Err(ParamFailure::Refused(r))) => assert_eq!(r, "Param write denied (MIS_TOTAL)"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// ArduPilot stores what the type holds: the same other value echoed to two sends is the
+    /// answer (the caller sees the vehicle kept another value), not a silence of 12 tries.
+    #[test]
+    fn the_same_other_echo_to_a_retry_ends_the_write_with_it() {
+        let t0 = Instant::now();
+        let i8t = MavParamType::MAV_PARAM_TYPE_INT8;
+        let mut m = ParamMachine::write(V, "Q_TILT_ENABLE", 1.0, i8t, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("Q_TILT_ENABLE", 0.0, u16::MAX, 1566, i8t));
+        assert!(m.result().is_none(), "maybe an old echo");
+        let d = m.deadline();
+        assert_eq!(m.on_time(d).len(), 1);
+        // A stream value (real index) does not count as an echo.
+        m.on_message(d, &value("Q_TILT_ENABLE", 0.0, 400, 1566, i8t));
+        assert!(m.result().is_none());
+        m.on_message(d, &value("Q_TILT_ENABLE", 0.0, u16::MAX, 1566, i8t));
+        assert_eq!(m.result().expect("done").expect("answered").value, 0.0);
     }
 
     #[test]

@@ -13,6 +13,10 @@ use super::machine::{Inbound, Machine, Retry, Step};
 /// protocol) only saves time, so the question is not pressed.
 pub const VERSION_TRIES: u8 = 3;
 
+/// The least wait for the answer before asking again: a busy vehicle or machine answers late,
+/// and asked alongside the round-trip probe it costs no time of its own.
+pub const VERSION_MIN_WAIT: Duration = Duration::from_millis(300);
+
 /// AUTOPILOT_VERSION's id, for MAV_CMD_REQUEST_MESSAGE.
 const AUTOPILOT_VERSION_ID: f32 = 148.0;
 
@@ -30,7 +34,7 @@ impl VersionMachine {
     pub fn new(target: (SystemId, ComponentId), rto: Duration) -> Self {
         Self {
             target,
-            retry: Retry::new(rto, VERSION_TRIES, Duration::ZERO),
+            retry: Retry::new(rto.max(VERSION_MIN_WAIT), VERSION_TRIES, Duration::ZERO),
             done: None,
         }
     }

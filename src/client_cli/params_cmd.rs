@@ -323,11 +323,83 @@ async fn push(
     what: &str,
     ftp: bool,
 ) -> Result<(), Failure> {
-    let current = pull(c, ftp).await?;
-    check_names(&current, wanted)?;
-    check_integers(&current, wanted)?;
-    let changes = params::diff(&current, &wanted.params);
-    let order = params::order_writes(&current, &changes, &params::TwinRules);
+    let mut current = pull(c, ftp).await?;
+    // Parameters the vehicle has only once an enable parameter of the file is set (ArduPilot's
+    // `Q_TILT_ENABLE 1` adds the `Q_TILT_*`): those enables are written first, then the table
+    // is read again; if the rest then fails, they are restored too.
+    let mut enables_before: Option<ParamSet> = None;
+    if !dry_run && !params::unknown_names(&current, &wanted.params).is_empty() {
+        let enables = changed_enables(&current, wanted);
+        if !enables.is_empty() {
+            let report = c
+                .push_onto(&current, &enables, &params::TwinRules, None)
+                .await?;
+            if !matches!(report.result, PushResult::Applied) {
+                return report_push(&report, what);
+            }
+            let before: ParamSet = enables
+                .keys()
+                .filter_map(|n| current.get(n).map(|p| (n.clone(), *p)))
+                .collect();
+            for (name, old) in &before {
+                println!(
+                    "{name} {} -> {} (written first: it adds parameters)",
+                    file::format_value(old.value),
+                    file::format_value(params::stored_value(old.ty, enables[name].value))
+                );
+            }
+            enables_before = Some(before);
+            current = pull(c, ftp).await?;
+        }
+    }
+    let result = push_checked(c, &current, wanted, dry_run, what).await;
+    if let (Err(_), Some(before)) = (&result, &enables_before) {
+        // Put the enables back as they were (the table shrinks again).
+        let restored = c
+            .push_onto(&current, before, &params::TwinRules, None)
+            .await;
+        if !restored.is_ok_and(|r| matches!(r.result, PushResult::Applied)) {
+            let names: Vec<&str> = before.keys().map(String::as_str).collect();
+            return Err(Failure {
+                code: EXIT_ROLLBACK,
+                message: format!(
+                    "{what} failed and {} could not be restored: {}",
+                    names.join(", "),
+                    result.err().map_or_else(String::new, |f| f.message)
+                ),
+            });
+        }
+    }
+    result
+}
+
+/// The `*_ENABLE` parameters `wanted` changes.
+fn changed_enables(current: &ParamSet, wanted: &ParamFile) -> ParamSet {
+    wanted
+        .params
+        .iter()
+        .filter(|(n, p)| {
+            n.ends_with("_ENABLE")
+                && current.get(*n).is_some_and(|c| {
+                    !params::same_value(c.value, params::stored_value(c.ty, p.value))
+                })
+        })
+        .map(|(n, p)| (n.clone(), *p))
+        .collect()
+}
+
+/// [`push`] once every name of the file is on the vehicle.
+async fn push_checked(
+    c: &ClientHandle,
+    current: &ParamSet,
+    wanted: &ParamFile,
+    dry_run: bool,
+    what: &str,
+) -> Result<(), Failure> {
+    check_names(current, wanted)?;
+    check_integers(current, wanted)?;
+    let changes = params::diff(current, &wanted.params);
+    let order = params::order_writes(current, &changes, &params::TwinRules);
     if dry_run {
         print_changes(&order);
         // What the twin's rules predict for this order; the vehicle has the last word.
@@ -360,7 +432,7 @@ async fn push(
     }
     let (tx, task) = show_progress("writing");
     let report = c
-        .push_onto(&current, &wanted.params, &params::TwinRules, tx)
+        .push_onto(current, &wanted.params, &params::TwinRules, tx)
         .await;
     if let Some(t) = task {
         let _ = t.await;

@@ -7,8 +7,8 @@
 //! stream still comes, once it has stayed missing for a reorder allowance (a quarter of a round
 //! trip: a link with jitter delivers a burst out of order, and each false hole would cost its
 //! copies); the indices after the last one heard are asked for once the stream has been quiet
-//! for as long. At most [`PULL_WINDOW`] indices are outstanding; each answer lets the next
-//! request go.
+//! for as long. At most [`PULL_WINDOW`] indices are outstanding ([`CLEAN_WINDOW`] while the
+//! stream has lost nothing); each answer lets the next request go.
 //!
 //! Once the link has shown loss (holes in the stream, or requests unanswered), each request
 //! goes out in several copies: one exchange fails with probability `f = 1 - (1 - p)²` at a loss
@@ -49,6 +49,10 @@ pub const HOLES_LEFT: f64 = 0.2;
 const HOLE_RTO_FACTOR: f64 = 1.25;
 /// The list request's first answer also waits for the vehicle to start its stream.
 const LIST_RTO_FACTOR: f64 = 1.5;
+/// The least wait for the stream's first value before the list request goes again: every
+/// list request restarts the stream (ArduPilot sends its banner first), so on a fast link a
+/// vehicle a little slow to start would be asked over and over.
+const LIST_MIN_WAIT: Duration = Duration::from_millis(100);
 /// The stream counts as over after this share of a round trip without a value, and a hole is
 /// asked for once it has been missing for as long (the reorder allowance)…
 const QUIET_SHARE: f64 = 0.25;
@@ -59,17 +63,17 @@ const MIN_QUIET: Duration = Duration::from_millis(50);
 const LOSS_PRIOR: f64 = 4.0;
 /// Recent request round trips kept for the timeout.
 const RECENT: usize = 16;
-/// Request frames (copies included) outstanding at once on a fast link. ArduPilot queues 20
-/// PARAM_REQUEST_READs, shared by all its links, and drops what finds the queue full; on a
-/// fast link a round of requests arrives at once, so more than this would be dropped (and
-/// taken for loss, and asked again in more copies). On a slow link the requests arrive spread
-/// out, as fast as the vehicle answers them.
-pub const FAST_LINK_FRAMES: u32 = 16;
-/// A link with a round trip under this is fast.
-pub const FAST_LINK: Duration = Duration::from_millis(20);
-/// On a fast link the stream counts as over only after this many times its longest gap so
-/// far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and then pauses for
-/// longer.
+/// Indices asked for at once, one copy each, while the download has seen no loss. ArduPilot
+/// queues 20 PARAM_REQUEST_READs, shared by all its links, and drops what finds the queue
+/// full; a round of requests arrives at once on a fast link, so the window stays under that
+/// queue (a larger one, or copies, would be dropped, taken for loss and asked again in more
+/// copies: a flood that starves the stream).
+pub const CLEAN_WINDOW: usize = 16;
+/// A link with a round trip under this is fast: the vehicle's own pace is what counts.
+const FAST_LINK: Duration = Duration::from_millis(20);
+/// While the stream has shown no loss, it counts as over only after this many times its
+/// longest gap so far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and
+/// then pauses for longer.
 const GAP_FACTOR: u32 = 4;
 /// How long a vehicle takes to answer one queued read (ArduPilot's IO thread: one a
 /// millisecond).
@@ -221,21 +225,27 @@ impl PullMachine {
 
     fn quiet(&self) -> Duration {
         let quiet = self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET);
-        if self.srtt() < FAST_LINK {
-            // The link's delay is nothing; the vehicle's pacing is what counts.
+        if self.clean() {
+            // Nothing lost: a pause is the vehicle's pacing, not the end of the stream.
             quiet.max(self.gap_max * GAP_FACTOR)
         } else {
             quiet
         }
     }
 
-    /// Request frames that may go now: the window, in copies, on a fast link.
-    fn frame_room(&self) -> u32 {
-        if self.srtt() >= FAST_LINK {
-            return u32::MAX;
+    /// Whether the download has seen no loss so far: no hole in the stream, no request
+    /// unanswered.
+    fn clean(&self) -> bool {
+        self.holes_seen == 0 && self.timed_out == 0
+    }
+
+    /// Indices that may be outstanding at once.
+    fn window(&self) -> usize {
+        if self.clean() {
+            CLEAN_WINDOW
+        } else {
+            PULL_WINDOW
         }
-        let out: u32 = self.outstanding.values().map(|a| a.copies).sum();
-        FAST_LINK_FRAMES.saturating_sub(out)
     }
 
     /// The table changed size (an enable parameter written while the download ran): its
@@ -282,9 +292,9 @@ impl PullMachine {
 
     /// Copies for each request of a round of `holes`.
     fn copies(&self, holes: usize) -> u32 {
-        // On a fast link a lost request costs a few milliseconds; copies would only crowd the
-        // vehicle's read queue.
-        if self.srtt() < FAST_LINK {
+        // A stream that lost nothing says the link does not lose: unanswered requests were
+        // dropped by the vehicle, and copies would only crowd its read queue.
+        if self.clean() {
             return 1;
         }
         let f = self.exchange_loss();
@@ -306,7 +316,7 @@ impl PullMachine {
             .srtt()
             .mul_f64(LIST_RTO_FACTOR)
             .min(self.rto)
-            .max(Rtt::MIN_RTO);
+            .max(LIST_MIN_WAIT);
         self.list_due = now + retry_wait(first_wait, self.list_sends);
         let copies = LIST_COPIES + usize::from(self.list_sends - 1).min(2);
         let m = MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
@@ -366,10 +376,7 @@ impl PullMachine {
         };
         let missing = usize::from(count) - self.values.len();
         let copies = self.copies(missing);
-        let frames = usize::try_from(self.frame_room() / copies).unwrap_or(usize::MAX);
-        let room = PULL_WINDOW
-            .saturating_sub(self.outstanding.len())
-            .min(frames);
+        let room = self.window().saturating_sub(self.outstanding.len());
         if room == 0 {
             return Vec::new();
         }

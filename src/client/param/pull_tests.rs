@@ -414,11 +414,7 @@ fn on_a_fast_link_a_pause_asks_for_few_indices_and_the_stream_finishes_the_table
     let later = now + ms(100.0);
     let asks = read_indices(&m.on_time(later));
     assert!(!asks.is_empty());
-    assert!(
-        asks.len() <= FAST_LINK_FRAMES as usize,
-        "{} reads at once",
-        asks.len()
-    );
+    assert!(asks.len() <= CLEAN_WINDOW, "{} reads at once", asks.len());
     // The stream resumes and brings the rest; the answers to the reads come too.
     let mut now = later + ms(1.0);
     for &i in &asks {
@@ -429,7 +425,7 @@ fn on_a_fast_link_a_pause_asks_for_few_indices_and_the_stream_finishes_the_table
             now += ms(2.5);
         }
         let out = read_indices(&m.on_message(now, &indexed(i, count)));
-        assert!(out.len() <= FAST_LINK_FRAMES as usize);
+        assert!(out.len() <= CLEAN_WINDOW);
     }
     let set = m.result().expect("done").expect("complete");
     assert_eq!(set.len(), usize::from(count));
