@@ -652,6 +652,7 @@ impl ClientHandle {
         let mut m = PullMachine::new(target, rtt);
         let out = self
             .drive(&mut m, |m| {
+                tracing::trace!(progress = ?m.progress(), "{}", m.summary());
                 if let Some(p) = &progress {
                     p.send_if_modified(|v| {
                         let now = m.progress();

@@ -69,8 +69,11 @@ const RECENT: usize = 16;
 /// queue (a larger one, or copies, would be dropped, taken for loss and asked again in more
 /// copies: a flood that starves the stream).
 pub const CLEAN_WINDOW: usize = 16;
-/// A link with a round trip under this is fast: the vehicle's own pace is what counts.
+/// A link whose round trip (as measured before the download) is under this is fast: the
+/// vehicle's own pace is what counts, not the link's.
 const FAST_LINK: Duration = Duration::from_millis(20);
+/// On a fast link, a stream that has lost nothing counts as over only after this long quiet.
+const FAST_PAUSE: Duration = Duration::from_millis(300);
 /// While the stream has shown no loss, it counts as over only after this many times its
 /// longest gap so far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and
 /// then pauses for longer.
@@ -133,6 +136,9 @@ pub struct PullMachine {
     check: Instant,
     stalls: u32,
     list_sends: u8,
+    /// Whether the link is fast ([`FAST_LINK`]), from the round trip known at the start: the
+    /// answers' own round trips grow with a busy vehicle's queue, not the link.
+    fast: bool,
     /// The last value of the list stream and the longest gap between two so far.
     last_streamed: Option<Instant>,
     gap_max: Duration,
@@ -173,6 +179,7 @@ impl PullMachine {
             check: now,
             stalls: 0,
             list_sends: 0,
+            fast: rtt.srtt().is_some_and(|s| s < FAST_LINK),
             last_streamed: None,
             gap_max: Duration::ZERO,
             restarts: 0,
@@ -225,27 +232,18 @@ impl PullMachine {
 
     fn quiet(&self) -> Duration {
         let quiet = self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET);
-        if self.clean() {
-            // Nothing lost: a pause is the vehicle's pacing, not the end of the stream.
-            quiet.max(self.gap_max * GAP_FACTOR)
+        if self.fast && self.holes_seen == 0 {
+            // Nothing lost on a fast link: a pause is the vehicle's pacing (ArduPilot's
+            // stream stops for about 100 ms every couple of hundred values), not its end.
+            quiet.max(self.gap_max * GAP_FACTOR).max(FAST_PAUSE)
         } else {
             quiet
         }
     }
 
-    /// Whether the download has seen no loss so far: no hole in the stream, no request
-    /// unanswered.
-    fn clean(&self) -> bool {
-        self.holes_seen == 0 && self.timed_out == 0
-    }
-
     /// Indices that may be outstanding at once.
     fn window(&self) -> usize {
-        if self.clean() {
-            CLEAN_WINDOW
-        } else {
-            PULL_WINDOW
-        }
+        if self.fast { CLEAN_WINDOW } else { PULL_WINDOW }
     }
 
     /// The table changed size (an enable parameter written while the download ran): its
@@ -292,9 +290,9 @@ impl PullMachine {
 
     /// Copies for each request of a round of `holes`.
     fn copies(&self, holes: usize) -> u32 {
-        // A stream that lost nothing says the link does not lose: unanswered requests were
-        // dropped by the vehicle, and copies would only crowd its read queue.
-        if self.clean() {
+        // On a fast link an unanswered request costs little, and copies would only crowd the
+        // vehicle's read queue (a request it drops is no loss of the link's).
+        if self.fast {
             return 1;
         }
         let f = self.exchange_loss();
@@ -331,7 +329,7 @@ impl PullMachine {
         // The vehicle answers queued reads one at a time: on a fast link the last of a round
         // waits for the others more than for the link (ArduPilot's IO thread takes one a
         // millisecond).
-        let queued = if self.srtt() < FAST_LINK {
+        let queued = if self.fast {
             self.outstanding.values().map(|a| a.copies).sum::<u32>()
                 + copies * u32::try_from(indices.len()).unwrap_or(u32::MAX)
         } else {
