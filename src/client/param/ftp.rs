@@ -39,6 +39,9 @@ pub const FTP_STALL: Duration = Duration::from_secs(2);
 /// sends its chunks back to back.
 const BURST_PAUSE: Duration = Duration::from_millis(50);
 
+/// Sends of TerminateSession before the table is returned without its ACK.
+const CLOSE_TRIES: u8 = 2;
+
 const OP_TERMINATE: u8 = 1;
 const OP_OPEN_RO: u8 = 4;
 const OP_READ: u8 = 5;
@@ -140,6 +143,9 @@ pub fn decode_pck(data: &[u8]) -> Result<ParamSet, PckError> {
 enum Phase {
     Open,
     Read,
+    /// The table is in; TerminateSession waits for its ACK (a few tries at most), so that the
+    /// vehicle's one session is free for the next reader even when this process ends at once.
+    Close,
 }
 
 /// The table over FTP: `Ok(table)`, or `Err(why)` when the parameter protocol should be used.
@@ -155,6 +161,8 @@ pub struct FtpPullMachine {
     /// The end of the file, once a short chunk or an end-of-file NAK has shown it.
     end: Option<u32>,
     last_rx: Instant,
+    /// The table, read, while the session closes.
+    table: Option<ParamSet>,
     done: Option<Result<ParamSet, String>>,
     /// Chunks received (duplicates included), for the benchmark's report.
     pub chunks_received: usize,
@@ -174,6 +182,7 @@ impl FtpPullMachine {
             chunks: BTreeMap::new(),
             end: None,
             last_rx: Instant::now(),
+            table: None,
             done: None,
             chunks_received: 0,
         }
@@ -243,12 +252,22 @@ impl FtpPullMachine {
         out
     }
 
+    /// TerminateSession, to be acknowledged.
+    fn close(&mut self, now: Instant) -> Vec<MavMessage> {
+        if self.phase != Phase::Close {
+            self.phase = Phase::Close;
+            self.retry = Retry::new(self.rto, CLOSE_TRIES, Duration::ZERO);
+        }
+        self.retry.send(now);
+        vec![self.request(OP_TERMINATE, 0, &[])]
+    }
+
     /// After a burst ends, or the stream of chunks stops: done, or a burst from the gap.
     fn settle(&mut self, now: Instant) -> Vec<MavMessage> {
         match decode_pck(&self.assembled()) {
             Ok(set) => {
-                self.done = Some(Ok(set));
-                vec![self.request(OP_TERMINATE, 0, &[])]
+                self.table = Some(set);
+                self.close(now)
             }
             Err(PckError::Incomplete { .. } | PckError::Truncated(_) | PckError::Short)
                 if self.end.is_none_or(|e| self.contiguous() < e) =>
@@ -287,6 +306,10 @@ impl Machine for FtpPullMachine {
             return Vec::new();
         }
         match (self.phase, opcode, req) {
+            (Phase::Close, _, OP_TERMINATE) => {
+                self.done = self.table.take().map(Ok);
+                Vec::new()
+            }
             (Phase::Open, OP_ACK, OP_OPEN_RO) => {
                 self.phase = Phase::Read;
                 self.last_rx = now;
@@ -343,7 +366,7 @@ impl Machine for FtpPullMachine {
         if self.done.is_some() {
             return Vec::new();
         }
-        if now.duration_since(self.last_rx) > FTP_STALL {
+        if self.phase != Phase::Close && now.duration_since(self.last_rx) > FTP_STALL {
             self.done = Some(Err(format!("{PARAM_FILE}: no answer")));
             return Vec::new();
         }
@@ -360,6 +383,11 @@ impl Machine for FtpPullMachine {
             }
             // The burst paused: what came may already be all of it, or a burst from the gap.
             (Step::Send, Phase::Read) => self.settle(now),
+            (Step::Send, Phase::Close) => self.close(now),
+            (Step::GiveUp, Phase::Close) => {
+                self.done = self.table.take().map(Ok);
+                Vec::new()
+            }
         }
     }
 

@@ -168,7 +168,7 @@ fn serve(file: &[u8], lose: &[usize]) -> (ParamSet, usize) {
                         }
                     }
                 }
-                OP_TERMINATE => {}
+                OP_TERMINATE => inbound.push(reply(&req, OP_ACK, &[], 0, false)),
                 other => panic!("opcode {other}"),
             }
         }
