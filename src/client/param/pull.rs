@@ -81,6 +81,11 @@ const GAP_FACTOR: u32 = 4;
 /// How long a vehicle takes to answer one queued read (ArduPilot's IO thread: one a
 /// millisecond).
 const READ_SERVICE: Duration = Duration::from_millis(1);
+/// On a fast link, a stream that stops with more than this many values missing is asked for
+/// again (PARAM_REQUEST_LIST) rather than read index by index…
+const RELIST_MISSING: usize = 2 * CLEAN_WINDOW;
+/// …at most this often.
+const RELIST_EVERY: Duration = Duration::from_secs(1);
 /// Restarts for a table that changed size during the download (an `*_ENABLE` written).
 const MAX_RESTARTS: u8 = 3;
 
@@ -143,6 +148,8 @@ pub struct PullMachine {
     last_streamed: Option<Instant>,
     gap_max: Duration,
     restarts: u8,
+    /// When the stream may be asked for again ([`RELIST_MISSING`]).
+    relist_due: Instant,
     /// Sizes the table had before it changed: values announcing them are from before.
     stale_counts: Vec<u16>,
     /// PARAM_REQUEST_READs sent, copies included (for the benchmark's report).
@@ -183,6 +190,7 @@ impl PullMachine {
             last_streamed: None,
             gap_max: Duration::ZERO,
             restarts: 0,
+            relist_due: now,
             stale_counts: Vec::new(),
             rerequests: 0,
             done: None,
@@ -373,6 +381,9 @@ impl PullMachine {
             return Vec::new();
         };
         let missing = usize::from(count) - self.values.len();
+        if self.fast && self.stream_over && missing > RELIST_MISSING {
+            return Vec::new();
+        }
         let copies = self.copies(missing);
         let room = self.window().saturating_sub(self.outstanding.len());
         if room == 0 {
@@ -538,6 +549,20 @@ impl Machine for PullMachine {
         if !self.stream_over && silent >= self.quiet() {
             self.stream_over = true;
         }
+        let missing = self.count.map_or(0, usize::from) - self.values.len();
+        if self.fast && self.stream_over && missing > RELIST_MISSING {
+            // On a fast link the stream brings the rest sooner than reads one at a time (and
+            // ArduPilot sends no stream while it answers reads): ask for it again.
+            if now >= self.relist_due {
+                self.relist_due = now + RELIST_EVERY;
+                self.stream_over = false;
+                // The pause before the new stream is no gap of it.
+                self.last_streamed = None;
+                self.list_sends = 0;
+                return self.list(now);
+            }
+            return Vec::new();
+        }
         // Requests whose answer is overdue are asked again.
         let overdue: Vec<u16> = self
             .outstanding
@@ -549,7 +574,6 @@ impl Machine for PullMachine {
             self.timed_out += 1;
             self.copies_resolved += self.outstanding.get(i).map_or(1, |a| a.copies);
         }
-        let missing = self.count.map_or(0, usize::from) - self.values.len();
         let copies = self.copies(missing);
         let mut out = self.read(&overdue, copies, now);
         out.extend(self.refill(now));
