@@ -363,7 +363,10 @@ where
             find_vehicle(&client, link, keyed).await?;
             // Without an answer the timeouts start generous and adapt; but a vehicle that signs
             // and hears only unsigned frames never answers anything.
-            if let Ok(None) = client.probe_rtt().await
+            // The vehicle's capabilities (whether it serves its parameters over FTP) are asked
+            // alongside the probe, so that knowing them costs no round trip of its own.
+            let (probe, _) = tokio::join!(client.probe_rtt(), client.capabilities());
+            if let Ok(None) = probe
                 && !keyed
                 && client
                     .target()

@@ -20,6 +20,7 @@ pub mod probe;
 mod session;
 pub use session::{Heard, hello};
 pub mod statustext;
+pub mod version;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -28,7 +29,7 @@ use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio_util::sync::CancellationToken;
-use vtol_link::dialect::{MavCmd, MavMessage, MavResult};
+use vtol_link::dialect::{MavCmd, MavMessage, MavProtocolCapability, MavResult};
 use vtol_link::{ComponentId, LinkOptions, LinkUrl, SystemId};
 
 use command::CommandMachine;
@@ -105,6 +106,10 @@ pub struct ClientHandle {
     rtt: Arc<Mutex<Rtt>>,
     shared: Arc<session::Shared>,
     cache: Arc<Mutex<ParamSet>>,
+    /// The vehicle's AUTOPILOT_VERSION capabilities, once asked (`None` inside: no answer).
+    caps: Arc<Mutex<Option<VehicleCaps>>>,
+    /// The last FTP session number used.
+    ftp_session: Arc<std::sync::atomic::AtomicU8>,
     heard: watch::Receiver<Heard>,
     /// Whether the session holds outgoing messages back (a radio's buffer full).
     held: watch::Receiver<bool>,
@@ -121,6 +126,9 @@ impl Drop for OperatorGuard {
         self.shared.operators.fetch_sub(1, Ordering::Relaxed);
     }
 }
+
+/// A vehicle and the capabilities its AUTOPILOT_VERSION gave (`None`: it did not answer).
+type VehicleCaps = ((SystemId, ComponentId), Option<MavProtocolCapability>);
 
 /// Frames buffered from the handles to the session task.
 const OUT_QUEUE: usize = 1024;
@@ -171,6 +179,10 @@ impl ClientHandle {
             rtt: Arc::new(Mutex::new(Rtt::default())),
             shared,
             cache: Arc::new(Mutex::new(ParamSet::new())),
+            caps: Arc::new(Mutex::new(None)),
+            // Sessions numbered from the component id: two clients of one vehicle rarely
+            // share one.
+            ftp_session: Arc::new(std::sync::atomic::AtomicU8::new(me.1.0.wrapping_mul(7))),
             heard,
             held,
         }
@@ -601,7 +613,29 @@ impl ClientHandle {
         })
     }
 
-    /// Whole table; progress reports (received, total).
+    /// The vehicle's capabilities (AUTOPILOT_VERSION, asked once per vehicle); `None` when it
+    /// does not answer.
+    ///
+    /// # Errors
+    /// [`ClientError::NoVehicle`], [`ClientError::Link`].
+    pub async fn capabilities(&self) -> Result<Option<MavProtocolCapability>, ClientError> {
+        let target = self.vehicle().await?;
+        if let Some((t, caps)) = self.caps.lock().ok().and_then(|c| *c)
+            && t == target
+        {
+            return Ok(caps);
+        }
+        let mut m = version::VersionMachine::new(target, self.rto());
+        let caps = self.drive(&mut m, |_| {}).await?;
+        if let Ok(mut c) = self.caps.lock() {
+            *c = Some((target, caps));
+        }
+        Ok(caps)
+    }
+
+    /// Whole table; progress reports (received, total). When the vehicle offers MAVLink FTP,
+    /// the table comes as its packed parameter file (`@PARAM/param.pck`), with the parameter
+    /// protocol as the fallback.
     ///
     /// # Errors
     /// [`ClientError::Timeout`] when the download stalls; link errors.
@@ -609,11 +643,50 @@ impl ClientHandle {
         &self,
         progress: Option<watch::Sender<(usize, usize)>>,
     ) -> Result<ParamSet, ClientError> {
+        self.params_pull_via(progress, true).await
+    }
+
+    /// [`ClientHandle::params_pull`], with FTP only if `allow_ftp`.
+    ///
+    /// # Errors
+    /// As [`ClientHandle::params_pull`].
+    pub async fn params_pull_via(
+        &self,
+        progress: Option<watch::Sender<(usize, usize)>>,
+        allow_ftp: bool,
+    ) -> Result<ParamSet, ClientError> {
         let target = self.vehicle().await?;
+        let ftp = allow_ftp
+            && self
+                .capabilities()
+                .await?
+                .is_some_and(|c| c.contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_FTP));
+        if ftp {
+            let session = self
+                .ftp_session
+                .fetch_add(1, Ordering::Relaxed)
+                .wrapping_add(1);
+            let mut m = param::FtpPullMachine::new(target, session, self.rto());
+            match self.drive(&mut m, |_| {}).await? {
+                Ok(set) => {
+                    if let Some(p) = &progress {
+                        p.send_replace((set.len(), set.len()));
+                    }
+                    if let Ok(mut c) = self.cache.lock() {
+                        c.clone_from(&set);
+                    }
+                    return Ok(set);
+                }
+                Err(why) => {
+                    tracing::info!("{why}: reading the table with the parameter protocol");
+                }
+            }
+        }
         let rtt = self.rtt.lock().map(|r| *r).unwrap_or_default();
         let mut m = PullMachine::new(target, rtt);
         let out = self
             .drive(&mut m, |m| {
+                tracing::trace!(progress = ?m.progress(), "{}", m.summary());
                 if let Some(p) = &progress {
                     p.send_if_modified(|v| {
                         let now = m.progress();
@@ -624,6 +697,7 @@ impl ClientHandle {
                 }
             })
             .await?;
+        tracing::debug!("parameter download: {}", m.summary());
         let set = out.map_err(|s| {
             ClientError::Timeout(format!(
                 "download stalled at {} of {} parameters",

@@ -5,9 +5,14 @@
 //! stream by PARAM_REQUEST_READ(index), asked for as soon as a later index shows them, in
 //! several copies once the link has shown loss.
 //!
-//! Write: PARAM_SET, confirmed only by a PARAM_VALUE echo equal to the value after the vehicle's
-//! type conversion (bit-exact for floats). A PARAM_ERROR is a definite refusal; the reason is
-//! the vehicle's STATUSTEXT about that name when one arrives, otherwise the error code.
+//! Write: PARAM_SET, confirmed by a PARAM_VALUE echo equal to the value after the vehicle's
+//! type conversion ([`crate::params::same_value`]: float32 as the vehicle holds it). A
+//! PARAM_ERROR is a definite refusal; the reason is the vehicle's STATUSTEXT about that name
+//! when one arrives, otherwise the error code. ArduPilot has no PARAM_ERROR: it refuses a
+//! write with a STATUSTEXT `Param write denied (NAME)` and echoes the unchanged value, and it
+//! stores what its type can hold (an integer clamped to its range), echoing that. So a denial
+//! text about the name is a refusal too, and the same other value echoed to two sends is the
+//! vehicle's answer: the write ends with that value, which the caller compares.
 
 use std::time::{Duration, Instant};
 
@@ -17,8 +22,10 @@ use vtol_link::{ComponentId, SystemId};
 use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Step};
 use crate::params::{Param, stored_value};
 
+mod ftp;
 mod pull;
-pub use pull::{PULL_WINDOW, PullMachine, PullStalled};
+pub use ftp::{FtpPullMachine, PARAM_FILE, PckError, decode_pck};
+pub use pull::{CLEAN_WINDOW, PULL_WINDOW, PullMachine, PullStalled};
 
 /// Sends of one write or read before giving up. At 30 % loss each way one exchange fails about
 /// half the time, so twelve sends leave a 0.03 % chance of a false "no answer"; with the
@@ -57,6 +64,17 @@ fn param_error_text(e: MavParamError) -> &'static str {
     }
 }
 
+/// Whether `text` names the parameter `name` as a word (`Q_A_RAT_RLL_P` is not in
+/// `Q_A_RAT_RLL_PDMX`).
+fn mentions(text: &str, name: &str) -> bool {
+    let word = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    text.match_indices(name).any(|(i, _)| {
+        let before = text[..i].chars().next_back();
+        let after = text[i + name.len()..].chars().next();
+        !before.is_some_and(word) && !after.is_some_and(word)
+    })
+}
+
 /// One read by name, or one verified write.
 #[derive(Debug)]
 pub struct ParamMachine {
@@ -67,6 +85,9 @@ pub struct ParamMachine {
     retry: Retry,
     last_echo: Option<f32>,
     refused: Option<(String, Instant)>,
+    /// An echo (index 65535) of another value than the one written, and the sends made when
+    /// it came: the same value echoed to a later send is the vehicle's answer.
+    other_echo: Option<(f32, u8)>,
     /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
     assembler: super::statustext::TextAssembler,
     /// Round trip of an exchange answered on its first send.
@@ -109,6 +130,7 @@ impl ParamMachine {
             retry: Retry::new(rto, PARAM_TRIES, GIVE_UP_AFTER),
             last_echo: None,
             refused: None,
+            other_echo: None,
             assembler: super::statustext::TextAssembler::default(),
             first_try_rtt: None,
             done: None,
@@ -163,7 +185,21 @@ impl Machine for ParamMachine {
                     self.done = Some(Ok(p));
                 } else {
                     // The unchanged value of a refusal, or an old echo: wait for PARAM_ERROR
-                    // or the echo of a retry.
+                    // or the echo of a retry. The same other value echoed again to a retry
+                    // (ArduPilot's echo carries index 65535) is what the vehicle holds.
+                    if v.param_index == u16::MAX {
+                        let tries = self.retry.tries();
+                        match self.other_echo {
+                            Some((seen, at))
+                                if crate::params::same_value(seen, p.value) && tries > at =>
+                            {
+                                if self.refused.is_none() {
+                                    self.done = Some(Ok(p));
+                                }
+                            }
+                            _ => self.other_echo = Some((p.value, tries)),
+                        }
+                    }
                     self.last_echo = Some(p.value);
                 }
             }
@@ -179,10 +215,15 @@ impl Machine for ParamMachine {
             MavMessage::STATUSTEXT(t) => {
                 // Long reasons come in chunks: put them together first.
                 if let Some(text) = self.assembler.push(t)
-                    && self.refused.is_some()
-                    && text.contains(self.name.as_str())
+                    && mentions(&text, &self.name)
                 {
-                    self.done = Some(Err(ParamFailure::Refused(text)));
+                    if self.refused.is_some() {
+                        self.done = Some(Err(ParamFailure::Refused(text)));
+                    } else if self.write.is_some() && text.to_ascii_lowercase().contains("denied") {
+                        // ArduPilot's refusal: its unchanged echo follows (or came first).
+                        self.refused = Some((text, now));
+                        self.retry.wait_until(now + REASON_GRACE);
+                    }
                 }
             }
             _ => {}
@@ -315,6 +356,57 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    fn text(s: &str) -> Inbound {
+        Inbound {
+            sys: SystemId(1),
+            comp: ComponentId(1),
+            msg: MavMessage::STATUSTEXT(apm::STATUSTEXT_DATA {
+                severity: apm::MavSeverity::MAV_SEVERITY_WARNING,
+                text: s.into(),
+                id: 0,
+                chunk_seq: 0,
+            }),
+        }
+    }
+
+    /// ArduPilot has no PARAM_ERROR: "Param write denied (NAME)" and the unchanged value.
+    #[test]
+    fn ardupilots_denial_text_is_a_refusal() {
+        let t0 = Instant::now();
+        let i16t = MavParamType::MAV_PARAM_TYPE_INT16;
+        let mut m = ParamMachine::write(V, "MIS_TOTAL", 3.0, i16t, Duration::from_millis(20));
+        m.start(t0);
+        // Another parameter's denial is not this one's.
+        m.on_message(t0, &text("Param write denied (MIS_TOTAL_X)"));
+        m.on_message(t0, &text("Param write denied (MIS_TOTAL)"));
+        m.on_message(t0, &value("MIS_TOTAL", 0.0, u16::MAX, 1566, i16t));
+        assert!(m.result().is_none(), "the grace for a fuller reason");
+        m.on_time(m.deadline());
+        match m.result() {
+            Some(Err(ParamFailure::Refused(r))) => assert_eq!(r, "Param write denied (MIS_TOTAL)"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// ArduPilot stores what the type holds: the same other value echoed to two sends is the
+    /// answer (the caller sees the vehicle kept another value), not a silence of 12 tries.
+    #[test]
+    fn the_same_other_echo_to_a_retry_ends_the_write_with_it() {
+        let t0 = Instant::now();
+        let i8t = MavParamType::MAV_PARAM_TYPE_INT8;
+        let mut m = ParamMachine::write(V, "Q_TILT_ENABLE", 1.0, i8t, Duration::from_millis(20));
+        m.start(t0);
+        m.on_message(t0, &value("Q_TILT_ENABLE", 0.0, u16::MAX, 1566, i8t));
+        assert!(m.result().is_none(), "maybe an old echo");
+        let d = m.deadline();
+        assert_eq!(m.on_time(d).len(), 1);
+        // A stream value (real index) does not count as an echo.
+        m.on_message(d, &value("Q_TILT_ENABLE", 0.0, 400, 1566, i8t));
+        assert!(m.result().is_none());
+        m.on_message(d, &value("Q_TILT_ENABLE", 0.0, u16::MAX, 1566, i8t));
+        assert_eq!(m.result().expect("done").expect("answered").value, 0.0);
     }
 
     #[test]

@@ -25,12 +25,14 @@ use super::pace::Pacer;
 use crate::trust::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 8] = [
+const WANTED: [u32; 10] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
     77,  // COMMAND_ACK
     109, // RADIO_STATUS (the pacing of what the client sends)
+    110, // FILE_TRANSFER_PROTOCOL (the parameter table as a file)
     111, // TIMESYNC
+    148, // AUTOPILOT_VERSION (whether the vehicle offers FTP)
     244, // MESSAGE_INTERVAL
     253, // STATUSTEXT
     345, // PARAM_ERROR

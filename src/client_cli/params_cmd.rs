@@ -22,6 +22,10 @@ use super::{
 pub struct ParamsArgs {
     #[command(subcommand)]
     command: ParamsCommand,
+    /// Read the table with the parameter protocol even when the vehicle offers it as a file
+    /// over MAVLink FTP.
+    #[arg(long, global = true)]
+    no_ftp: bool,
     #[command(flatten)]
     link: LinkArgs,
 }
@@ -97,11 +101,12 @@ pub fn params(args: ParamsArgs) -> ExitCode {
         _ => None,
     };
     let command = args.command;
+    let ftp = !args.no_ftp;
     with_client(&args.link, |c| async move {
         match command {
             ParamsCommand::Pull { output, format } => {
                 let t0 = std::time::Instant::now();
-                let set = pull(&c).await?;
+                let set = pull(&c, ftp).await?;
                 let took = t0.elapsed();
                 let vehicle = c.target().unwrap_or((SystemId(1), ComponentId(1)));
                 match output {
@@ -120,7 +125,7 @@ pub fn params(args: ParamsArgs) -> ExitCode {
                 Ok(())
             }
             ParamsCommand::Save { file: path, format } => {
-                let set = pull(&c).await?;
+                let set = pull(&c, ftp).await?;
                 file::save(
                     &path,
                     &set,
@@ -146,7 +151,7 @@ pub fn params(args: ParamsArgs) -> ExitCode {
             }
             ParamsCommand::Diff { file: path } => {
                 let wanted = wanted.ok_or_else(|| usage("no file loaded"))?;
-                let current = pull(&c).await?;
+                let current = pull(&c, ftp).await?;
                 check_names(&current, &wanted)?;
                 let changes = params::diff(&current, &wanted.params);
                 if !changes.is_empty() {
@@ -173,11 +178,11 @@ pub fn params(args: ParamsArgs) -> ExitCode {
             }
             ParamsCommand::Push { dry_run, .. } => {
                 let wanted = wanted.ok_or_else(|| usage("no file loaded"))?;
-                push(&c, &wanted, dry_run, "push").await
+                push(&c, &wanted, dry_run, "push", ftp).await
             }
             ParamsCommand::Set { .. } => {
                 let wanted = wanted.ok_or_else(|| usage("no values given"))?;
-                push(&c, &wanted, false, "set").await
+                push(&c, &wanted, false, "set", ftp).await
             }
         }
     })
@@ -269,28 +274,30 @@ fn show_progress(what: &'static str) -> Progress {
     (Some(tx), Some(task))
 }
 
-async fn pull(c: &ClientHandle) -> Result<ParamSet, Failure> {
+async fn pull(c: &ClientHandle, ftp: bool) -> Result<ParamSet, Failure> {
     let (tx, task) = show_progress("parameters");
-    let r = c.params_pull(tx).await;
+    let r = c.params_pull_via(tx, ftp).await;
     if let Some(t) = task {
         let _ = t.await;
     }
     Ok(r?)
 }
 
-/// Whole-number values for the vehicle's integer parameters: a fraction would be rounded by the
-/// vehicle without a word, so it is refused here, before anything is sent.
+/// Whole numbers within their type's range for the vehicle's integer parameters: anything
+/// else would be rounded or clamped by the vehicle without a word, so it is refused here,
+/// before anything is sent.
 fn check_integers(current: &ParamSet, wanted: &ParamFile) -> Result<(), Failure> {
     let rounded: Vec<String> = wanted
         .params
         .iter()
         .filter_map(|(name, p)| {
             let now = current.get(name)?;
-            (params::is_integer(now.ty) && p.value.fract() != 0.0).then(|| {
+            let stored = params::stored_value(now.ty, p.value);
+            (params::is_integer(now.ty) && stored != p.value).then(|| {
                 format!(
                     "{name} is an integer parameter: {} would be stored as {}",
                     file::format_value(p.value),
-                    file::format_value(p.value.round())
+                    file::format_value(stored)
                 )
             })
         })
@@ -320,12 +327,85 @@ async fn push(
     wanted: &ParamFile,
     dry_run: bool,
     what: &str,
+    ftp: bool,
 ) -> Result<(), Failure> {
-    let current = pull(c).await?;
-    check_names(&current, wanted)?;
-    check_integers(&current, wanted)?;
-    let changes = params::diff(&current, &wanted.params);
-    let order = params::order_writes(&current, &changes, &params::TwinRules);
+    let mut current = pull(c, ftp).await?;
+    // Parameters the vehicle has only once an enable parameter of the file is set (ArduPilot's
+    // `Q_TILT_ENABLE 1` adds the `Q_TILT_*`): those enables are written first, then the table
+    // is read again; if the rest then fails, they are restored too.
+    let mut enables_before: Option<ParamSet> = None;
+    if !dry_run && !params::unknown_names(&current, &wanted.params).is_empty() {
+        let enables = changed_enables(&current, wanted);
+        if !enables.is_empty() {
+            let report = c
+                .push_onto(&current, &enables, &params::TwinRules, None)
+                .await?;
+            if !matches!(report.result, PushResult::Applied) {
+                return report_push(&report, what);
+            }
+            let before: ParamSet = enables
+                .keys()
+                .filter_map(|n| current.get(n).map(|p| (n.clone(), *p)))
+                .collect();
+            for (name, old) in &before {
+                println!(
+                    "{name} {} -> {} (written first: it adds parameters)",
+                    file::format_value(old.value),
+                    file::format_value(params::stored_value(old.ty, enables[name].value))
+                );
+            }
+            enables_before = Some(before);
+            current = pull(c, ftp).await?;
+        }
+    }
+    let result = push_checked(c, &current, wanted, dry_run, what).await;
+    if let (Err(_), Some(before)) = (&result, &enables_before) {
+        // Put the enables back as they were (the table shrinks again).
+        let restored = c
+            .push_onto(&current, before, &params::TwinRules, None)
+            .await;
+        if !restored.is_ok_and(|r| matches!(r.result, PushResult::Applied)) {
+            let names: Vec<&str> = before.keys().map(String::as_str).collect();
+            return Err(Failure {
+                code: EXIT_ROLLBACK,
+                message: format!(
+                    "{what} failed and {} could not be restored: {}",
+                    names.join(", "),
+                    result.err().map_or_else(String::new, |f| f.message)
+                ),
+            });
+        }
+    }
+    result
+}
+
+/// The `*_ENABLE` parameters `wanted` changes.
+fn changed_enables(current: &ParamSet, wanted: &ParamFile) -> ParamSet {
+    wanted
+        .params
+        .iter()
+        .filter(|(n, p)| {
+            n.ends_with("_ENABLE")
+                && current.get(*n).is_some_and(|c| {
+                    !params::same_value(c.value, params::stored_value(c.ty, p.value))
+                })
+        })
+        .map(|(n, p)| (n.clone(), *p))
+        .collect()
+}
+
+/// [`push`] once every name of the file is on the vehicle.
+async fn push_checked(
+    c: &ClientHandle,
+    current: &ParamSet,
+    wanted: &ParamFile,
+    dry_run: bool,
+    what: &str,
+) -> Result<(), Failure> {
+    check_names(current, wanted)?;
+    check_integers(current, wanted)?;
+    let changes = params::diff(current, &wanted.params);
+    let order = params::order_writes(current, &changes, &params::TwinRules);
     if dry_run {
         print_changes(&order);
         // What the twin's rules predict for this order; the vehicle has the last word.
@@ -358,7 +438,7 @@ async fn push(
     }
     let (tx, task) = show_progress("writing");
     let report = c
-        .push_onto(&current, &wanted.params, &params::TwinRules, tx)
+        .push_onto(current, &wanted.params, &params::TwinRules, tx)
         .await;
     if let Some(t) = task {
         let _ = t.await;

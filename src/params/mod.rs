@@ -24,11 +24,32 @@ pub struct Param {
 pub type ParamSet = BTreeMap<String, Param>;
 
 /// The value a vehicle stores for a write of `value` to a parameter of type `ty`: integers are
-/// rounded to nearest (the C cast ArduPilot and the twin apply), floats are kept bit for bit.
+/// rounded to nearest and held to the type's range (ArduPilot clamps, and truncates after
+/// adding 0.01, which agrees for every whole number), floats are kept as float32.
 /// A write is confirmed only by an echo equal to this.
 #[must_use]
 pub fn stored_value(ty: MavParamType, value: f32) -> f32 {
-    if is_integer(ty) { value.round() } else { value }
+    match integer_range(ty) {
+        Some((lo, hi)) => value.round().clamp(lo, hi),
+        None => value,
+    }
+}
+
+/// The range of an integer parameter type (as float32s), `None` for floats.
+#[must_use]
+pub fn integer_range(ty: MavParamType) -> Option<(f32, f32)> {
+    use MavParamType as T;
+    Some(match ty {
+        T::MAV_PARAM_TYPE_UINT8 => (0.0, f32::from(u8::MAX)),
+        T::MAV_PARAM_TYPE_INT8 => (f32::from(i8::MIN), f32::from(i8::MAX)),
+        T::MAV_PARAM_TYPE_UINT16 => (0.0, f32::from(u16::MAX)),
+        T::MAV_PARAM_TYPE_INT16 => (f32::from(i16::MIN), f32::from(i16::MAX)),
+        T::MAV_PARAM_TYPE_UINT32 => (0.0, u32::MAX as f32),
+        T::MAV_PARAM_TYPE_INT32 => (i32::MIN as f32, i32::MAX as f32),
+        T::MAV_PARAM_TYPE_UINT64 => (0.0, u64::MAX as f32),
+        T::MAV_PARAM_TYPE_INT64 => (i64::MIN as f32, i64::MAX as f32),
+        _ => return None,
+    })
 }
 
 /// Whether a parameter type holds integers.
@@ -40,13 +61,13 @@ pub fn is_integer(ty: MavParamType) -> bool {
     )
 }
 
-/// Two wire values are the same parameter value: bit-exact for floats (so 0.1 written as the
-/// float32 nearest 0.1 matches only that float32), numeric for integers.
+/// Two wire values are the same parameter value: equal as float32s, or apart by no more than
+/// float32's own rounding (a relative `f32::EPSILON`), which is how ArduPilot's `is_equal`
+/// and QGroundControl compare a value read back. A value written is compared as the float32
+/// the vehicle holds (0.26 is 0.25999999), never as the decimal or a float64.
 #[must_use]
 pub fn same_value(a: f32, b: f32) -> bool {
-    // `==` alone would also do for every value a vehicle can echo (NaN is refused before
-    // sending); the bit test documents that floats are compared exactly, never with a tolerance.
-    a.to_bits() == b.to_bits() || a == b
+    a.to_bits() == b.to_bits() || a == b || (a - b).abs() <= f32::EPSILON * a.abs().max(b.abs())
 }
 
 /// One difference between the vehicle and a wanted set.
@@ -132,7 +153,29 @@ mod tests {
     }
 
     #[test]
+    fn float32_rounding_is_no_difference_and_a_real_change_is() {
+        let v: f64 = 0.26;
+        // The float32 nearest 0.26 against the float32 of that float64 printed and re-read.
+        assert!(same_value(
+            v as f32,
+            (v as f32).to_string().parse().unwrap()
+        ));
+        assert!(same_value(0.26, f32::from_bits(0.26f32.to_bits() + 1)));
+        assert!(!same_value(0.26, 0.2601));
+        assert!(!same_value(0.25, 0.26));
+        assert!(!same_value(0.0, 1e-30));
+    }
+
+    #[test]
     fn integer_writes_round_like_the_vehicle() {
+        assert_eq!(
+            stored_value(MavParamType::MAV_PARAM_TYPE_INT8, 300.0),
+            127.0
+        );
+        assert_eq!(
+            stored_value(MavParamType::MAV_PARAM_TYPE_INT16, -4e4),
+            -32768.0
+        );
         assert_eq!(stored_value(MavParamType::MAV_PARAM_TYPE_INT8, 0.6), 1.0);
         let v = 0.1f32;
         assert_eq!(

@@ -7,8 +7,8 @@
 //! stream still comes, once it has stayed missing for a reorder allowance (a quarter of a round
 //! trip: a link with jitter delivers a burst out of order, and each false hole would cost its
 //! copies); the indices after the last one heard are asked for once the stream has been quiet
-//! for as long. At most [`PULL_WINDOW`] indices are outstanding; each answer lets the next
-//! request go.
+//! for as long. At most [`PULL_WINDOW`] indices are outstanding ([`CLEAN_WINDOW`] while the
+//! stream has lost nothing); each answer lets the next request go.
 //!
 //! Once the link has shown loss (holes in the stream, or requests unanswered), each request
 //! goes out in several copies: one exchange fails with probability `f = 1 - (1 - p)²` at a loss
@@ -49,15 +49,45 @@ pub const HOLES_LEFT: f64 = 0.2;
 const HOLE_RTO_FACTOR: f64 = 1.25;
 /// The list request's first answer also waits for the vehicle to start its stream.
 const LIST_RTO_FACTOR: f64 = 1.5;
+/// The least wait for the stream's first value before the list request goes again: every
+/// list request restarts the stream (ArduPilot sends its banner first), so on a fast link a
+/// vehicle a little slow to start would be asked over and over.
+const LIST_MIN_WAIT: Duration = Duration::from_millis(100);
 /// The stream counts as over after this share of a round trip without a value, and a hole is
 /// asked for once it has been missing for as long (the reorder allowance)…
 const QUIET_SHARE: f64 = 0.25;
-/// …and at least this long: a vehicle paces its stream over a few ticks.
-const MIN_QUIET: Duration = Duration::from_millis(20);
+/// …and at least this long: a vehicle paces its stream over a few ticks, and its main loop
+/// (or the machine running it) pauses now and then.
+const MIN_QUIET: Duration = Duration::from_millis(50);
 /// Values added to those heard when the stream's holes give the loss.
 const LOSS_PRIOR: f64 = 4.0;
 /// Recent request round trips kept for the timeout.
 const RECENT: usize = 16;
+/// Indices asked for at once, one copy each, while the download has seen no loss. ArduPilot
+/// queues 20 PARAM_REQUEST_READs, shared by all its links, and drops what finds the queue
+/// full; a round of requests arrives at once on a fast link, so the window stays under that
+/// queue (a larger one, or copies, would be dropped, taken for loss and asked again in more
+/// copies: a flood that starves the stream).
+pub const CLEAN_WINDOW: usize = 16;
+/// A link whose round trip (as measured before the download) is under this is fast: the
+/// vehicle's own pace is what counts, not the link's.
+const FAST_LINK: Duration = Duration::from_millis(20);
+/// On a fast link, a stream that has lost nothing counts as over only after this long quiet.
+const FAST_PAUSE: Duration = Duration::from_millis(300);
+/// While the stream has shown no loss, it counts as over only after this many times its
+/// longest gap so far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and
+/// then pauses for longer.
+const GAP_FACTOR: u32 = 4;
+/// How long a vehicle takes to answer one queued read (ArduPilot's IO thread: one a
+/// millisecond).
+const READ_SERVICE: Duration = Duration::from_millis(1);
+/// On a fast link, a stream that stops with more than this many values missing is asked for
+/// again (PARAM_REQUEST_LIST) rather than read index by index…
+const RELIST_MISSING: usize = 2 * CLEAN_WINDOW;
+/// …at most this often.
+const RELIST_EVERY: Duration = Duration::from_secs(1);
+/// Restarts for a table that changed size during the download (an `*_ENABLE` written).
+const MAX_RESTARTS: u8 = 3;
 
 /// Why a download did not complete.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -111,6 +141,17 @@ pub struct PullMachine {
     check: Instant,
     stalls: u32,
     list_sends: u8,
+    /// Whether the link is fast ([`FAST_LINK`]), from the round trip known at the start: the
+    /// answers' own round trips grow with a busy vehicle's queue, not the link.
+    fast: bool,
+    /// The last value of the list stream and the longest gap between two so far.
+    last_streamed: Option<Instant>,
+    gap_max: Duration,
+    restarts: u8,
+    /// When the stream may be asked for again ([`RELIST_MISSING`]).
+    relist_due: Instant,
+    /// Sizes the table had before it changed: values announcing them are from before.
+    stale_counts: Vec<u16>,
     /// PARAM_REQUEST_READs sent, copies included (for the benchmark's report).
     pub rerequests: usize,
     done: Option<Result<ParamSet, PullStalled>>,
@@ -145,9 +186,30 @@ impl PullMachine {
             check: now,
             stalls: 0,
             list_sends: 0,
+            fast: rtt.srtt().is_some_and(|s| s < FAST_LINK),
+            last_streamed: None,
+            gap_max: Duration::ZERO,
+            restarts: 0,
+            relist_due: now,
+            stale_counts: Vec::new(),
             rerequests: 0,
             done: None,
         }
+    }
+
+    /// What the download did, for the debug log.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        format!(
+            "{} reads, {} holes seen, {} timed out, {} lists, {} restarts, srtt {:?}, longest gap {:?}",
+            self.rerequests,
+            self.holes_seen,
+            self.timed_out,
+            self.list_sends,
+            self.restarts,
+            self.rtt.srtt(),
+            self.gap_max
+        )
     }
 
     /// (received, total) for a progress bar; total is 0 until the first value.
@@ -177,7 +239,39 @@ impl PullMachine {
     }
 
     fn quiet(&self) -> Duration {
-        self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET)
+        let quiet = self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET);
+        if self.fast && self.holes_seen == 0 {
+            // Nothing lost on a fast link: a pause is the vehicle's pacing (ArduPilot's
+            // stream stops for about 100 ms every couple of hundred values), not its end.
+            quiet.max(self.gap_max * GAP_FACTOR).max(FAST_PAUSE)
+        } else {
+            quiet
+        }
+    }
+
+    /// Indices that may be outstanding at once.
+    fn window(&self) -> usize {
+        if self.fast { CLEAN_WINDOW } else { PULL_WINDOW }
+    }
+
+    /// The table changed size (an enable parameter written while the download ran): its
+    /// indices moved, so the download starts again.
+    fn restart(&mut self, now: Instant) -> Vec<MavMessage> {
+        self.restarts += 1;
+        if let Some(old) = self.count.take() {
+            self.stale_counts.push(old);
+        }
+        self.values.clear();
+        self.by_name.clear();
+        self.outstanding.clear();
+        self.asked.clear();
+        self.shown.clear();
+        self.highest = None;
+        self.stream_over = false;
+        self.last_streamed = None;
+        self.list_sends = 0;
+        self.last_rx = now;
+        self.list(now)
     }
 
     /// One exchange's chance of failing, from what the download has seen so far: the stream's
@@ -204,6 +298,11 @@ impl PullMachine {
 
     /// Copies for each request of a round of `holes`.
     fn copies(&self, holes: usize) -> u32 {
+        // On a fast link an unanswered request costs little, and copies would only crowd the
+        // vehicle's read queue (a request it drops is no loss of the link's).
+        if self.fast {
+            return 1;
+        }
         let f = self.exchange_loss();
         if f <= 0.0 {
             return 1;
@@ -223,7 +322,7 @@ impl PullMachine {
             .srtt()
             .mul_f64(LIST_RTO_FACTOR)
             .min(self.rto)
-            .max(Rtt::MIN_RTO);
+            .max(LIST_MIN_WAIT);
         self.list_due = now + retry_wait(first_wait, self.list_sends);
         let copies = LIST_COPIES + usize::from(self.list_sends - 1).min(2);
         let m = MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
@@ -235,7 +334,16 @@ impl PullMachine {
 
     /// PARAM_REQUEST_READ of each index in `indices`, in `copies` copies.
     fn read(&mut self, indices: &[u16], copies: u32, now: Instant) -> Vec<MavMessage> {
-        let rto = self.hole_rto();
+        // The vehicle answers queued reads one at a time: on a fast link the last of a round
+        // waits for the others more than for the link (ArduPilot's IO thread takes one a
+        // millisecond).
+        let queued = if self.fast {
+            self.outstanding.values().map(|a| a.copies).sum::<u32>()
+                + copies * u32::try_from(indices.len()).unwrap_or(u32::MAX)
+        } else {
+            0
+        };
+        let rto = self.hole_rto() + READ_SERVICE * queued;
         let mut out = Vec::new();
         for &index in indices {
             self.asked.insert(index);
@@ -272,7 +380,15 @@ impl PullMachine {
         let Some(count) = self.count else {
             return Vec::new();
         };
-        let room = PULL_WINDOW.saturating_sub(self.outstanding.len());
+        let missing = usize::from(count) - self.values.len();
+        if self.fast && self.stream_over && missing > RELIST_MISSING {
+            return Vec::new();
+        }
+        let copies = self.copies(missing);
+        let room = self.window().saturating_sub(self.outstanding.len());
+        if room == 0 {
+            return Vec::new();
+        }
         let holes: Vec<u16> = if self.stream_over {
             (0..count)
                 .filter(|i| !self.values.contains_key(i) && !self.outstanding.contains_key(i))
@@ -290,8 +406,6 @@ impl PullMachine {
         if holes.is_empty() {
             return Vec::new();
         }
-        let missing = usize::from(count) - self.values.len();
-        let copies = self.copies(missing);
         self.read(&holes, copies, now)
     }
 
@@ -313,8 +427,14 @@ impl PullMachine {
     /// A value from the list stream (not an answer to a request): the indices it passed over
     /// are holes; one that fills a hole shown before was late, not lost.
     fn streamed(&mut self, index: u16, now: Instant) {
+        if let Some(last) = self.last_streamed {
+            self.gap_max = self.gap_max.max(now.duration_since(last));
+        }
+        self.last_streamed = Some(now);
         let from = self.highest.map_or(0, |h| h + 1);
         if index >= from {
+            // The stream goes on after a pause that looked like its end.
+            self.stream_over = false;
             self.holes_seen += u32::from(index - from);
             for i in from..index {
                 self.shown.insert(i, now);
@@ -348,7 +468,13 @@ impl Machine for PullMachine {
             value: v.param_value,
             ty: v.param_type,
         };
+        if self.stale_counts.contains(&v.param_count) {
+            return Vec::new();
+        }
         let count = *self.count.get_or_insert(v.param_count);
+        if v.param_count != count && self.restarts < MAX_RESTARTS {
+            return self.restart(now);
+        }
         let index = if v.param_index == u16::MAX {
             match self.by_name.get(&name) {
                 Some(&i) => i,
@@ -423,6 +549,20 @@ impl Machine for PullMachine {
         if !self.stream_over && silent >= self.quiet() {
             self.stream_over = true;
         }
+        let missing = self.count.map_or(0, usize::from) - self.values.len();
+        if self.fast && self.stream_over && missing > RELIST_MISSING {
+            // On a fast link the stream brings the rest sooner than reads one at a time (and
+            // ArduPilot sends no stream while it answers reads): ask for it again.
+            if now >= self.relist_due {
+                self.relist_due = now + RELIST_EVERY;
+                self.stream_over = false;
+                // The pause before the new stream is no gap of it.
+                self.last_streamed = None;
+                self.list_sends = 0;
+                return self.list(now);
+            }
+            return Vec::new();
+        }
         // Requests whose answer is overdue are asked again.
         let overdue: Vec<u16> = self
             .outstanding
@@ -434,7 +574,6 @@ impl Machine for PullMachine {
             self.timed_out += 1;
             self.copies_resolved += self.outstanding.get(i).map_or(1, |a| a.copies);
         }
-        let missing = self.count.map_or(0, usize::from) - self.values.len();
         let copies = self.copies(missing);
         let mut out = self.read(&overdue, copies, now);
         out.extend(self.refill(now));

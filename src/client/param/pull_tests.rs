@@ -385,3 +385,85 @@ fn at_30_percent_loss_and_200_ms_the_pull_takes_about_two_round_trips_more_than_
         "{reads} reads in {runs} pulls"
     );
 }
+
+/// ArduPilot's stream on a fast link: a few values every 2.5 ms tick, with now and then a pause
+/// of about 100 ms. A pause is taken for the end of the stream only after [`FAST_PAUSE`] (and
+/// four times the longest gap so far), and the indices asked for then stay within ArduPilot's
+/// read queue, one copy each.
+#[test]
+fn on_a_fast_link_a_pause_asks_for_few_indices_and_the_stream_finishes_the_table() {
+    let t0 = Instant::now();
+    let ms = |x: f64| Duration::from_secs_f64(x / 1e3);
+    let count = 1566;
+    let mut m = PullMachine::new(V, rtt(1));
+    m.start(t0);
+    let mut now = t0 + ms(2.0);
+    let mut asked = 0;
+    for i in 0..600u16 {
+        // Five values a 2.5 ms tick.
+        if i % 5 == 0 {
+            now += ms(2.5);
+        }
+        asked += read_indices(&m.on_message(now, &indexed(i, count))).len();
+    }
+    assert_eq!(asked, 0, "no hole, no read");
+    // The ticks' gap is the longest so far: a pause of twice that is no end of the stream.
+    let quiet = m.deadline().duration_since(now);
+    assert!(quiet >= ms(7.5), "{quiet:?}");
+    assert!(m.on_time(now + ms(5.0)).is_empty());
+    // ArduPilot's pauses of about 100 ms are no end either.
+    assert!(m.on_time(now + ms(120.0)).is_empty());
+    // A long pause with most of the table missing: the stream is asked for again.
+    let later = now + ms(400.0);
+    let again = m.on_time(later);
+    assert!(
+        !again.is_empty()
+            && again
+                .iter()
+                .all(|m| matches!(m, MavMessage::PARAM_REQUEST_LIST(_))),
+        "{again:?}"
+    );
+    // It restarts at 0; past what was already in, the stream brings the rest.
+    let mut now = later + ms(3.0);
+    for i in 0..count - 20 {
+        if i % 5 == 0 {
+            now += ms(2.5);
+        }
+        assert!(read_indices(&m.on_message(now, &indexed(i, count))).is_empty());
+    }
+    // The last 20 do not come: they are read, no more than the vehicle's queue takes.
+    let asks = read_indices(&m.on_time(now + ms(400.0)));
+    assert_eq!(asks.len(), CLEAN_WINDOW, "{asks:?}");
+    let now = now + ms(401.0);
+    for i in count - 20..count {
+        let out = read_indices(&m.on_message(now, &indexed(i, count)));
+        assert!(out.len() <= CLEAN_WINDOW);
+    }
+    let set = m.result().expect("done").expect("complete");
+    assert_eq!(set.len(), usize::from(count));
+}
+
+/// A value announcing another table size (an enable parameter written meanwhile) starts the
+/// download again; values announcing the old size are ignored from then on.
+#[test]
+fn a_table_that_changes_size_is_downloaded_again() {
+    let t0 = Instant::now();
+    let mut m = PullMachine::new(V, rtt(10));
+    m.start(t0);
+    for i in 0..5 {
+        m.on_message(t0, &indexed(i, 10));
+    }
+    let again = m.on_message(t0, &indexed(5, 12));
+    assert!(
+        again
+            .iter()
+            .all(|m| matches!(m, MavMessage::PARAM_REQUEST_LIST(_)))
+            && !again.is_empty(),
+        "{again:?}"
+    );
+    assert!(m.on_message(t0, &indexed(6, 10)).is_empty());
+    for i in 0..12 {
+        m.on_message(t0, &indexed(i, 12));
+    }
+    assert_eq!(m.result().expect("done").expect("complete").len(), 12);
+}

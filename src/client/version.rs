@@ -1,0 +1,148 @@
+//! What the vehicle offers: MAV_CMD_REQUEST_MESSAGE(AUTOPILOT_VERSION), sent again until the
+//! AUTOPILOT_VERSION arrives, and its `capabilities` bits. A vehicle that refuses or does not
+//! answer offers nothing beyond the basic protocols (`None`).
+
+use std::time::{Duration, Instant};
+
+use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavProtocolCapability, MavResult};
+use vtol_link::{ComponentId, SystemId};
+
+use super::machine::{Inbound, Machine, Retry, Step};
+
+/// Sends before the capabilities are called unknown: what they decide (FTP or the parameter
+/// protocol) only saves time, so the question is not pressed.
+pub const VERSION_TRIES: u8 = 3;
+
+/// The least wait for the answer before asking again: a busy vehicle or machine answers late,
+/// and asked alongside the round-trip probe it costs no time of its own.
+pub const VERSION_MIN_WAIT: Duration = Duration::from_millis(300);
+
+/// AUTOPILOT_VERSION's id, for MAV_CMD_REQUEST_MESSAGE.
+const AUTOPILOT_VERSION_ID: f32 = 148.0;
+
+/// The capabilities of `target`: `Some(bits)` from its AUTOPILOT_VERSION, `None` without one.
+#[derive(Debug)]
+pub struct VersionMachine {
+    target: (SystemId, ComponentId),
+    retry: Retry,
+    done: Option<Option<MavProtocolCapability>>,
+}
+
+impl VersionMachine {
+    /// Asks `target`, again every `rto` (then backing off).
+    #[must_use]
+    pub fn new(target: (SystemId, ComponentId), rto: Duration) -> Self {
+        Self {
+            target,
+            retry: Retry::new(rto.max(VERSION_MIN_WAIT), VERSION_TRIES, Duration::ZERO),
+            done: None,
+        }
+    }
+
+    fn request(&mut self, now: Instant) -> MavMessage {
+        let send = self.retry.send(now);
+        MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
+            param1: AUTOPILOT_VERSION_ID,
+            param2: 0.0,
+            param3: 0.0,
+            param4: 0.0,
+            param5: 0.0,
+            param6: 0.0,
+            param7: 0.0,
+            command: MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            target_system: self.target.0.0,
+            target_component: self.target.1.0,
+            confirmation: send - 1,
+        })
+    }
+}
+
+impl Machine for VersionMachine {
+    type Output = Option<MavProtocolCapability>;
+
+    fn start(&mut self, now: Instant) -> Vec<MavMessage> {
+        vec![self.request(now)]
+    }
+
+    fn on_message(&mut self, _now: Instant, m: &Inbound) -> Vec<MavMessage> {
+        if (m.sys, m.comp) != self.target || self.done.is_some() {
+            return Vec::new();
+        }
+        match &m.msg {
+            MavMessage::AUTOPILOT_VERSION(v) => self.done = Some(Some(v.capabilities)),
+            MavMessage::COMMAND_ACK(a)
+                if a.command == MavCmd::MAV_CMD_REQUEST_MESSAGE
+                    && !matches!(
+                        a.result,
+                        MavResult::MAV_RESULT_ACCEPTED | MavResult::MAV_RESULT_IN_PROGRESS
+                    ) =>
+            {
+                self.done = Some(None);
+            }
+            _ => {}
+        }
+        Vec::new()
+    }
+
+    fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
+        if self.done.is_some() {
+            return Vec::new();
+        }
+        match self.retry.step(now) {
+            Step::Wait => Vec::new(),
+            Step::Send => vec![self.request(now)],
+            Step::GiveUp => {
+                self.done = Some(None);
+                Vec::new()
+            }
+        }
+    }
+
+    fn deadline(&self) -> Instant {
+        self.retry.deadline()
+    }
+
+    fn result(&mut self) -> Option<Self::Output> {
+        self.done.take()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
+
+    fn version(caps: MavProtocolCapability) -> Inbound {
+        Inbound {
+            sys: V.0,
+            comp: V.1,
+            msg: MavMessage::AUTOPILOT_VERSION(apm::AUTOPILOT_VERSION_DATA {
+                capabilities: caps,
+                ..Default::default()
+            }),
+        }
+    }
+
+    #[test]
+    fn the_version_gives_the_capabilities_and_silence_gives_none() {
+        let t0 = Instant::now();
+        let mut m = VersionMachine::new(V, Duration::from_millis(20));
+        assert_eq!(m.start(t0).len(), 1);
+        assert_eq!(m.on_time(m.deadline()).len(), 1, "asked again");
+        m.on_message(
+            t0,
+            &version(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_FTP),
+        );
+        let caps = m.result().expect("done").expect("answered");
+        assert!(caps.contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_FTP));
+
+        let mut m = VersionMachine::new(V, Duration::from_millis(20));
+        let mut sends = m.start(t0).len();
+        while m.done.is_none() {
+            sends += m.on_time(m.deadline()).len();
+        }
+        assert!(sends <= usize::from(VERSION_TRIES), "{sends}");
+        assert_eq!(m.result(), Some(None));
+    }
+}
