@@ -488,3 +488,46 @@ fn arduplanes_stale_target_in_a_hover_mode_is_no_setpoint() {
     let frame = rec.render(&mut app, 21_000, (80, 24));
     assert!(frame.contains("the vehicle's live target"), "{frame}");
 }
+
+/// A vehicle whose HEARTBEAT carries a MAV_TYPE newer than the dialect (60) is shown, and the
+/// message inspector shows its HEARTBEAT with the number the dialect has no name for.
+#[test]
+fn a_mav_type_newer_than_the_dialect_is_shown_with_its_number() {
+    let mut rec = Recording::new();
+    for i in 0..5u64 {
+        let mut p = [0u8; 9];
+        p[..4].copy_from_slice(&18u32.to_le_bytes());
+        p[4] = 60;
+        p[5] = MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA as u8;
+        p[6] = 0x81;
+        p[7] = MavState::MAV_STATE_ACTIVE as u8;
+        p[8] = 3;
+        let frame = vtol_link::Frame::encode_payload_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            i as u8,
+            0,
+            &p,
+        )
+        .unwrap();
+        rec.feed_frame(i * 1000, &frame);
+    }
+    let mut app = app_with_params();
+    let frame = rec.render(&mut app, 4_000, (120, 40));
+    assert!(
+        frame.contains("sys 1"),
+        "the vehicle is not shown:\n{frame}"
+    );
+    app.view = View::Messages;
+    let state = rec.state.clone();
+    rec.render(&mut app, 4_000, (120, 40));
+    for k in "/heart".chars() {
+        app.on_key(key(KeyCode::Char(k)), &state, rec.at(4_000));
+    }
+    app.on_key(key(KeyCode::Enter), &state, rec.at(4_000));
+    let frame = rec.render(&mut app, 4_000, (120, 40));
+    assert!(
+        frame.contains("type = 60 (not in the dialect's MavType)"),
+        "no wire value:\n{frame}"
+    );
+}

@@ -33,7 +33,7 @@ pub fn decode(frame: &Frame) -> Option<(&'static str, Fields)> {
 
 /// The flattened name of an enum field at its place in the payload: the field whose value
 /// changes when another value the enum defines is written there. Learnt once per field.
-fn field_key(message_id: u32, field: vtol_link::frame::EnumField) -> Option<String> {
+pub(crate) fn field_key(message_id: u32, field: vtol_link::frame::EnumField) -> Option<String> {
     use mavlink::{MavlinkVersion, Message};
     use std::sync::{Mutex, OnceLock};
     type Keys = Mutex<HashMap<(u32, u8), Option<String>>>;

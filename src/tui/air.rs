@@ -72,7 +72,7 @@ pub struct Air {
 
 fn last(state: &VehicleState, v: &VehicleView, id: u32) -> Option<(MavMessage, Instant)> {
     let s = state.messages.get(&(v.system_id, v.component_id, id))?;
-    Some((s.last.decode().ok()?, s.last_at))
+    Some((s.last.decode_lenient().ok().map(|l| l.msg)?, s.last_at))
 }
 
 /// The air data of `v`; `arspd_fbw_min` is the vehicle's `ARSPD_FBW_MIN` if known,

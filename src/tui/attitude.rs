@@ -93,7 +93,7 @@ pub fn in_hover(state: &VehicleState, v: &VehicleView) -> bool {
     let ext = state
         .messages
         .get(&(v.system_id, v.component_id, EXTENDED_SYS_STATE))
-        .and_then(|s| s.last.decode().ok());
+        .and_then(|s| s.last.decode_lenient().ok().map(|l| l.msg));
     match ext {
         Some(MavMessage::EXTENDED_SYS_STATE(e))
             if e.vtol_state != MavVtolState::MAV_VTOL_STATE_UNDEFINED =>

@@ -105,7 +105,7 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
         state
             .messages
             .get(&(v.system_id, v.component_id, id))
-            .and_then(|s| s.last.decode().ok())
+            .and_then(|s| s.last.decode_lenient().ok().map(|l| l.msg))
     };
     let mut out = Vitals::default();
     if let Some(MavMessage::SYS_STATUS(s)) = last(1) {

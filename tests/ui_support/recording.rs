@@ -78,6 +78,13 @@ impl Recording {
         self.history.record(&frame, decoded.as_ref(), now);
     }
 
+    /// Applies a frame built by hand (a payload the typed encoder cannot express) at `ms`.
+    pub fn feed_frame(&mut self, ms: u64, frame: &Frame) {
+        let now = self.at(ms);
+        let decoded = self.state.apply(VEHICLE_LINK, Side::Vehicle, frame, now);
+        self.history.record(frame, decoded.as_ref(), now);
+    }
+
     /// Applies `msg` from vehicle 1 at `ms`.
     pub fn feed(&mut self, ms: u64, msg: &MavMessage) {
         self.feed_from(1, ms, msg);

@@ -19,7 +19,7 @@ fn battery(snap: &Snapshot<'_>, v: &VehicleView) -> String {
         .state
         .messages
         .get(&(v.system_id, v.component_id, SYS_STATUS))
-        .and_then(|m| m.last.decode().ok())
+        .and_then(|m| m.last.decode_lenient().ok().map(|l| l.msg))
     else {
         return "-".to_owned();
     };

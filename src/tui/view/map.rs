@@ -503,7 +503,7 @@ pub fn scene_parts(
         state
             .messages
             .get(&(v.system_id, v.component_id, id))
-            .and_then(|m| m.last.decode().ok())
+            .and_then(|m| m.last.decode_lenient().ok().map(|l| l.msg))
     };
     let vehicle = match last(33) {
         Some(MavMessage::GLOBAL_POSITION_INT(g)) if (g.lat, g.lon) != (0, 0) => {

@@ -95,8 +95,10 @@ pub(super) fn draw_messages(
     let mut lines = Vec::new();
     if let Some(k) = listed.get(m.selected) {
         let s = &snap.state.messages[k];
-        match s.last.decode() {
-            Ok(msg) => {
+        // Decoded as pymavlink does: a value the dialect does not define still shows the
+        // message, with that field's wire number said below it.
+        match s.last.decode_lenient() {
+            Ok(vtol_link::frame::Lenient { msg, replaced }) => {
                 let fs = fields::fields(&msg);
                 let numeric_fields: Vec<_> = fs.iter().filter(|f| f.value.is_some()).collect();
                 m.field = m.field.min(numeric_fields.len().saturating_sub(1));
@@ -126,6 +128,17 @@ pub(super) fn draw_messages(
                         lines.push(Line::styled(f.path.clone(), style));
                         lines.push(Line::styled(format!("  {}", f.text), style));
                     }
+                }
+                for r in &replaced {
+                    let name = crate::log::fields::field_key(s.last.message_id(), r.field)
+                        .unwrap_or_else(|| format!("byte {}", r.field.offset));
+                    lines.push(Line::styled(
+                        format!(
+                            "{name} = {} (not in the dialect's {})",
+                            r.value, r.field.enum_type
+                        ),
+                        Style::new().fg(Color::Yellow),
+                    ));
                 }
                 numeric = numeric_fields.into_iter().map(|f| f.path.clone()).collect();
                 let skip = sel_line.saturating_sub(visible.saturating_sub(1));
