@@ -9,6 +9,7 @@ pub mod daemon;
 pub mod fit;
 pub mod gcs;
 pub mod log;
+pub mod mission;
 pub mod params;
 pub mod reboot;
 pub mod router;
