@@ -14,6 +14,7 @@
 pub mod command;
 pub mod interval;
 pub mod machine;
+pub mod mission;
 pub mod pace;
 pub mod param;
 pub mod probe;
