@@ -16,7 +16,9 @@ use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::trust::signing::{DaemonSigning, default_state_file, system_clock};
 use vtol_link::{ComponentId, LinkUrl, SigningKey, SystemId};
 
+mod mission_cmd;
 mod params_cmd;
+pub use mission_cmd::{MissionArgs, mission};
 pub use params_cmd::{ParamsArgs, params};
 
 /// Done.

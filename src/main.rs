@@ -44,6 +44,8 @@ enum Command {
     Tui(TuiArgs),
     /// Parameters: pull, push, get, set, diff, save.
     Params(client_cli::ParamsArgs),
+    /// Missions, fences and rally points: upload, download, clear, start, set-current, show.
+    Mission(client_cli::MissionArgs),
     /// Arm the vehicle.
     Arm(client_cli::ArmArgs),
     /// Disarm the vehicle.
@@ -197,6 +199,7 @@ fn main() -> std::process::ExitCode {
     }
     let result = match cli.command {
         Some(Command::Params(a)) => return client_cli::params(a),
+        Some(Command::Mission(a)) => return client_cli::mission(a),
         Some(Command::Arm(a)) => return client_cli::arm(a, true),
         Some(Command::Disarm(a)) => return client_cli::arm(a, false),
         Some(Command::Mode(a)) => return client_cli::mode(a),

@@ -127,7 +127,6 @@ pub fn result_words(r: MavMissionResult) -> String {
         R::MAV_MISSION_INVALID_SEQUENCE => "item out of sequence",
         R::MAV_MISSION_DENIED => "not accepting mission commands now",
         R::MAV_MISSION_OPERATION_CANCELLED => "the transfer was cancelled",
-        _ => "refused",
     };
     format!("{r:?} ({what})")
 }

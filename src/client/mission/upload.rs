@@ -4,9 +4,12 @@
 //! then on the vehicle drives: every MISSION_REQUEST_INT or MISSION_REQUEST is answered with the
 //! item it names (again, when it asks again because an item was lost). The transfer ends with
 //! the vehicle's MISSION_ACK; a refusal waits briefly for the STATUSTEXT that explains it.
-//! Silence for [`UPLOAD_SILENCE`] after the first request ends it without an ACK, as does
-//! silence after the last item for [`LAST_ACK_WAIT`] (a lost ACK: the caller's verifying
-//! download tells whether the vehicle took the list).
+//! Silence for [`UPLOAD_SILENCE`] after the first request ends it without an ACK. Once the
+//! last item has been asked for, it is sent again on the round-trip timeout until the ACK
+//! comes (the last item or the ACK may be lost; the twin and MAVProxy answer a repeated last
+//! item with the ACK again), for [`LAST_ACK_WAIT`] at least. A refusal that answers such a
+//! repeat, or no ACK at all, ends the upload without an ACK: the caller's verifying download
+//! tells whether the vehicle took the list.
 
 use std::time::{Duration, Instant};
 
@@ -20,8 +23,7 @@ use crate::mission::Kind;
 
 /// Silence after which an upload under way is given up (ArduPilot cancels its side after 8 s).
 pub const UPLOAD_SILENCE: Duration = Duration::from_secs(8);
-/// How long the ACK is awaited after the last item was sent without a word: the vehicle asks
-/// again for a lost last item after about a second.
+/// The least time the last item is repeated for before the ACK is called lost.
 pub const LAST_ACK_WAIT: Duration = Duration::from_millis(2500);
 /// How long a refusal waits for the STATUSTEXT that explains it.
 const REASON_GRACE: Duration = Duration::from_millis(150);
@@ -55,6 +57,9 @@ pub struct UploadMachine {
     asked: Vec<bool>,
     last_heard: Option<Instant>,
     refused: Option<(MavMissionResult, Instant)>,
+    /// The repeats of the last item, once the vehicle has asked for it.
+    last: Option<Retry>,
+    rto: Duration,
     texts: Vec<String>,
     assembler: TextAssembler,
     rtt: Option<Duration>,
@@ -79,6 +84,8 @@ impl UploadMachine {
             asked: vec![false; n],
             last_heard: None,
             refused: None,
+            last: None,
+            rto,
             texts: Vec::new(),
             assembler: TextAssembler::default(),
             rtt: None,
@@ -125,9 +132,15 @@ impl UploadMachine {
         {
             self.rtt = Some(rtt);
         }
+        let msg = MavMessage::MISSION_ITEM_INT(item.clone());
         self.last_heard = Some(now);
         self.asked[usize::from(seq)] = true;
-        vec![MavMessage::MISSION_ITEM_INT(item.clone())]
+        if usize::from(seq) + 1 == self.items.len() {
+            let mut r = Retry::new(self.rto, MISSION_TRIES, LAST_ACK_WAIT);
+            r.send(now);
+            self.last = Some(r);
+        }
+        vec![msg]
     }
 }
 
@@ -153,11 +166,16 @@ impl Machine for UploadMachine {
                 if a.mavtype == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE {
                     return Vec::new();
                 }
+                let repeated = self.last.as_ref().is_some_and(|r| r.tries() > 1);
                 if a.mavtype == MavMissionResult::MAV_MISSION_ACCEPTED {
                     self.done = Some(UploadOutcome::Acked {
                         result: a.mavtype,
                         reason: None,
                     });
+                } else if repeated {
+                    // Perhaps the answer to a repeat after the vehicle finished: the download
+                    // that follows tells.
+                    self.no_ack();
                 } else if self.refused.is_none() {
                     self.refused = Some((a.mavtype, now));
                     if !self.texts.is_empty() {
@@ -198,6 +216,23 @@ impl Machine for UploadMachine {
             });
             return Vec::new();
         }
+        if let Some(r) = &mut self.last {
+            return match r.step(now) {
+                Step::Wait => Vec::new(),
+                Step::Send => {
+                    r.send(now);
+                    self.items
+                        .last()
+                        .map(|i| MavMessage::MISSION_ITEM_INT(i.clone()))
+                        .into_iter()
+                        .collect()
+                }
+                Step::GiveUp => {
+                    self.no_ack();
+                    Vec::new()
+                }
+            };
+        }
         if self.last_heard.is_some() {
             // The vehicle drives: its silence past the wait ends the transfer.
             self.no_ack();
@@ -217,9 +252,11 @@ impl Machine for UploadMachine {
         if let Some((_, at)) = self.refused {
             return at + REASON_GRACE;
         }
+        if let Some(r) = &self.last {
+            return r.deadline();
+        }
         match self.last_heard {
             None => self.retry.deadline(),
-            Some(t) if self.asked.iter().all(|a| *a) => t + LAST_ACK_WAIT,
             Some(t) => t + UPLOAD_SILENCE,
         }
     }
