@@ -20,7 +20,7 @@ use super::{EXIT_REFUSED, EXIT_USAGE, Failure, LinkArgs, usage, with_client};
 pub struct MissionArgs {
     #[command(subcommand)]
     command: MissionCommand,
-    /// Which list: mission (default), fence or rally.
+    /// Which list: mission, fence or rally.
     #[arg(long = "type", default_value = "mission", value_parser = parse_kind, global = true)]
     kind: Kind,
     #[command(flatten)]
@@ -189,10 +189,9 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
             return Err(Failure {
                 code: EXIT_REFUSED,
                 message: format!(
-                    "refused by the vehicle: {}{}; the {} it held before is unchanged",
+                    "refused by the vehicle: {}{}",
                     result_words(result),
                     reason.map(|r| format!(": {r}")).unwrap_or_default(),
-                    kind.name()
                 ),
             });
         }

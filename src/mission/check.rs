@@ -11,7 +11,7 @@ pub const NAV_VTOL_LAND: u16 = 85;
 /// `VTOL land too short, min 30m`).
 pub const VTOL_LAND_MIN_LEG_M: f64 = 30.0;
 /// Metres per degree of latitude (ArduPilot's LOCATION_SCALING_FACTOR × 1e7).
-const M_PER_DEG: f64 = 111_318.844_502_145_034;
+const M_PER_DEG: f64 = 111_318.844_502_145_03;
 
 /// Ground distance between two global positions in degrees (ArduPilot's flat-earth scaling).
 #[must_use]
@@ -60,14 +60,15 @@ pub fn problems(items: &[Located], kind: Kind) -> Vec<String> {
         let fine = |v: f64, limit: f64| v.is_finite() && v.abs() <= limit;
         let position =
             (i.has_position() && fine(i.x, 90.0) && fine(i.y, 180.0)).then_some((i.x, i.y));
-        if kind == Kind::Mission && i.command == NAV_VTOL_LAND {
-            if let (Some(from), Some(to)) = (last_position, position) {
-                let leg = distance_m(from, to);
-                if leg < VTOL_LAND_MIN_LEG_M {
-                    out.push(at(format!(
-                        "VTOL land too short, min 30m (the approach from the item before is {leg:.1} m)"
-                    )));
-                }
+        if kind == Kind::Mission
+            && i.command == NAV_VTOL_LAND
+            && let (Some(from), Some(to)) = (last_position, position)
+        {
+            let leg = distance_m(from, to);
+            if leg < VTOL_LAND_MIN_LEG_M {
+                out.push(at(format!(
+                    "VTOL land too short, min 30m (the approach from the item before is {leg:.1} m)"
+                )));
             }
         }
         if position.is_some() {
