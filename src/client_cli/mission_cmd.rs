@@ -233,7 +233,8 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
 }
 
 /// How the vehicle's list differs from what was sent, if it does. A mission's item 0 is home,
-/// which ArduPilot replaces with the real one: only its presence is compared.
+/// which ArduPilot replaces with the real one: only its presence is compared. Fence and rally
+/// items have no use for `autocontinue` (ArduPilot reports 0 whatever was sent).
 fn difference(sent: &[Item], back: &[Item], kind: Kind) -> Option<String> {
     if sent.len() != back.len() {
         return Some(format!("{} items, not {}", back.len(), sent.len()));
@@ -243,16 +244,28 @@ fn difference(sent: &[Item], back: &[Item], kind: Kind) -> Option<String> {
         .zip(back)
         .enumerate()
         .skip(skip)
-        .find(|(_, (a, b))| !a.same_as(b))
-        .map(|(seq, (a, b))| {
-            format!(
-                "item {seq} is {} {:?}, sent {} {:?}",
-                command_name(b.command),
-                b,
-                command_name(a.command),
-                a
-            )
+        .find(|(_, (a, b))| {
+            let mut a = **a;
+            if kind != Kind::Mission {
+                a.autocontinue = b.autocontinue;
+            }
+            !a.same_as(b)
         })
+        .map(|(seq, (a, b))| format!("item {seq} is {}; sent {}", describe(b), describe(a)))
+}
+
+/// An item in one line of words, every field.
+fn describe(i: &Item) -> String {
+    let [p1, p2, p3, p4] = i.params;
+    format!(
+        "{} frame {} at {}, {} alt {} params {p1} {p2} {p3} {p4} autocontinue {}",
+        command_name(i.command),
+        frame_name(i.frame),
+        i.x,
+        i.y,
+        i.z,
+        u8::from(i.autocontinue)
+    )
 }
 
 /// The meaning of a command's first four parameters, where it is well known.
@@ -389,8 +402,20 @@ mod tests {
         back[0].z = 600.0;
         assert_eq!(difference(&sent, &back, Kind::Mission), None);
         assert!(difference(&sent, &back, Kind::Rally).is_some());
+        back[1].autocontinue = false;
+        assert!(
+            difference(&sent[1..], &back[1..], Kind::Rally).is_none(),
+            "no autocontinue"
+        );
         back[1].z = 31.0;
-        assert!(difference(&sent, &back, Kind::Mission).is_some_and(|d| d.starts_with("item 1")));
+        assert_eq!(
+            difference(&sent, &back, Kind::Mission).as_deref(),
+            Some(
+                "item 1 is NAV_VTOL_TAKEOFF frame GLOBAL_RELATIVE_ALT at 0, 0 alt 31 params 0 0 0 0 \
+                 autocontinue 0; sent NAV_VTOL_TAKEOFF frame GLOBAL_RELATIVE_ALT at 0, 0 alt 30 \
+                 params 0 0 0 0 autocontinue 1"
+            )
+        );
         assert!(difference(&sent, &back[..1], Kind::Mission).is_some());
     }
 }
