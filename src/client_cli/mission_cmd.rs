@@ -123,16 +123,19 @@ pub fn mission(args: MissionArgs) -> ExitCode {
                 upload(&c, &items, kind, &file).await
             }
             MissionCommand::Download { file, format } => {
+                let t0 = std::time::Instant::now();
                 let items = c.mission_download(kind, |_, _| {}).await?;
+                let took = t0.elapsed();
                 match file.filter(|f| f.as_os_str() != "-") {
                     Some(path) => {
                         let text = file::write(&items, kind, Format::for_path(&path));
                         text_file::write_text(&path, &text).map_err(|e| usage(e.to_string()))?;
                         eprintln!(
-                            "{} {} items written to {}",
+                            "{} {} items written to {} (download {:.0} ms)",
                             items.len(),
                             kind.name(),
-                            path.display()
+                            path.display(),
+                            took.as_secs_f64() * 1e3
                         );
                     }
                     None => {
