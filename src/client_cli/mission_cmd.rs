@@ -198,15 +198,18 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
                 ),
             });
         }
-        UploadOutcome::NoAck { requested, total } if requested == total => true,
-        UploadOutcome::NoAck { requested, total } => {
-            return Err(super::link_failure(format!(
-                "no answer from the vehicle: upload stopped after it asked for {requested} of {total} items"
-            )));
-        }
+        UploadOutcome::NoAck { .. } => true,
     };
     let back = c.mission_download(kind, |_, _| {}).await?;
-    if let Some(diff) = difference(items, &back, kind) {
+    let diff = difference(items, &back, kind);
+    if let (Some(diff), UploadOutcome::NoAck { requested, total }) = (&diff, &outcome) {
+        return Err(super::link_failure(format!(
+            "no MISSION_ACK from the vehicle (it asked for {requested} of {total} items) and it \
+             holds another {}: {diff}",
+            kind.name()
+        )));
+    }
+    if let Some(diff) = diff {
         return Err(Failure {
             code: EXIT_REFUSED,
             message: format!(

@@ -57,6 +57,10 @@ impl Vehicle {
             MavMessage::MISSION_ITEM_INT(i) => {
                 self.items_received += 1;
                 let Some((count, got, at)) = &mut self.upload else {
+                    // A repeated last item: our ACK was lost; the same again (as the twin).
+                    if usize::from(i.seq) + 1 == self.stored.len() {
+                        return vec![ack(MavMissionResult::MAV_MISSION_ACCEPTED)];
+                    }
                     return Vec::new();
                 };
                 if usize::from(i.seq) != got.len() {
@@ -223,6 +227,7 @@ fn a_clean_link_uploads_and_downloads_the_same_list() {
 #[test]
 fn lost_requests_items_and_acks_are_asked_again_at_30_percent_loss() {
     let items = mission(12);
+    let mut no_ack = 0;
     for seed in 0..20 {
         let mut v = Vehicle::default();
         let out = upload(&items, &mut v, 0.3, seed);
@@ -235,15 +240,14 @@ fn lost_requests_items_and_acks_are_asked_again_at_30_percent_loss() {
                     "seed {seed}"
                 )
             }
-            UploadOutcome::NoAck { requested, total } => {
-                assert_eq!(requested, total, "seed {seed}: only the ACK may be missing")
-            }
+            UploadOutcome::NoAck { .. } => no_ack += 1,
         }
         let stored: Vec<Item> = v.stored.iter().map(from_wire).collect();
         assert!(same(&items, &stored), "seed {seed}: stored as sent");
         let back = download(&mut v, 0.3, seed + 100).expect("downloads");
         assert!(same(&items, &back), "seed {seed}");
     }
+    assert!(no_ack <= 2, "{no_ack} of 20 uploads without an ACK");
 }
 
 #[test]

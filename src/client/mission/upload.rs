@@ -4,19 +4,24 @@
 //! then on the vehicle drives: every MISSION_REQUEST_INT or MISSION_REQUEST is answered with the
 //! item it names (again, when it asks again because an item was lost). The transfer ends with
 //! the vehicle's MISSION_ACK; a refusal waits briefly for the STATUSTEXT that explains it.
-//! Silence for [`UPLOAD_SILENCE`] after the first request ends it without an ACK. Once the
-//! last item has been asked for, it is sent again on the round-trip timeout until the ACK
-//! comes (the last item or the ACK may be lost; the twin and MAVProxy answer a repeated last
-//! item with the ACK again), for [`LAST_ACK_WAIT`] at least. A refusal that answers such a
-//! repeat, or no ACK at all, ends the upload without an ACK: the caller's verifying download
-//! tells whether the vehicle took the list.
+//! The vehicle asks again for an item it did not get, but only after a second (ArduPilot, the
+//! twin): on a lossy link that second would be paid for every lost frame. So when the next
+//! request does not come within the round-trip timeout, the item last asked for is sent again
+//! (it may have been lost) with the one after it (the vehicle's request for that one may have
+//! been lost; ArduPilot and the twin take the item they wait for whether or not its request
+//! arrived, and answer one they do not wait for with MAV_MISSION_INVALID_SEQUENCE or nothing,
+//! which does not end the transfer). Silence for [`UPLOAD_SILENCE`] ends the upload without an
+//! ACK. The last item is repeated until the ACK comes, for [`LAST_ACK_WAIT`] at least (the
+//! twin and MAVProxy answer a repeated last item with the ACK again). A refusal that answers
+//! such a repeat, or no ACK at all, ends the upload without an ACK: the caller's verifying
+//! download tells whether the vehicle took the list.
 
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavMissionResult};
 use vtol_link::{ComponentId, SystemId};
 
-use super::super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Step};
+use super::super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Rtt, Step};
 use super::super::statustext::TextAssembler;
 use super::{MISSION_TRIES, mission_type};
 use crate::mission::Kind;
@@ -57,8 +62,10 @@ pub struct UploadMachine {
     asked: Vec<bool>,
     last_heard: Option<Instant>,
     refused: Option<(MavMissionResult, Instant)>,
-    /// The repeats of the last item, once the vehicle has asked for it.
-    last: Option<Retry>,
+    /// The item last asked for and the repeats of its answer.
+    pending: Option<(u16, Retry)>,
+    /// Round trips measured in this transfer (request to the next request).
+    measured: Rtt,
     rto: Duration,
     texts: Vec<String>,
     assembler: TextAssembler,
@@ -84,7 +91,8 @@ impl UploadMachine {
             asked: vec![false; n],
             last_heard: None,
             refused: None,
-            last: None,
+            pending: None,
+            measured: Rtt::default(),
             rto,
             texts: Vec::new(),
             assembler: TextAssembler::default(),
@@ -130,16 +138,32 @@ impl UploadMachine {
         if self.last_heard.is_none()
             && let Some(rtt) = self.retry.first_try_rtt(now)
         {
+            self.measured.sample(rtt);
             self.rtt = Some(rtt);
         }
         let msg = MavMessage::MISSION_ITEM_INT(item.clone());
+        if let Some((prev, r)) = &self.pending
+            && u32::from(*prev) + 1 == u32::from(seq)
+            && let Some(rtt) = r.first_try_rtt(now)
+        {
+            self.measured.sample(rtt);
+            self.rtt = Some(rtt);
+        }
         self.last_heard = Some(now);
         self.asked[usize::from(seq)] = true;
-        if usize::from(seq) + 1 == self.items.len() {
-            let mut r = Retry::new(self.rto, MISSION_TRIES, LAST_ACK_WAIT);
-            r.send(now);
-            self.last = Some(r);
-        }
+        let last = usize::from(seq) + 1 == self.items.len();
+        let rto = if self.measured.srtt().is_some() {
+            self.measured.rto()
+        } else {
+            self.rto
+        };
+        let mut r = Retry::new(
+            rto,
+            MISSION_TRIES,
+            if last { LAST_ACK_WAIT } else { UPLOAD_SILENCE },
+        );
+        r.send(now);
+        self.pending = Some((seq, r));
         vec![msg]
     }
 }
@@ -166,7 +190,11 @@ impl Machine for UploadMachine {
                 if a.mavtype == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE {
                     return Vec::new();
                 }
-                let repeated = self.last.as_ref().is_some_and(|r| r.tries() > 1);
+                let last = u16::try_from(self.items.len().saturating_sub(1)).unwrap_or(u16::MAX);
+                let repeated = self
+                    .pending
+                    .as_ref()
+                    .is_some_and(|(seq, r)| *seq == last && r.tries() > 1);
                 if a.mavtype == MavMissionResult::MAV_MISSION_ACCEPTED {
                     self.done = Some(UploadOutcome::Acked {
                         result: a.mavtype,
@@ -216,15 +244,17 @@ impl Machine for UploadMachine {
             });
             return Vec::new();
         }
-        if let Some(r) = &mut self.last {
+        if let Some((seq, r)) = &mut self.pending {
             return match r.step(now) {
                 Step::Wait => Vec::new(),
                 Step::Send => {
                     r.send(now);
+                    let k = usize::from(*seq);
                     self.items
-                        .last()
+                        .iter()
+                        .skip(k)
+                        .take(2)
                         .map(|i| MavMessage::MISSION_ITEM_INT(i.clone()))
-                        .into_iter()
                         .collect()
                 }
                 Step::GiveUp => {
@@ -232,11 +262,6 @@ impl Machine for UploadMachine {
                     Vec::new()
                 }
             };
-        }
-        if self.last_heard.is_some() {
-            // The vehicle drives: its silence past the wait ends the transfer.
-            self.no_ack();
-            return Vec::new();
         }
         match self.retry.step(now) {
             Step::Wait => Vec::new(),
@@ -252,12 +277,9 @@ impl Machine for UploadMachine {
         if let Some((_, at)) = self.refused {
             return at + REASON_GRACE;
         }
-        if let Some(r) = &self.last {
-            return r.deadline();
-        }
-        match self.last_heard {
+        match &self.pending {
+            Some((_, r)) => r.deadline(),
             None => self.retry.deadline(),
-            Some(t) => t + UPLOAD_SILENCE,
         }
     }
 
