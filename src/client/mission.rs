@@ -106,6 +106,22 @@ pub fn from_float_wire(m: &apm::MISSION_ITEM_DATA) -> Item {
     }
 }
 
+/// Whether a mission message is addressed to `me` (or to all of our system's components):
+/// another ground station's transfer on the same link is not ours.
+fn for_me(msg: &apm::MavMessage, me: (SystemId, ComponentId)) -> bool {
+    use apm::MavMessage as M;
+    let (sys, comp) = match msg {
+        M::MISSION_REQUEST_INT(r) => (r.target_system, r.target_component),
+        M::MISSION_REQUEST(r) => (r.target_system, r.target_component),
+        M::MISSION_ACK(a) => (a.target_system, a.target_component),
+        M::MISSION_COUNT(c) => (c.target_system, c.target_component),
+        M::MISSION_ITEM_INT(i) => (i.target_system, i.target_component),
+        M::MISSION_ITEM(i) => (i.target_system, i.target_component),
+        _ => return true,
+    };
+    (sys == 0 || sys == me.0.0) && (comp == 0 || comp == me.1.0)
+}
+
 /// A MAV_MISSION_RESULT in words: its name and what it means.
 #[must_use]
 pub fn result_words(r: MavMissionResult) -> String {
@@ -227,7 +243,7 @@ impl ClientHandle {
                     .ok_or_else(|| ClientError::Usage(format!("item {seq} cannot be sent")))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let mut m = UploadMachine::new(target, kind, wire, self.rto());
+        let mut m = UploadMachine::new(self.me, target, kind, wire, self.rto());
         self.drive(&mut m, |m| progress(m.sent(), m.total())).await
     }
 
@@ -242,7 +258,7 @@ impl ClientHandle {
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Vec<Item>, ClientError> {
         let target = self.vehicle().await?;
-        let mut m = DownloadMachine::new(target, kind, self.rto());
+        let mut m = DownloadMachine::new(self.me, target, kind, self.rto());
         let out = self
             .drive(&mut m, |m| progress(m.received(), m.total()))
             .await?;

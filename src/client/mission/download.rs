@@ -24,6 +24,7 @@ pub struct DownloadStalled {
 /// The download exchange.
 #[derive(Debug)]
 pub struct DownloadMachine {
+    me: (SystemId, ComponentId),
     target: (SystemId, ComponentId),
     kind: Kind,
     rto: Duration,
@@ -36,10 +37,16 @@ pub struct DownloadMachine {
 }
 
 impl DownloadMachine {
-    /// Downloads the `kind` list of `target`.
+    /// Downloads the `kind` list of `target`; `me` is who its answers are addressed to.
     #[must_use]
-    pub fn new(target: (SystemId, ComponentId), kind: Kind, rto: Duration) -> Self {
+    pub fn new(
+        me: (SystemId, ComponentId),
+        target: (SystemId, ComponentId),
+        kind: Kind,
+        rto: Duration,
+    ) -> Self {
         Self {
+            me,
             target,
             kind,
             rto,
@@ -129,7 +136,8 @@ impl Machine for DownloadMachine {
     }
 
     fn on_message(&mut self, now: Instant, m: &Inbound) -> Vec<MavMessage> {
-        if self.done.is_some() || (m.sys, m.comp) != self.target {
+        if self.done.is_some() || (m.sys, m.comp) != self.target || !super::for_me(&m.msg, self.me)
+        {
             return Vec::new();
         }
         let ours = mission_type(self.kind);

@@ -13,6 +13,7 @@ use super::*;
 use crate::mission::Item;
 
 const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
+const ME: (SystemId, ComponentId) = (SystemId(255), ComponentId(190));
 const HOP: Duration = Duration::from_millis(5);
 const RE_REQUEST: Duration = Duration::from_secs(1);
 
@@ -87,7 +88,11 @@ impl Vehicle {
             MavMessage::MISSION_REQUEST_INT(r) => self
                 .stored
                 .get(usize::from(r.seq))
-                .map(|i| MavMessage::MISSION_ITEM_INT(i.clone()))
+                .map(|i| {
+                    let mut i = i.clone();
+                    (i.target_system, i.target_component) = (255, 190);
+                    MavMessage::MISSION_ITEM_INT(i)
+                })
                 .into_iter()
                 .collect(),
             MavMessage::MISSION_CLEAR_ALL(_) => {
@@ -186,12 +191,12 @@ fn upload(items: &[Item], v: &mut Vehicle, loss: f64, seed: u64) -> UploadOutcom
         .enumerate()
         .map(|(k, i)| to_wire(u16::try_from(k).expect("small"), i, V, Kind::Mission).expect("wire"))
         .collect();
-    let mut m = UploadMachine::new(V, Kind::Mission, wire, Duration::from_millis(20));
+    let mut m = UploadMachine::new(ME, V, Kind::Mission, wire, Duration::from_millis(20));
     run(&mut m, v, loss, seed).0
 }
 
 fn download(v: &mut Vehicle, loss: f64, seed: u64) -> Result<Vec<Item>, DownloadStalled> {
-    let mut m = DownloadMachine::new(V, Kind::Mission, Duration::from_millis(20));
+    let mut m = DownloadMachine::new(ME, V, Kind::Mission, Duration::from_millis(20));
     run(&mut m, v, loss, seed).0
 }
 
@@ -253,14 +258,14 @@ fn lost_requests_items_and_acks_are_asked_again_at_30_percent_loss() {
 #[test]
 fn a_silent_vehicle_ends_each_transfer_with_what_was_done() {
     let t0 = Instant::now();
-    let mut m = DownloadMachine::new(V, Kind::Mission, Duration::from_millis(20));
+    let mut m = DownloadMachine::new(ME, V, Kind::Mission, Duration::from_millis(20));
     let mut sends = m.start(t0).len();
     while m.result_pending() {
         let d = m.deadline();
         sends += m.on_time(d).len();
     }
     assert!(sends >= usize::from(MISSION_TRIES));
-    let mut u = UploadMachine::new(V, Kind::Mission, Vec::new(), Duration::from_millis(20));
+    let mut u = UploadMachine::new(ME, V, Kind::Mission, Vec::new(), Duration::from_millis(20));
     u.start(t0);
     let mut out = None;
     while out.is_none() {
@@ -286,7 +291,7 @@ fn a_refusal_carries_the_vehicle_reason() {
         .map(|(k, i)| to_wire(u16::try_from(k).expect("small"), i, V, Kind::Mission).expect("wire"))
         .collect();
     let t0 = Instant::now();
-    let mut m = UploadMachine::new(V, Kind::Mission, wire, Duration::from_millis(20));
+    let mut m = UploadMachine::new(ME, V, Kind::Mission, wire, Duration::from_millis(20));
     m.start(t0);
     let from = |msg| Inbound {
         sys: V.0,
@@ -315,6 +320,20 @@ fn a_refusal_carries_the_vehicle_reason() {
             reason: Some("Mission item 0: frame 3 is not supported".into())
         })
     );
+    let mut other = UploadMachine::new(
+        (SystemId(255), ComponentId(42)),
+        V,
+        Kind::Mission,
+        Vec::new(),
+        Duration::from_millis(20),
+    );
+    other.start(t0);
+    assert!(
+        other
+            .on_message(t0, &from(ack(MavMissionResult::MAV_MISSION_ACCEPTED)))
+            .is_empty()
+    );
+    assert_eq!(other.result(), None, "an ACK for another ground station");
     assert_eq!(
         result_words(MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME),
         "MAV_MISSION_UNSUPPORTED_FRAME (coordinate frame not supported)"

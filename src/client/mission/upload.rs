@@ -55,6 +55,7 @@ pub enum UploadOutcome {
 /// The upload exchange.
 #[derive(Debug)]
 pub struct UploadMachine {
+    me: (SystemId, ComponentId),
     target: (SystemId, ComponentId),
     kind: Kind,
     items: Vec<apm::MISSION_ITEM_INT_DATA>,
@@ -74,9 +75,11 @@ pub struct UploadMachine {
 }
 
 impl UploadMachine {
-    /// Uploads `items` (already addressed and numbered) as the `kind` list of `target`.
+    /// Uploads `items` (already addressed and numbered) as the `kind` list of `target`;
+    /// `me` is who the vehicle's requests and ACK are addressed to.
     #[must_use]
     pub fn new(
+        me: (SystemId, ComponentId),
         target: (SystemId, ComponentId),
         kind: Kind,
         items: Vec<apm::MISSION_ITEM_INT_DATA>,
@@ -84,6 +87,7 @@ impl UploadMachine {
     ) -> Self {
         let n = items.len();
         Self {
+            me,
             target,
             kind,
             items,
@@ -176,7 +180,8 @@ impl Machine for UploadMachine {
     }
 
     fn on_message(&mut self, now: Instant, m: &Inbound) -> Vec<MavMessage> {
-        if self.done.is_some() || (m.sys, m.comp) != self.target {
+        if self.done.is_some() || (m.sys, m.comp) != self.target || !super::for_me(&m.msg, self.me)
+        {
             return Vec::new();
         }
         let ours = mission_type(self.kind);
