@@ -1,7 +1,7 @@
 //! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the terminal UI
 //! (no arguments, or `tui`), the headless daemon (`run`) until Ctrl-C or SIGTERM, or one client
-//! command (`params`, `arm`, `disarm`, `mode`). It owns the terminal: the start-up and status
-//! lines and the UI are drawn here, never by the library.
+//! command (`params`, `mission`, `arm`, `disarm`, `mode`). It owns the terminal: the start-up
+//! and status lines and the UI are drawn here, never by the library.
 
 mod client_cli;
 

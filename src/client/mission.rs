@@ -3,12 +3,12 @@
 //!
 //! - **Upload** ([`UploadMachine`], `mission/upload.rs`): MISSION_COUNT, then each item the
 //!   vehicle asks for (MISSION_REQUEST_INT, or MISSION_REQUEST as ArduPilot sends it) answered
-//!   with MISSION_ITEM_INT, until its MISSION_ACK. The vehicle drives the transfer and asks
-//!   again for what it did not get; the ground station repeats only MISSION_COUNT until the
-//!   first request.
-//! - **Download** ([`DownloadMachine`], `mission/download.rs`): MISSION_REQUEST_LIST, MISSION_COUNT,
-//!   then MISSION_REQUEST_INT for each item, repeated until it arrives (MISSION_ITEM_INT, or
-//!   MISSION_ITEM from a vehicle that only has that), and a MISSION_ACK at the end.
+//!   with MISSION_ITEM_INT, until its MISSION_ACK. A request late by the round-trip timeout
+//!   gets the item last asked for again with the one after it (see `mission/upload.rs`).
+//! - **Download** ([`DownloadMachine`], `mission/download.rs`): MISSION_REQUEST_LIST,
+//!   MISSION_COUNT, then MISSION_REQUEST_INT for each item, repeated until it arrives
+//!   (MISSION_ITEM_INT, or MISSION_ITEM from a vehicle that only has that), and a MISSION_ACK at
+//!   the end.
 //! - **Clear** ([`ClearMachine`]): MISSION_CLEAR_ALL until its MISSION_ACK.
 //! - Set current and start are commands (MAV_CMD_DO_SET_MISSION_CURRENT, MAV_CMD_MISSION_START).
 //!

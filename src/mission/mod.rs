@@ -2,7 +2,7 @@
 //! MAVLink mission protocol carries them (MISSION_ITEM_INT), where each came from in its file,
 //! and the checks made before anything is sent.
 //!
-//! - [`file`]: QGroundControl's `QGC WPL 110` text and `.plan` JSON, read and written.
+//! - [`file`](mod@file): QGroundControl's `QGC WPL 110` text and `.plan` JSON, read and written.
 //! - [`check`]: what is refused before an upload (unknown command or frame, a NaN position,
 //!   latitude or longitude out of range, a VTOL landing approach ArduPlane refuses).
 
