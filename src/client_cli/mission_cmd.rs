@@ -58,7 +58,7 @@ enum MissionCommand {
     /// Remove the list from the vehicle.
     Clear,
     /// Start the mission (MAV_CMD_MISSION_START: ArduPlane switches to AUTO; it does not arm),
-    /// at item SEQ when given.
+    /// or with SEQ: make SEQ current, then switch to AUTO.
     Start {
         /// The item to start at.
         seq: Option<u16>,
@@ -154,10 +154,15 @@ pub fn mission(args: MissionArgs) -> ExitCode {
                 Ok(())
             }
             MissionCommand::Start { seq } => {
-                if let Some(seq) = seq {
-                    c.mission_set_current(seq).await?;
+                match seq {
+                    // ArduPilot denies MISSION_START with a first item: make it current, then
+                    // AUTO flies from it.
+                    Some(seq) => {
+                        c.mission_set_current(seq).await?;
+                        c.set_mode("AUTO").await?;
+                    }
+                    None => c.mission_start(None).await?,
                 }
-                c.mission_start(seq).await?;
                 match seq {
                     Some(s) => println!("mission started at item {s}"),
                     None => println!("mission started"),

@@ -68,6 +68,11 @@ def close(a: list[list[float]], b: list[list[float]]) -> bool:
     return len(a) == len(b) and all(len(r) == len(s) and all(map(same, r, s)) for r, s in zip(a, b))
 
 
+def gcs_mode(name: str, link: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(DAEMON_BIN), "mode", name, "--link", link], capture_output=True,
+                          text=True, timeout=60)
+
+
 def pymavlink_items(url: str) -> list:
     """The twin's mission, read by pymavlink (an independent check)."""
     with Gcs(url) as g:
@@ -183,6 +188,12 @@ def test_show_set_current_and_clear(lossless, tmp_path):
     with Gcs(lossless.tcp) as g:
         g.wait_vehicle_heartbeat()
         assert g.recv("MISSION_CURRENT", lambda m: m.seq == 2, timeout=10).seq == 2
+    r = gcs("start", "3", link=lossless.tcp)
+    assert r.returncode == 0 and r.stdout.strip() == "mission started at item 3", r.stdout + r.stderr
+    with Gcs(lossless.tcp) as g:
+        g.wait_vehicle_heartbeat(pred=lambda h: h.custom_mode == 10)  # AUTO, still disarmed
+        assert g.recv("MISSION_CURRENT", lambda m: m.seq == 3, timeout=10).seq == 3
+    assert gcs_mode("QHOVER", lossless.tcp).returncode == 0
     r = gcs("set-current", "9", link=lossless.tcp)
     assert r.returncode == 1 and "refused" in r.stderr, r.stdout + r.stderr
     r = gcs("clear", link=lossless.tcp)
