@@ -243,8 +243,9 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
     Ok(())
 }
 
-/// How the vehicle's list differs from what was sent, if it does. A mission's item 0 is home,
-/// which ArduPilot replaces with the real one: only its presence is compared. Fence and rally
+/// How the vehicle's list differs from what was sent, if it does ([`Item::held_as`]). A
+/// mission's item 0 is home, which ArduPilot replaces with the real one: only its presence is
+/// compared. Fence and rally
 /// items have no use for `autocontinue` (ArduPilot reports 0 whatever was sent).
 fn difference(sent: &[Item], back: &[Item], kind: Kind) -> Option<String> {
     if sent.len() != back.len() {
@@ -260,7 +261,7 @@ fn difference(sent: &[Item], back: &[Item], kind: Kind) -> Option<String> {
             if kind != Kind::Mission {
                 a.autocontinue = b.autocontinue;
             }
-            !a.same_as(b)
+            !a.held_as(b)
         })
         .map(|(seq, (a, b))| format!("item {seq} is {}; sent {}", describe(b), describe(a)))
 }

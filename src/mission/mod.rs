@@ -184,6 +184,26 @@ impl Item {
     }
 }
 
+impl Item {
+    /// Whether `back`, downloaded after this item was uploaded, is what the vehicle keeps of
+    /// it: [`Item::same_as`], except that a NaN parameter may come back as anything (ArduPilot
+    /// stores none) and a command without a position (MAV_CMD_CONDITION_*, MAV_CMD_DO_*) may
+    /// come back in another frame (ArduPilot reports MAV_FRAME_GLOBAL for them).
+    #[must_use]
+    pub fn held_as(&self, back: &Item) -> bool {
+        let mut sent = *self;
+        for (p, b) in sent.params.iter_mut().zip(back.params) {
+            if p.is_nan() {
+                *p = b;
+            }
+        }
+        if (100..5000).contains(&sent.command) {
+            sent.frame = back.frame;
+        }
+        sent.same_as(back)
+    }
+}
+
 /// The command's MAVLink name without its `MAV_CMD_` prefix, or its number.
 #[must_use]
 pub fn command_name(command: u16) -> String {
@@ -201,5 +221,47 @@ pub fn frame_name(frame: u8) -> String {
     match vtol_link::dialect::MavFrame::from_u8(frame) {
         Some(f) => format!("{f:?}").trim_start_matches("MAV_FRAME_").to_owned(),
         None => frame.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn what_ardupilot_keeps_of_an_item_is_held_as_sent() {
+        let sent = Item {
+            frame: 2,
+            command: 177,
+            current: false,
+            autocontinue: true,
+            params: [3.0, 2.0, 0.0, f32::NAN],
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+        };
+        let back = Item {
+            frame: 0,
+            params: [3.0, 2.0, 0.0, 0.0],
+            ..sent
+        };
+        assert!(sent.held_as(&back) && !sent.same_as(&back));
+        let takeoff = Item {
+            frame: 3,
+            command: 84,
+            ..sent
+        };
+        let moved = Item { frame: 0, ..back };
+        assert!(
+            !takeoff.held_as(&Item {
+                command: 84,
+                ..moved
+            }),
+            "a NAV item keeps its frame"
+        );
+        assert!(!sent.held_as(&Item {
+            params: [4.0, 2.0, 0.0, 0.0],
+            ..back
+        }));
     }
 }
