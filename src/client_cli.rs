@@ -1,5 +1,6 @@
-//! The client commands of the binary: `params pull|push|get|set|diff|save`, `arm`, `disarm`,
-//! `mode`, `reboot`, each on its own link (`--link`, default the daemon's serve port).
+//! The client commands of the binary: `params pull|push|get|set|diff|save`, `mission ...`,
+//! `arm`, `disarm`, `mode`, `reboot`, each on its own link (`--link`, default the daemon's serve
+//! port).
 //!
 //! Exit status (docs/cli.md): 0 done; 1 refused by the vehicle (nothing left changed; for
 //! `params diff`: the vehicle differs from the file); 2 a usage or input error (bad file,
@@ -16,7 +17,9 @@ use vtol_gcs::client::{ClientConfig, ClientError, ClientHandle};
 use vtol_gcs::trust::signing::{DaemonSigning, default_state_file, system_clock};
 use vtol_link::{ComponentId, LinkUrl, SigningKey, SystemId};
 
+mod mission_cmd;
 mod params_cmd;
+pub use mission_cmd::{MissionArgs, mission};
 pub use params_cmd::{ParamsArgs, params};
 
 /// Done.

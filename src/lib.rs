@@ -9,6 +9,7 @@ pub mod daemon;
 pub mod fit;
 pub mod gcs;
 pub mod log;
+pub mod mission;
 pub mod modes;
 pub mod outputs;
 pub mod params;

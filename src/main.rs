@@ -1,7 +1,7 @@
 //! The `vtol-gcs` binary: parses the command line, sets up logging, and runs the terminal UI
 //! (no arguments, or `tui`), the headless daemon (`run`) until Ctrl-C or SIGTERM, or one client
-//! command (`params`, `arm`, `disarm`, `mode`). It owns the terminal: the start-up and status
-//! lines and the UI are drawn here, never by the library.
+//! command (`params`, `mission`, `arm`, `disarm`, `mode`). It owns the terminal: the start-up
+//! and status lines and the UI are drawn here, never by the library.
 
 mod client_cli;
 
@@ -44,6 +44,8 @@ enum Command {
     Tui(TuiArgs),
     /// Parameters: pull, push, get, set, diff, save.
     Params(client_cli::ParamsArgs),
+    /// Missions, fences and rally points: upload, download, clear, start, set-current, show.
+    Mission(client_cli::MissionArgs),
     /// Arm the vehicle.
     Arm(client_cli::ArmArgs),
     /// Disarm the vehicle.
@@ -197,6 +199,7 @@ fn main() -> std::process::ExitCode {
     }
     let result = match cli.command {
         Some(Command::Params(a)) => return client_cli::params(a),
+        Some(Command::Mission(a)) => return client_cli::mission(a),
         Some(Command::Arm(a)) => return client_cli::arm(a, true),
         Some(Command::Disarm(a)) => return client_cli::arm(a, false),
         Some(Command::Mode(a)) => return client_cli::mode(a),

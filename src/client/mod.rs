@@ -2,8 +2,8 @@
 //! vtol-link transport (straight to a URL, or inside the daemon over its own-traffic link).
 //!
 //! - [`session`]: the one task that owns the identity, the sequence counter and the link.
-//! - [`machine`], [`command`], [`param`]: the protocol exchanges as pure state machines
-//!   (messages and time in, messages and a result out), tested without sockets.
+//! - [`machine`], [`command`], [`param`], [`mission`]: the protocol exchanges as pure state
+//!   machines (messages and time in, messages and a result out), tested without sockets.
 //! - [`pace`]: the session's sends paced by the RADIO_STATUS of a telemetry radio on the link.
 //! - [`ClientHandle`]: the async shell that drives those machines, cheap to clone; the
 //!   command line and the terminal UI use it.
@@ -14,6 +14,7 @@
 pub mod command;
 pub mod interval;
 pub mod machine;
+pub mod mission;
 pub mod pace;
 pub mod param;
 pub mod probe;

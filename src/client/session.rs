@@ -25,9 +25,15 @@ use super::pace::Pacer;
 use crate::trust::signing::DaemonSigning;
 
 /// Message ids the client's machines read; everything else is never decoded.
-const WANTED: [u32; 10] = [
+const WANTED: [u32; 16] = [
     0,   // HEARTBEAT
     22,  // PARAM_VALUE
+    39,  // MISSION_ITEM
+    40,  // MISSION_REQUEST
+    44,  // MISSION_COUNT
+    47,  // MISSION_ACK
+    51,  // MISSION_REQUEST_INT
+    73,  // MISSION_ITEM_INT
     77,  // COMMAND_ACK
     109, // RADIO_STATUS (the pacing of what the client sends)
     110, // FILE_TRANSFER_PROTOCOL (the parameter table as a file)
