@@ -219,3 +219,51 @@ fn the_track_outlives_the_history() {
             .is_empty()
     );
 }
+
+/// Entering the Map view asks for the vehicle's mission once; what comes back is drawn, home
+/// and items without a place left out; `r` asks again.
+#[test]
+fn the_map_view_downloads_the_mission_and_draws_its_items() {
+    use vtol_gcs::mission::Item;
+    use vtol_gcs::tui::app::{Outcome, Request};
+    use vtol_link::dialect::{MavCmd, MavFrame};
+    let mut app = vtol_gcs::tui::app::App::default();
+    let state = vtol_gcs::tracker::VehicleState::default();
+    let now = std::time::Instant::now();
+    let tab = ratatui::crossterm::event::KeyEvent::from(ratatui::crossterm::event::KeyCode::Tab);
+    let mut asked = Vec::new();
+    while app.view != View::Map {
+        asked.extend(app.on_key(tab, &state, now));
+    }
+    assert_eq!(asked, vec![Request::MissionDownload]);
+    // Round the seven views once more: asked only once.
+    let mut again = Vec::new();
+    for _ in 0..7 {
+        again.extend(app.on_key(tab, &state, now));
+    }
+    assert!(again.is_empty(), "{again:?}");
+    let item = |command: MavCmd, x: f64, y: f64| Item {
+        frame: MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT as u8,
+        command: command as u16,
+        current: false,
+        autocontinue: true,
+        params: [0.0; 4],
+        x,
+        y,
+        z: 30.0,
+    };
+    app.on_outcome(Outcome::Mission(Ok(vec![
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT, -35.36, 149.16),
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT, -35.361, 149.161),
+        item(MavCmd::MAV_CMD_DO_VTOL_TRANSITION, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_LOITER_UNLIM, -35.362, 149.162),
+        item(MavCmd::MAV_CMD_NAV_VTOL_LAND, -35.363, 149.163),
+    ])));
+    let seqs: Vec<u16> = app.map.items.iter().map(|i| i.seq).collect();
+    assert_eq!(seqs, vec![2, 4, 5]);
+    assert_eq!(app.map.items[0].at, (-353_610_000, 1_491_610_000));
+    let r =
+        ratatui::crossterm::event::KeyEvent::from(ratatui::crossterm::event::KeyCode::Char('r'));
+    assert_eq!(app.on_key(r, &state, now), vec![Request::MissionDownload]);
+}

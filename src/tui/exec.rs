@@ -209,6 +209,11 @@ impl Control for ClientControl {
                 Err(e) => command("parameter download".into(), Err(e)),
             },
             Request::LoadGains(path) => Outcome::GainsLoaded(self.load_gains(&path).await),
+            Request::MissionDownload => Outcome::Mission(
+                c.mission_download(crate::mission::Kind::Mission, |_, _| {})
+                    .await
+                    .map_err(|e| reason(&e)),
+            ),
             Request::PushGains => {
                 let result = self.push_gains(&out).await;
                 // Show what the vehicle holds now, whatever happened.

@@ -148,6 +148,8 @@ pub enum Request {
     LoadGains(String),
     /// Upload the loaded gains as one transaction.
     PushGains,
+    /// Download the vehicle's mission, for the Map view.
+    MissionDownload,
 }
 
 /// What came back from a request.
@@ -182,6 +184,8 @@ pub enum Outcome {
     GainsLoaded(Result<Vec<(String, Option<f32>, f32)>, String>),
     /// The upload finished: a summary line, Ok when every value was verified.
     GainsPushed(Result<String, String>),
+    /// The vehicle's mission arrived (item 0 is home), or why not.
+    Mission(Result<Vec<crate::mission::Item>, String>),
 }
 
 /// Where a parameter stands in the UI.
@@ -514,11 +518,11 @@ impl App {
             }
             KeyCode::Tab => {
                 self.view = View::ALL[(self.view.index() + 1) % View::ALL.len()];
-                return Vec::new();
+                return self.entered_view();
             }
             KeyCode::BackTab => {
                 self.view = View::ALL[(self.view.index() + View::ALL.len() - 1) % View::ALL.len()];
-                return Vec::new();
+                return self.entered_view();
             }
             KeyCode::Char('v') => return self.switch_vehicle(state, 1),
             KeyCode::Char('V') => return self.switch_vehicle(state, -1),
@@ -680,6 +684,16 @@ impl App {
                 }
             }
             Outcome::GainsLoaded(Err(e)) => self.note(Level::Error, e),
+            Outcome::Mission(Ok(items)) => {
+                let radius = self.param("WP_LOITER_RAD").unwrap_or(60.0);
+                self.map.items = crate::tui::view::map::items_from_mission(&items, radius);
+                let n = items.len().saturating_sub(1);
+                self.note(
+                    Level::Ok,
+                    format!("mission of {n} items (r: download again)"),
+                );
+            }
+            Outcome::Mission(Err(e)) => self.note(Level::Error, format!("mission download: {e}")),
             Outcome::GainsPushed(result) => {
                 self.params.progress = None;
                 if result.is_ok() {
@@ -695,5 +709,25 @@ impl App {
                 }
             }
         }
+    }
+
+    /// What entering a view asks for: the Map view downloads the mission the first time (a
+    /// replayed log has no vehicle to ask).
+    fn entered_view(&mut self) -> Vec<Request> {
+        if self.view == View::Map && !self.map.requested && !self.replay {
+            self.map.requested = true;
+            self.note(Level::Info, "downloading the mission");
+            return vec![Request::MissionDownload];
+        }
+        Vec::new()
+    }
+
+    /// A parameter's value from the pulled table.
+    fn param(&self, name: &str) -> Option<f32> {
+        self.params
+            .table
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| *v)
     }
 }

@@ -103,6 +103,37 @@ impl MapItem {
     }
 }
 
+/// The navigation items of a downloaded mission that have a place, as the map draws them:
+/// item 0 (home) and items without a position (DO_*, a take-off at 0, 0) are left out.
+#[must_use]
+// The `_INT` frames are deprecated in the dialect, but vehicles still send them.
+#[allow(deprecated)]
+pub fn items_from_mission(items: &[crate::mission::Item], default_radius_m: f32) -> Vec<MapItem> {
+    items
+        .iter()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, it)| it.x != 0.0 || it.y != 0.0)
+        .filter(|(_, it)| {
+            use vtol_link::dialect::MavFrame as F;
+            [
+                F::MAV_FRAME_GLOBAL,
+                F::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                F::MAV_FRAME_GLOBAL_INT,
+                F::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                F::MAV_FRAME_GLOBAL_TERRAIN_ALT,
+                F::MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+            ]
+            .iter()
+            .any(|f| *f as u8 == it.frame)
+        })
+        .map(|(seq, it)| {
+            let at = ((it.x * 1e7).round() as i32, (it.y * 1e7).round() as i32);
+            MapItem::from_mission(seq as u16, it.command, it.params, at, default_radius_m)
+        })
+        .collect()
+}
+
 /// The vehicle on the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapVehicle {
@@ -211,12 +242,15 @@ impl MapCamera {
 pub struct MapState {
     /// Camera.
     pub camera: MapCamera,
-    /// The mission drawn (the caller loads it).
+    /// The mission drawn (downloaded when the view is first entered; `r` again).
     pub items: Vec<MapItem>,
+    /// Whether the mission was asked for.
+    pub requested: bool,
 }
 
 impl MapState {
-    /// The Map view's keys: `+`/`-` zoom, arrows pan, `f` or `0` follow the vehicle again.
+    /// The Map view's keys: `+`/`-` zoom, arrows pan, `f` or `0` follow the vehicle again, `r`
+    /// downloads the mission again.
     /// `None` for a key it does not take.
     pub fn on_key(
         &mut self,
@@ -232,6 +266,10 @@ impl MapState {
             KeyCode::Right => c.pan(0.0, PAN_CELLS),
             KeyCode::Left => c.pan(0.0, -PAN_CELLS),
             KeyCode::Char('f' | '0') => c.follow(),
+            KeyCode::Char('r') => {
+                self.requested = true;
+                return Some(vec![crate::tui::app::Request::MissionDownload]);
+            }
             _ => return None,
         }
         Some(Vec::new())
