@@ -154,7 +154,7 @@ def prearm(v: Vehicle, tr: Trace) -> None:
 def arm_disarm(v: Vehicle, tr: Trace) -> None:
     begin(v, tr)
     tr.proto("boot_mode", v.modes[-1] if v.modes else None)
-    for mode in ("QSTABILIZE", "QHOVER", "MANUAL", "FBWA"):
+    for mode in ("QSTABILIZE", "QHOVER", "QLOITER", "MANUAL", "FBWA"):
         tr.proto(f"{mode}.mode", v.mode(mode))
         if not v.wait_mode(mode, timeout=5):
             continue  # refused: arming here would repeat the previous mode's round

@@ -30,8 +30,12 @@ use crate::nav::globe::{deg_to_e7, valid_lat_lon};
 use crate::nav::l1::L1Params;
 use crate::nav::mission::{Limits, frame};
 use crate::nav::navigation::{
-    NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused, loiter_entry_point,
+    NAV_PERIOD_US, NavEvent, NavInput, Navigator, Refused, loiter_entry_point, loiter_takeoff_point,
 };
+
+/// QLOITER on the ground climbs only on a throttle stick above this (mid and a dead zone), µs;
+/// at or below mid, or with no receiver signal, it stays landed as ArduPlane's does.
+const QLOITER_CLIMB_STICK_US: u16 = 1600;
 
 /// Home moves (and is announced) only by more than this, m.
 const HOME_MOVE_M: f64 = 0.01;
@@ -130,8 +134,18 @@ impl Endpoint {
         self.next_nav_us = self.now_us + NAV_PERIOD_US;
         let t = self.vehicle.telemetry();
         if !t.mode.is_autonomous() {
-            if t.mode == FlightMode::QLoiter && self.navigator.is_entering(t.mode) {
-                self.hold_here();
+            if t.mode == FlightMode::QLoiter {
+                if self.navigator.is_entering(t.mode) {
+                    self.hold_here();
+                } else if t.armed && t.landed && t.rc_us[2] > QLOITER_CLIMB_STICK_US {
+                    // Throttle stick above mid: climb to `HOVER_ALT` above the spot.
+                    let p = loiter_takeoff_point(
+                        &paper_to_ned(&t.pos_m),
+                        self.params.value("HOVER_ALT"),
+                    );
+                    self.vehicle
+                        .set_position_setpoint(crate::model::frames::ned_to_paper(&p));
+                }
             }
             // Nothing to navigate in the pilot and hover modes.
             let t = self.vehicle.telemetry();
@@ -155,11 +169,7 @@ impl Endpoint {
     /// earlier target was.
     fn hold_here(&mut self) {
         let t = self.vehicle.telemetry();
-        let p = loiter_entry_point(
-            &paper_to_ned(&t.pos_m),
-            t.landed,
-            self.params.value("HOVER_ALT"),
-        );
+        let p = loiter_entry_point(&paper_to_ned(&t.pos_m));
         self.vehicle
             .set_position_setpoint(crate::model::frames::ned_to_paper(&p));
     }

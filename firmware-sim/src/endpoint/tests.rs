@@ -551,3 +551,72 @@ fn reboot_clears_a_crash_after_a_silence() {
     assert!(ep.vehicle().telemetry().armed);
     assert_eq!(acks(&ep.handle(GCS, &reboot(1.0))), [(246, 2)]);
 }
+
+/// ArduPlane's QLOITER on the ground with no pilot throttle (no RC at all) stays on the ground,
+/// motors at idle, and a disarm is accepted; the twin must not climb to a hover by itself.
+#[test]
+fn qloiter_armed_on_the_ground_without_sticks_stays_landed_and_disarms() {
+    let mut ep = endpoint();
+    run_until(&mut ep, 2_000_000);
+    let set_mode = command_long(
+        apm::MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, 19.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        0,
+    );
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&set_mode))),
+        vec![(176, commands::result::ACCEPTED)]
+    );
+    run_until(&mut ep, 2_500_000);
+    let arm = |p1: f32| {
+        command_long(
+            apm::MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [p1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        )
+    };
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&arm(1.0)))),
+        vec![(400, commands::result::ACCEPTED)]
+    );
+    run_until(&mut ep, 12_500_000);
+    let t = ep.vehicle().telemetry();
+    assert!(t.armed);
+    assert!(t.landed, "lifted off: {:?}", t.pos_m);
+    assert!(t.pos_m.z.abs() < 0.01, "{:?}", t.pos_m);
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&arm(0.0)))),
+        vec![(400, commands::result::ACCEPTED)]
+    );
+    assert!(!ep.vehicle().telemetry().armed);
+
+    // The throttle stick at mid holds the ground; above mid QLOITER climbs to `HOVER_ALT`.
+    let throttle = |us: u16| {
+        v2(&apm::MavMessage::RC_CHANNELS_OVERRIDE(
+            apm::RC_CHANNELS_OVERRIDE_DATA {
+                chan1_raw: 1500,
+                chan2_raw: 1500,
+                chan3_raw: us,
+                chan4_raw: 1500,
+                target_system: 1,
+                target_component: 1,
+                ..Default::default()
+            },
+        ))
+    };
+    assert_eq!(
+        acks(&ep.handle(GCS, &v2(&arm(1.0)))),
+        vec![(400, commands::result::ACCEPTED)]
+    );
+    let _ = ep.handle(GCS, &throttle(1500));
+    run_until(&mut ep, 15_000_000);
+    assert!(ep.vehicle().telemetry().landed);
+    let _ = ep.handle(GCS, &throttle(1800));
+    run_until(&mut ep, 17_000_000);
+    let _ = ep.handle(GCS, &throttle(1500));
+    run_until(&mut ep, 19_000_000);
+    let _ = ep.handle(GCS, &throttle(1500));
+    run_until(&mut ep, 21_000_000);
+    let t = ep.vehicle().telemetry();
+    assert!(!t.landed && (t.pos_m.z - 1.0).abs() < 0.1, "{:?}", t.pos_m);
+}

@@ -64,6 +64,8 @@ pub const AERO_EVERY_STEPS: u64 = 4;
 pub const LAND_DISARM_DELAY_S: f64 = 0.5;
 /// Largest estimated tilt at which arming is allowed, rad.
 pub const ARM_MAX_TILT_RAD: f64 = 0.2;
+/// QLOITER on the ground idles while its point is at most this far above the vehicle, m.
+const LOITER_GROUND_HOLD_M: f64 = 0.05;
 /// Period of the battery model, s: it drains slowly, so 10 Hz is plenty and costs the control
 /// loop nothing.
 const BATTERY_PERIOD_S: f64 = 0.1;
@@ -614,10 +616,19 @@ impl Vehicle {
     }
 
     /// The control law flown now: the mode's own, or for GUIDED, AUTO and QRTL the one their
-    /// guidance asks for (QLOITER's to a point, QLAND's), or `None` when idle on the ground.
+    /// guidance asks for (QLOITER's to a point, QLAND's), or `None` when idle on the ground
+    /// (also QLOITER landed with its point on the ground).
     #[must_use]
     pub fn law(&self) -> Option<FlightMode> {
         let mode = self.telemetry.mode;
+        if mode == FlightMode::QLoiter
+            && self.on_ground
+            && self.setpoint_m.z <= self.plant.pos_m.z + LOITER_GROUND_HOLD_M
+        {
+            // A point on the ground: landed, motors at idle (ArduPlane's QLOITER with the
+            // throttle stick at or below mid).
+            return None;
+        }
         if !mode.is_autonomous() {
             return Some(mode);
         }

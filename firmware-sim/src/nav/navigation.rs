@@ -722,16 +722,22 @@ impl Navigator {
     }
 }
 
-/// A landing where the vehicle stands (already on the ground, or told to land here).
 /// Where QLOITER holds when it is entered (local NED), as ArduPlane's QLOITER does: the
-/// position and altitude at entry; on the ground, `hover_alt_m` above the spot (the twin takes
-/// off to it when armed).
+/// position and altitude at entry, on the ground the spot itself (the vehicle stays landed,
+/// motors at idle, until the throttle stick asks for a climb: [`loiter_takeoff_point`]).
 #[must_use]
-pub fn loiter_entry_point(here: &Vector3<f64>, landed: bool, hover_alt_m: f64) -> Vector3<f64> {
-    let z = if landed { -hover_alt_m } else { here.z };
-    Vector3::new(here.x, here.y, z)
+pub fn loiter_entry_point(here: &Vector3<f64>) -> Vector3<f64> {
+    *here
 }
 
+/// Where QLOITER climbs to from the ground when the throttle stick is above mid (local NED):
+/// `hover_alt_m` above the spot.
+#[must_use]
+pub fn loiter_takeoff_point(here: &Vector3<f64>, hover_alt_m: f64) -> Vector3<f64> {
+    Vector3::new(here.x, here.y, here.z - hover_alt_m)
+}
+
+/// A landing where the vehicle stands (already on the ground, or told to land here).
 fn landing_here(here: &Vector3<f64>) -> Leg {
     Leg::Landing {
         xy: here.xy(),
