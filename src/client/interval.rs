@@ -247,19 +247,12 @@ impl IntervalMachine {
     #[allow(deprecated)]
     fn request(&mut self, now: Instant) -> MavMessage {
         let send = self.retry.send(now);
-        MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
-            param1: self.msgid as f32,
-            param2: 0.0,
-            param3: 0.0,
-            param4: 0.0,
-            param5: 0.0,
-            param6: 0.0,
-            param7: 0.0,
-            command: MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL,
-            target_system: self.target.0.0,
-            target_component: self.target.1.0,
-            confirmation: send - 1,
-        })
+        vtol_link::frame::command_long(
+            self.target,
+            MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL,
+            [self.msgid as f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            send - 1,
+        )
     }
 }
 

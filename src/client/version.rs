@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavProtocolCapability, MavResult};
+use vtol_link::dialect::{MavCmd, MavMessage, MavProtocolCapability, MavResult};
 use vtol_link::{ComponentId, SystemId};
 
 use super::machine::{Inbound, Machine, Retry, Step};
@@ -41,19 +41,12 @@ impl VersionMachine {
 
     fn request(&mut self, now: Instant) -> MavMessage {
         let send = self.retry.send(now);
-        MavMessage::COMMAND_LONG(apm::COMMAND_LONG_DATA {
-            param1: AUTOPILOT_VERSION_ID,
-            param2: 0.0,
-            param3: 0.0,
-            param4: 0.0,
-            param5: 0.0,
-            param6: 0.0,
-            param7: 0.0,
-            command: MavCmd::MAV_CMD_REQUEST_MESSAGE,
-            target_system: self.target.0.0,
-            target_component: self.target.1.0,
-            confirmation: send - 1,
-        })
+        vtol_link::frame::command_long(
+            self.target,
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [AUTOPILOT_VERSION_ID, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            send - 1,
+        )
     }
 }
 
