@@ -110,7 +110,7 @@ mod tests {
         Inbound {
             sys: V.0,
             comp: V.1,
-            msg: MavMessage::AUTOPILOT_VERSION(apm::AUTOPILOT_VERSION_DATA {
+            msg: MavMessage::AUTOPILOT_VERSION(vtol_link::dialect::AUTOPILOT_VERSION_DATA {
                 capabilities: caps,
                 ..Default::default()
             }),
