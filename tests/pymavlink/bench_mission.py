@@ -47,12 +47,13 @@ def twin_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / TICKS
 
 
-def mission(target: tuple[int, int]) -> list:
-    """Home slot, then 99 waypoints on a spiral within 40 m of home at 2-5 m."""
+def mission(target: tuple[int, int], count: int = ITEMS) -> list:
+    """Home slot, then count - 1 waypoints on a spiral around home (within 40 m for 100 items)
+    at 2-5 m."""
     items = [MAV.MAVLink_mission_item_int_message(*target, 0, MAV.MAV_FRAME_GLOBAL_INT,
                                                   MAV.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0,
                                                   HOME[0], HOME[1], 584.0)]
-    for seq in range(1, ITEMS):
+    for seq in range(1, count):
         r, a = 0.4 * seq, 0.5 * seq
         lat = HOME[0] + round(r * math.cos(a) / 0.011131884502145034)
         lon = HOME[1] + round(r * math.sin(a) / 0.011131884502145034 / math.cos(math.radians(HOME[0] * 1e-7)))
@@ -82,7 +83,8 @@ def upload(m, items) -> float:
         m.mav.send(items[msg.seq])
 
 
-def download(m, items) -> float:
+def download(m, items, pos_tol: int = 0) -> float:
+    """Downloads the list and checks it against `items` (positions to within `pos_tol` 1e-7 deg)."""
     t0 = time.perf_counter()
     m.mav.mission_request_list_send(1, 1)
     count = recv(m, "MISSION_COUNT").count
@@ -94,9 +96,11 @@ def download(m, items) -> float:
     if count != len(items):
         raise SystemExit(f"downloaded {count} items, uploaded {len(items)}")
     for a, b in zip(got, items):
-        fa = (a.seq, a.command, a.frame, a.x, a.y, a.z, a.param1, a.param2, a.param3)
-        fb = (b.seq, b.command, b.frame, b.x, b.y, b.z, b.param1, b.param2, b.param3)
-        if fa != fb or math.isnan(a.param4) != math.isnan(b.param4):
+        # Home (item 0) comes back in MAV_FRAME_GLOBAL, as ArduPilot reports it.
+        fa = (a.seq, a.command, a.frame, a.z, a.param1, a.param2, a.param3)
+        fb = (b.seq, b.command, MAV.MAV_FRAME_GLOBAL if b.seq == 0 else b.frame, b.z, b.param1, b.param2, b.param3)
+        far = abs(a.x - b.x) > pos_tol or abs(a.y - b.y) > pos_tol
+        if fa != fb or far or math.isnan(a.param4) != math.isnan(b.param4):
             raise SystemExit(f"item {b.seq} differs: {a} vs {b}")
     return dt
 

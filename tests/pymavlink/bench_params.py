@@ -51,6 +51,12 @@ def timed(args: list[str]) -> tuple[float, float]:
 
 def timed_full(args: list[str]) -> tuple[float, float, str]:
     """Wall and CPU seconds and standard error of one child process, which must exit 0."""
+    wall, cpu, r = timed_run(args)
+    return wall, cpu, r.stderr
+
+
+def timed_run(args: list[str]) -> tuple[float, float, subprocess.CompletedProcess]:
+    """Wall and CPU seconds and the outcome of one child process, which must exit 0."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     r = subprocess.run(args, capture_output=True, text=True, timeout=120)
@@ -59,7 +65,7 @@ def timed_full(args: list[str]) -> tuple[float, float, str]:
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(args)} failed ({r.returncode}): {r.stderr}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, r.stderr
+    return wall, cpu, r
 
 
 def gcs_pull(url: str, out: Path) -> tuple[float, float, float]:
