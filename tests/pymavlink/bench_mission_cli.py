@@ -2,7 +2,7 @@
 """`vtol-gcs mission upload` against a bare pymavlink loop and MAVProxy's `wp load`, side by side
 against one twin over loopback TCP.
 
-    cargo build --release --bins
+    cargo build --release --workspace --bins
     FIRMWARE_SIM_BIN=target/release/firmware-sim VTOL_GCS_BIN=target/release/vtol-gcs \\
         .venv/bin/python tests/pymavlink/bench_mission_cli.py [--items 500] [--runs N]
 
@@ -19,7 +19,8 @@ mission) is uploaded N times by each of, in turn within each run:
   - MAVProxy 1.8.75's `wp load FILE` in one MAVProxy kept running (after its parameter
     download), from the command to its "Sent all N waypoints" line, printed when it answers the
     last request (it does not wait for the ACK); then the list is downloaded by pymavlink and
-    checked (outside the timing: MAVProxy rounds degrees down to 1e-7, so to within 1 unit).
+    checked (outside the timing; positions to within 1e-7 degree, as MAVProxy truncates
+    degrees x 1e7 with int()).
 The twin runs at --speed 0.01, its telemetry at the default wall-clock rates. Client CPU per
 transfer: vtol-gcs from getrusage (whole process), pymavlink from process_time, MAVProxy from
 /proc over the transfer (its idle loop included). Medians and maxima; every run must succeed.
