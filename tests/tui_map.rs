@@ -221,7 +221,7 @@ fn the_track_outlives_the_history() {
 }
 
 /// Entering the Map view asks for the vehicle's mission once; what comes back is drawn, home
-/// and items without a place left out; `r` asks again.
+/// and items without a place left out, a take-off drawn at home; `r` asks again.
 #[test]
 fn the_map_view_downloads_the_mission_and_draws_its_items() {
     use vtol_gcs::mission::Item;
@@ -261,8 +261,10 @@ fn the_map_view_downloads_the_mission_and_draws_its_items() {
         item(MavCmd::MAV_CMD_NAV_VTOL_LAND, -35.363, 149.163),
     ])));
     let seqs: Vec<u16> = app.map.items.iter().map(|i| i.seq).collect();
-    assert_eq!(seqs, vec![2, 4, 5]);
-    assert_eq!(app.map.items[0].at, (-353_610_000, 1_491_610_000));
+    // The take-off at 0, 0 is drawn at home (item 0); the DO_ item is left out.
+    assert_eq!(seqs, vec![1, 2, 4, 5]);
+    assert_eq!(app.map.items[0].at, (-353_600_000, 1_491_600_000));
+    assert_eq!(app.map.items[1].at, (-353_610_000, 1_491_610_000));
     let r =
         ratatui::crossterm::event::KeyEvent::from(ratatui::crossterm::event::KeyCode::Char('r'));
     assert_eq!(app.on_key(r, &state, now), vec![Request::MissionDownload]);

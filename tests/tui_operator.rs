@@ -418,12 +418,15 @@ fn no_battery_monitor_reads_a_dash() {
     assert!(frame.contains("BAT 12.1V 80%"), "{frame}");
 }
 
-/// The daemon asks the vehicle for HOME_POSITION when it first hears it (the twin, like
+/// With an operator present, the daemon asks the vehicle for HOME_POSITION when it first hears
+/// it (the twin, like
 /// ArduPilot, sends it only when asked or when home moves): the home distance shows before
 /// the vehicle arms.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn home_is_asked_for_on_connect() {
     let (running, cancel, mut tasks, _control) = ui_support::start().await;
+    // The terminal UI is the operator the requests are made for.
+    let _operator = running.client.operator_present();
     let state = ui_support::wait_state(&running, "HOME_POSITION", |s| {
         s.vehicles
             .keys()

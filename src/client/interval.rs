@@ -135,8 +135,8 @@ fn heard_ext(s: &VehicleState, key: (SystemId, ComponentId), since: Instant) -> 
         .is_some_and(|m| m.last_at > since)
 }
 
-/// Asks the client's vehicle, at first contact and after each reboot, for HOME_POSITION
-/// (again at each arming while none came: ArduPilot sets home when it arms) and, when
+/// While an operator is present, asks the client's vehicle, at first contact and after each
+/// reboot, for HOME_POSITION (again at each arming while none came: ArduPilot sets home when it arms) and, when
 /// EXTENDED_SYS_STATE has not come within [`STREAM_WAIT`], for that message at 2 Hz. Every
 /// answer is logged; a refusal changes nothing else. Runs until `cancel` fires or the tracker
 /// stops.
@@ -158,6 +158,13 @@ pub async fn ask_on_connect(
         else {
             continue;
         };
+        // Only for an operator's view (the terminal UI holds the guard): a headless daemon
+        // routes, and sends the vehicle nothing its clients did not ask for. An operator who
+        // comes later is served at the next state change, as at first contact.
+        if !client.has_operator() {
+            asked = None;
+            continue;
+        }
         let armed_now = armed && !was_armed;
         was_armed = armed;
         let first = asked != Some((key, reboots));

@@ -365,6 +365,12 @@ impl ClientHandle {
         }
     }
 
+    /// Whether an operator is present (an [`OperatorGuard`] lives).
+    #[must_use]
+    pub fn has_operator(&self) -> bool {
+        self.shared.operators.load(Ordering::Relaxed) > 0
+    }
+
     /// Fire-and-forget frame from the client's identity (e.g. SET_POSITION_TARGET_LOCAL_NED).
     ///
     /// # Errors

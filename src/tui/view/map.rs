@@ -104,13 +104,32 @@ impl MapItem {
 }
 
 /// The navigation items of a downloaded mission that have a place, as the map draws them:
-/// item 0 (home) and items without a position (DO_*, a take-off at 0, 0) are left out.
+/// item 0 (home) and items without a position (DO_*) are left out; a take-off at 0, 0 is drawn
+/// at home.
 #[must_use]
 // The `_INT` frames are deprecated in the dialect, but vehicles still send them.
 #[allow(deprecated)]
 pub fn items_from_mission(items: &[crate::mission::Item], default_radius_m: f32) -> Vec<MapItem> {
+    // A take-off without a place (the usual 0, 0) climbs where the vehicle is: drawn at home,
+    // item 0, so its leg to the first waypoint shows.
+    let home = items.first().map(|h| (h.x, h.y));
+    let placed = |it: &crate::mission::Item| {
+        use vtol_link::dialect::MavCmd as C;
+        let takeoff = [C::MAV_CMD_NAV_TAKEOFF, C::MAV_CMD_NAV_VTOL_TAKEOFF]
+            .iter()
+            .any(|c| *c as u16 == it.command);
+        match home {
+            Some(h) if takeoff && it.x == 0.0 && it.y == 0.0 => crate::mission::Item {
+                x: h.0,
+                y: h.1,
+                ..*it
+            },
+            _ => *it,
+        }
+    };
     items
         .iter()
+        .map(placed)
         .enumerate()
         .skip(1)
         .filter(|(_, it)| it.x != 0.0 || it.y != 0.0)
