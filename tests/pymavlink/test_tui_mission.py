@@ -111,8 +111,8 @@ def test_a_mission_flown_on_the_map(screen_factory, tmp_path):  # noqa: F811
                 highlighted.append(m.group(1))
         home_seen = home_seen or bool(re.search(on_map(r"\bH\b"), plain))
         most = max(most, braille(plain))
-        if mid is None and highlighted[-1:] == ["4"]:
-            mid = plain
+        if highlighted[-1:] == ["4"]:
+            mid = plain  # the last screen on the east leg, the box almost flown
         if re.search(r"sys 1 \S+ disarmed", plain):
             break
         assert time.monotonic() < deadline, f"still flying; highlighted {highlighted}:\n{plain}"
