@@ -497,7 +497,15 @@ fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) 
         prev = Some((x, y));
     }
     ctx.layer();
-    for item in scene.items.iter().filter(|i| i.at != (0, 0)) {
+    // The current item's label last, so that it shows where items share a place (a take-off
+    // and a landing at home).
+    let is_current = |i: &&MapItem| scene.current_seq == Some(i.seq);
+    let placed = scene.items.iter().filter(|i| i.at != (0, 0));
+    for item in placed
+        .clone()
+        .filter(|i| !is_current(i))
+        .chain(placed.filter(is_current))
+    {
         let (x, y) = xy(item.at);
         let label = match item.kind {
             ItemKind::Takeoff => format!("T{}", item.seq),
