@@ -497,16 +497,10 @@ fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) 
         prev = Some((x, y));
     }
     ctx.layer();
-    // The current item's label last, so that it shows where items share a place (a take-off
-    // and a landing at home).
-    let is_current = |i: &&MapItem| scene.current_seq == Some(i.seq);
-    let placed = scene.items.iter().filter(|i| i.at != (0, 0));
-    for item in placed
-        .clone()
-        .filter(|i| !is_current(i))
-        .chain(placed.filter(is_current))
-    {
-        let (x, y) = xy(item.at);
+    // Items that share a place (a take-off and a landing at home) share one label, `T1/L5`,
+    // each part in its own style.
+    let mut places: Vec<(LatLon, Vec<Span<'static>>)> = Vec::new();
+    for item in scene.items.iter().filter(|i| i.at != (0, 0)) {
         let label = match item.kind {
             ItemKind::Takeoff => format!("T{}", item.seq),
             ItemKind::Land => format!("L{}", item.seq),
@@ -520,8 +514,19 @@ fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) 
         } else {
             Style::new().fg(Color::Cyan)
         };
+        let span = Span::styled(label, style);
+        match places.iter_mut().find(|(at, _)| *at == item.at) {
+            Some((_, spans)) => {
+                spans.push(Span::styled("/", Style::new().fg(Color::Cyan)));
+                spans.push(span);
+            }
+            None => places.push((item.at, vec![span])),
+        }
+    }
+    for (at, spans) in places {
+        let (x, y) = xy(at);
         // Beside the point, so that home, target or vehicle on it leave it readable.
-        ctx.print(x + mpc, y, Span::styled(label, style));
+        ctx.print(x + mpc, y, TextLine::from(spans));
     }
     if let Some(h) = scene.home {
         let (x, y) = xy(h);
