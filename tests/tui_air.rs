@@ -152,6 +152,85 @@ fn hud(airspeed: f32) -> MavMessage {
     })
 }
 
+/// ATTITUDE at roll, pitch, yaw in degrees, no rates.
+fn attitude(roll: f32, pitch: f32, yaw: f32) -> MavMessage {
+    MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
+        roll: roll.to_radians(),
+        pitch: pitch.to_radians(),
+        yaw: yaw.to_radians(),
+        ..Default::default()
+    })
+}
+
+/// AHRS2 at roll, pitch, yaw in degrees: ArduPilot's secondary estimate, in the wing frame.
+fn ahrs2(roll: f32, pitch: f32, yaw: f32) -> MavMessage {
+    MavMessage::AHRS2(dialect::AHRS2_DATA {
+        roll: roll.to_radians(),
+        pitch: pitch.to_radians(),
+        yaw: yaw.to_radians(),
+        ..Default::default()
+    })
+}
+
+/// The Flight view's roll, pitch and yaw readouts.
+fn readouts(frame: &str) -> Vec<String> {
+    ["Roll", "Pitch", "Yaw"]
+        .iter()
+        .map(|k| {
+            let line = frame
+                .lines()
+                .find(|l| l.contains(&format!("│{k} ")))
+                .unwrap_or_default();
+            let at = line.find(&format!("│{k} ")).unwrap_or(0);
+            line[at..]
+                .split_whitespace()
+                .nth(1)
+                .unwrap_or_default()
+                .to_owned()
+        })
+        .collect()
+}
+
+/// ArduPlane SITL's tailsitter standing on its tail, as it reported it: ATTITUDE roll 110.6°
+/// pitch 90° yaw 97.6° in a fixed-wing mode (the wing frame), roll 0° pitch 0° yaw −13° in a
+/// Q mode (its VTOL view), AHRS2 in the wing frame throughout. Shown in the hover frame either
+/// way: upright, heading 347°; and so is a wing-frame ATTITUDE in a Q mode when AHRS2 says it
+/// is one (as on SITL's first boot, before its VTOL view is set up).
+#[test]
+fn a_hover_reads_the_same_whichever_frame_the_attitude_comes_in() {
+    let cases = [
+        (
+            "VTOL view, AHRS2",
+            attitude(0.0, 0.0, -13.0),
+            Some(ahrs2(110.6, 89.99, 97.6)),
+        ),
+        ("VTOL view alone", attitude(0.0, 0.0, -13.0), None),
+        (
+            "wing frame, AHRS2",
+            attitude(110.6, 89.99, 97.6),
+            Some(ahrs2(110.6, 89.99, 97.6)),
+        ),
+    ];
+    for (what, att, ahrs) in cases {
+        let mut rec = flight(17);
+        rec.feed(4_960, &ext_state(MavVtolState::MAV_VTOL_STATE_MC));
+        if let Some(a) = &ahrs {
+            rec.feed(4_970, a);
+        }
+        rec.feed(4_980, &att);
+        let mut app = app_with_params();
+        let frame = rec.render(&mut app, 5_000, (80, 24));
+        assert!(frame.contains("(hover frame)"), "{what}:\n{frame}");
+        let r = readouts(&frame);
+        let deg = |s: &str| s.trim_end_matches('°').parse::<f32>().unwrap_or(f32::NAN);
+        assert!(
+            deg(&r[0]).abs() < 0.5 && deg(&r[1]).abs() < 0.5,
+            "{what}: {r:?}\n{frame}"
+        );
+        assert!((deg(&r[2]) + 13.0).abs() < 0.5, "{what}: {r:?}\n{frame}");
+    }
+}
+
 fn aoa(aoa: f32, ssa: f32) -> MavMessage {
     MavMessage::AOA_SSA(dialect::AOA_SSA_DATA {
         time_usec: 0,
@@ -172,6 +251,9 @@ fn airspeed_angle_of_attack_vtol_state_and_transition_progress() {
         4_960,
         &ext_state(MavVtolState::MAV_VTOL_STATE_TRANSITION_TO_FW),
     );
+    // Pitched 45° toward the belly, in ArduPlane's VTOL view (its ATTITUDE in a forward
+    // transition).
+    rec.feed(4_980, &attitude(0.0, -45.0, 0.0));
     let mut app = app_with_params();
     let frame = rec.render(&mut app, 5_000, (80, 24));
     assert!(

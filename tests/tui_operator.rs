@@ -192,11 +192,29 @@ fn plane_heartbeat(mode: u32) -> MavMessage {
     })
 }
 
-/// ArduPlane's tailsitter hovering upright, its attitude as it reports it (the fixed-wing body
-/// frame): `roll +129.9° pitch +89.9° yaw +128.5°`, which the UI once showed as it came.
-fn arduplane_hover(vtol: MavVtolState) -> Recording {
+/// ArduPlane's tailsitter hovering upright, its attitude as it reports it: AHRS2 in the
+/// fixed-wing body frame, `roll +129.9° pitch +89.9° yaw +128.5°` (which the UI once showed as
+/// it came), and ATTITUDE the same in `vtol` FW, its VTOL view of it in MC; or, with
+/// `first_boot`, the fixed-wing frame in MC too, as an ArduPlane SITL sends it before the reboot
+/// that sets its VTOL view up.
+fn arduplane_hover(vtol: MavVtolState, first_boot: bool) -> Recording {
     let mut rec = Recording::new();
     let d = |x: f32| x.to_radians();
+    let wing = [d(129.9), d(89.9), d(128.5)];
+    let view = {
+        let q = nalgebra::UnitQuaternion::from_euler_angles(
+            f64::from(wing[0]),
+            f64::from(wing[1]),
+            f64::from(wing[2]),
+        );
+        let (r, p, y) = vtol_gcs::tui::attitude::wing_to_hover(q).euler_angles();
+        [r as f32, p as f32, y as f32]
+    };
+    let reported = if vtol == MavVtolState::MAV_VTOL_STATE_MC && !first_boot {
+        view
+    } else {
+        wing
+    };
     for ms in (0..5_000).step_by(100) {
         if ms % 1000 == 0 {
             rec.feed(ms, &plane_heartbeat(18));
@@ -204,11 +222,20 @@ fn arduplane_hover(vtol: MavVtolState) -> Recording {
         }
         rec.feed(
             ms,
+            &MavMessage::AHRS2(dialect::AHRS2_DATA {
+                roll: wing[0],
+                pitch: wing[1],
+                yaw: wing[2],
+                ..Default::default()
+            }),
+        );
+        rec.feed(
+            ms,
             &MavMessage::ATTITUDE(dialect::ATTITUDE_DATA {
                 time_boot_ms: ms as u32,
-                roll: d(129.9),
-                pitch: d(89.9),
-                yaw: d(128.5),
+                roll: reported[0],
+                pitch: reported[1],
+                yaw: reported[2],
                 rollspeed: 0.0,
                 pitchspeed: 0.0,
                 yawspeed: 0.0,
@@ -254,9 +281,14 @@ fn arduplane_app() -> App {
 /// forward flight the wing frame is shown as reported, and says so.
 #[test]
 fn a_tailsitter_hovering_reads_upright_in_the_hover_frame() {
-    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC);
+    // Before and after ArduPlane's VTOL view is set up: the same.
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC, true);
+    let mut app = arduplane_app();
+    let first_boot = rec.render(&mut app, 5_000, (80, 24));
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC, false);
     let mut app = arduplane_app();
     let frame = rec.render(&mut app, 5_000, (80, 24));
+    assert_eq!(first_boot, frame);
     assert!(frame.contains("Horizon (hover frame)"), "{frame}");
     assert!(frame.contains("Attitude (hover frame)"), "{frame}");
     // 0.1° short of vertical in the report: 0.1° from upright.
@@ -271,19 +303,19 @@ fn a_tailsitter_hovering_reads_upright_in_the_hover_frame() {
     insta::assert_snapshot!("tailsitter_hover", frame);
 
     // The same vehicle level in forward flight: the wing frame as reported.
-    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_FW);
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_FW, false);
     let frame = rec.render(&mut app, 5_000, (80, 24));
     assert!(frame.contains("Attitude (wing frame)"), "{frame}");
     assert!(frame.contains("Pitch    +89.9°"), "{frame}");
 
     // The twin publishes Q_TAILSIT_* gains without the switch: a tailsitter too.
-    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC);
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC, false);
     let mut twin = app_with(params_with(&[("Q_TAILSIT_ANGLE", 45.0)]));
     let frame = rec.render(&mut twin, 5_000, (80, 24));
     assert!(frame.contains("Attitude (hover frame)"), "{frame}");
 
     // Not a tailsitter (no Q_TAILSIT_ENABLE, a fixed-wing MAV_TYPE): as reported, unlabelled.
-    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC);
+    let rec = arduplane_hover(MavVtolState::MAV_VTOL_STATE_MC, true);
     let mut plain = app_with(params_with(&[]));
     let frame = rec.render(&mut plain, 5_000, (80, 24));
     assert!(frame.contains(" Attitude and position "), "{frame}");

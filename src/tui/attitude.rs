@@ -1,15 +1,20 @@
-//! The attitude as the operator reads it. ArduPlane reports a tailsitter's attitude (ATTITUDE,
-//! ATTITUDE_QUATERNION) in the fixed-wing body frame — x out of the nose, z out of the belly —
-//! whatever it is doing, and the twin reports it the same way. Hovering on its tail, that frame
-//! reads pitch +90° with roll and yaw degenerate (only their difference means anything), so a
-//! horizon drawn from it is useless just when the operator needs it.
+//! The attitude as the operator reads it. ArduPlane reports a tailsitter's attitude in the
+//! fixed-wing body frame — x out of the nose, z out of the belly — except in one message at
+//! some times: while it flies as a multicopter (a VTOL mode, or a forward transition still
+//! pitching down) its ATTITUDE is in its **VTOL view** (`GCS_MAVLINK_Plane::send_attitude`,
+//! `QuadPlane::show_vtol_view`), the fixed-wing frame turned by −90° of pitch.
+//! ATTITUDE_QUATERNION, AHRS2 and the headings stay in the fixed-wing frame, and so does
+//! ATTITUDE on the wing and in a back transition. The twin reports the same way. Hovering on its
+//! tail, the fixed-wing frame reads pitch +90° with roll and yaw degenerate (only their
+//! difference means anything), so a horizon drawn from it is useless just when the operator
+//! needs it.
 //!
 //! A tailsitter (`Q_TAILSIT_ENABLE` > 0 in its parameters — or other `Q_TAILSIT_*` ones,
 //! which ArduPilot shows only while it is set —, or a `MAV_TYPE_VTOL_TAILSITTER*` heartbeat;
 //! ArduPlane's own is `MAV_TYPE_FIXED_WING` while `Q_MAV_TYPE` is 0) in hover (EXTENDED_SYS_STATE's `vtol_state` MC or a forward transition under way,
-//! or, without that message, a Q mode) is therefore shown in the **hover frame**: the wing frame
-//! turned by −90° of pitch about the wing's y axis (the right wing), as ArduPilot's own
-//! tailsitter controller views it. In that frame
+//! or, without that message, a Q mode) is therefore shown in the **hover frame**, which is that
+//! VTOL view: the wing frame turned by −90° of pitch about the wing's y axis (the right wing),
+//! as ArduPilot's own tailsitter controller views it. In that frame
 //!
 //! - standing upright on the tail reads roll 0°, pitch 0°: a level horizon;
 //! - x (the hover "nose") is the direction the **belly** faces — where the vehicle goes when it
@@ -22,20 +27,24 @@
 //!
 //! In forward flight (and during a back transition, which the fixed-wing controller flies) the
 //! wing frame is shown as reported. The readouts say which frame they are in. The quaternion is
-//! preferred when the vehicle streams ATTITUDE_QUATERNION (no gimbal lock near 90° of pitch);
-//! otherwise it is built from ATTITUDE's Euler angles, which hold the rotation exactly even
-//! where the split between roll and yaw is arbitrary.
+//! preferred when the vehicle streams ATTITUDE_QUATERNION (no gimbal lock near 90° of pitch,
+//! always the wing frame) and turned; otherwise ATTITUDE's angles, which in hover are the
+//! VTOL view already when the vehicle is an ArduPilot — unless AHRS2 (always the wing frame)
+//! says they are not, as on an ArduPlane SITL's first boot with a tailsitter's parameters
+//! given as defaults, before the reboot that sets its VTOL view up — and are turned otherwise.
 
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
-use vtol_link::dialect::{MavMessage, MavType, MavVtolState};
+use vtol_link::dialect::{MavAutopilot, MavMessage, MavType, MavVtolState};
 use vtol_link::protocol::id::{ATTITUDE, EXTENDED_SYS_STATE};
 
 use crate::tracker::state::{VehicleState, VehicleView};
 
 /// ATTITUDE_QUATERNION's message id.
 const ATTITUDE_QUATERNION: u32 = 31;
+/// AHRS2's message id: ArduPilot's secondary estimate, always in the wing frame.
+const AHRS2: u32 = 178;
 /// A quaternion this much older than the last ATTITUDE is no longer streamed.
 const QUATERNION_FRESH: Duration = Duration::from_secs(1);
 
@@ -137,8 +146,20 @@ fn euler(q: &UnitQuaternion<f64>) -> [f32; 3] {
     [r as f32 + 0.0, p as f32 + 0.0, y as f32 + 0.0]
 }
 
+/// Where a reported attitude came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    /// ATTITUDE_QUATERNION: the wing frame.
+    Quaternion,
+    /// ATTITUDE's Euler angles: the wing frame, or an ArduPilot tailsitter's VTOL view.
+    Attitude,
+}
+
 /// The reported attitude of `v` (quaternion and body rates), ATTITUDE_QUATERNION when streamed.
-fn reported(state: &VehicleState, v: &VehicleView) -> Option<(UnitQuaternion<f64>, [f32; 3])> {
+fn reported(
+    state: &VehicleState,
+    v: &VehicleView,
+) -> Option<(UnitQuaternion<f64>, [f32; 3], Source)> {
     let key = |id| (v.system_id, v.component_id, id);
     let att_at = state.messages.get(&key(ATTITUDE)).map(|s| s.last_at);
     if let Some(s) = state.messages.get(&key(ATTITUDE_QUATERNION))
@@ -155,12 +176,42 @@ fn reported(state: &VehicleState, v: &VehicleView) -> Option<(UnitQuaternion<f64
             return Some((
                 UnitQuaternion::from_quaternion(raw),
                 [q.rollspeed, q.pitchspeed, q.yawspeed],
+                Source::Quaternion,
             ));
         }
     }
     let a = v.attitude?;
     let [r, p, y] = a.rpy_rad.map(f64::from);
-    Some((UnitQuaternion::from_euler_angles(r, p, y), a.rates_rad_s))
+    Some((
+        UnitQuaternion::from_euler_angles(r, p, y),
+        a.rates_rad_s,
+        Source::Attitude,
+    ))
+}
+
+/// Whether ATTITUDE (`q_att`) of a tailsitter in hover is its VTOL view already: told by AHRS2
+/// (the wing frame) when it is streamed, which of the wing frame or its VTOL view ATTITUDE is
+/// nearer; otherwise ArduPilot's convention for an ArduPilot vehicle, the wing frame for others.
+fn attitude_is_vtol_view(
+    state: &VehicleState,
+    v: &VehicleView,
+    q_att: &UnitQuaternion<f64>,
+) -> bool {
+    let key = |id| (v.system_id, v.component_id, id);
+    let att_at = state.messages.get(&key(ATTITUDE)).map(|s| s.last_at);
+    if let Some(s) = state.messages.get(&key(AHRS2))
+        && att_at.is_none_or(|a| a.saturating_duration_since(s.last_at) <= QUATERNION_FRESH)
+        && let Ok(MavMessage::AHRS2(a)) = s.last.decode_lenient().map(|l| l.msg)
+        && [a.roll, a.pitch, a.yaw].iter().all(|x| x.is_finite())
+    {
+        let wing = UnitQuaternion::from_euler_angles(
+            f64::from(a.roll),
+            f64::from(a.pitch),
+            f64::from(a.yaw),
+        );
+        return q_att.angle_to(&wing_to_hover(wing)) < q_att.angle_to(&wing);
+    }
+    v.autopilot == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA as u8
 }
 
 /// The attitude of `v` as the operator should read it; `q_tailsit_enable` is the vehicle's
@@ -171,7 +222,7 @@ pub fn shown(
     v: &VehicleView,
     q_tailsit_enable: Option<f32>,
 ) -> Option<Shown> {
-    let (q, rates) = reported(state, v)?;
+    let (q, rates, source) = reported(state, v)?;
     if !is_tailsitter(v, q_tailsit_enable) {
         return Some(Shown {
             rpy_rad: v.attitude.map_or_else(|| euler(&q), |a| a.rpy_rad),
@@ -180,8 +231,14 @@ pub fn shown(
         });
     }
     Some(if in_hover(state, v) {
+        let already = source == Source::Attitude && attitude_is_vtol_view(state, v, &q);
         Shown {
-            rpy_rad: euler(&wing_to_hover(q)),
+            rpy_rad: if already {
+                v.attitude.map_or_else(|| euler(&q), |a| a.rpy_rad)
+            } else {
+                euler(&wing_to_hover(q))
+            },
+            // ArduPilot's ATTITUDE keeps the wing frame's rates in its VTOL view.
             rates_rad_s: wing_rates_to_hover(rates),
             frame: AttFrame::Hover,
         }
@@ -192,6 +249,17 @@ pub fn shown(
             frame: AttFrame::Wing,
         }
     })
+}
+
+/// Whether the shown vehicle's ATTITUDE history is to be turned into the hover frame for the
+/// charts: not when ATTITUDE comes in the VTOL view already (then the charts show ATTITUDE as
+/// reported, the hover's samples in the hover frame and the wing's in the wing frame).
+#[must_use]
+pub fn turn_history(state: &VehicleState, v: &VehicleView) -> bool {
+    match reported(state, v) {
+        Some((q, _, Source::Attitude)) => !attitude_is_vtol_view(state, v, &q),
+        _ => true,
+    }
 }
 
 /// The nose's angle above the horizon, rad, from a wing-frame attitude (+π/2: vertical).

@@ -68,29 +68,35 @@ def f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-# ATTITUDE is in ArduPilot's fixed-wing body frame (x the nose, z the belly), as ArduPlane reports
-# a tailsitter: hovering, the pitch is near 90° and roll and yaw are near gimbal lock. These
-# read a hover from it.
+# Hovering, ATTITUDE is ArduPlane's VTOL view of a tailsitter (docs/compatibility.md): the
+# fixed-wing frame pitched 90° down, so upright on the tail reads roll 0°, pitch 0°, its x axis
+# through the belly and its z axis along the nose reversed (the thrust axis, down).
+
+
+def _thrust_axis_ned(a) -> tuple[float, float, float]:
+    """The nose (thrust axis, up in a hover) in NED, from a VTOL-view ATTITUDE: minus its z axis."""
+    sr, cr = math.sin(a.roll), math.cos(a.roll)
+    sp, cp = math.sin(a.pitch), math.cos(a.pitch)
+    sy, cy = math.sin(a.yaw), math.cos(a.yaw)
+    # Third column of Rz(yaw)·Ry(pitch)·Rx(roll), negated.
+    return (-(cr * sp * cy + sr * sy), -(cr * sp * sy - sr * cy), -(cr * cp))
 
 
 def tilt_rad(a) -> float:
-    """How far the nose (the thrust axis) leans from vertical, rad."""
-    return math.pi / 2 - a.pitch
+    """How far the nose (the thrust axis) leans from vertical, rad (a VTOL-view ATTITUDE)."""
+    return math.acos(max(-1.0, min(1.0, -_thrust_axis_ned(a)[2])))
 
 
 def nose_lean_rad(a, bearing_rad: float) -> float:
-    """How far the nose leans from vertical toward the horizontal bearing `bearing_rad`, rad."""
-    n, e = math.cos(a.pitch) * math.cos(a.yaw), math.cos(a.pitch) * math.sin(a.yaw)
+    """How far the nose leans from vertical toward the horizontal bearing `bearing_rad`, rad
+    (a VTOL-view ATTITUDE)."""
+    n, e, _ = _thrust_axis_ned(a)
     return math.asin(max(-1.0, min(1.0, n * math.cos(bearing_rad) + e * math.sin(bearing_rad))))
 
 
 def belly_heading_rad(a) -> float:
-    """The heading of the belly (the fixed-wing z axis), rad: a hover's heading, well defined
-    while the nose is near vertical."""
-    sr, cr = math.sin(a.roll), math.cos(a.roll)
-    sp = math.sin(a.pitch)
-    sy, cy = math.sin(a.yaw), math.cos(a.yaw)
-    return math.atan2(cr * sp * sy - sr * cy, cr * sp * cy + sr * sy)
+    """The heading of the belly, rad: a hover's heading, the yaw of a VTOL-view ATTITUDE."""
+    return a.yaw
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """Disturbance rejection while hovering (the paper's Figs 8-10): a torque push on one axis through
 the SIM_PUSH_* parameters shows up in ATTITUDE and the controller brings the attitude back.
-ATTITUDE is in the fixed-wing body frame (pitch near 90° in the hover): a roll or pitch push
-tilts the nose off vertical, a yaw push turns the belly's heading."""
+ATTITUDE is ArduPlane's VTOL view of a tailsitter in the hover (upright reads roll and pitch 0°):
+a roll or pitch push tilts the nose off vertical, a yaw push turns the belly's heading."""
 
 import math
 

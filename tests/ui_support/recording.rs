@@ -19,6 +19,8 @@ use vtol_link::{ComponentId, Frame, LinkId, LinkStatsSnapshot, SystemId};
 pub const VEHICLE_LINK: LinkId = LinkId(1);
 /// The link of the daemon's own client, in a recording [`Recording::with_own_traffic`].
 pub const OWN_LINK: LinkId = LinkId(2);
+/// ArduPlane's mode numbers from QSTABILIZE (17) on are the Q (VTOL) modes.
+const Q_MODES_FROM: u32 = 17;
 
 /// The tracker state and history after frames applied at known times.
 pub struct Recording {
@@ -114,8 +116,9 @@ impl Recording {
 
     /// Vehicle 1 from `from_ms` to `to_ms`: 1 Hz heartbeat, 50 Hz attitude, 10 Hz outputs and
     /// position, from a function of time giving (mode, armed, roll, pitch, yaw, altitude) with
-    /// the attitude in the tailsitter's hover frame (upright is level), reported in the wing
-    /// frame as ArduPlane reports it.
+    /// the attitude in the tailsitter's hover frame (upright is level), reported as ArduPlane
+    /// reports it: ATTITUDE in its VTOL view (the hover frame) in a Q mode, in the wing frame
+    /// otherwise; the body rates in the wing frame.
     pub fn fly(
         &mut self,
         from_ms: u64,
@@ -125,8 +128,11 @@ impl Recording {
         self.fly_frames(from_ms, to_ms, |t| {
             let (mode, armed, roll, pitch, yaw, alt) = f(t);
             let [r, p, y] = [roll, pitch, yaw].map(f64::from);
-            let q = hover_to_wing(nalgebra::UnitQuaternion::from_euler_angles(r, p, y));
-            let (r, p, y) = q.euler_angles();
+            let (r, p, y) = if mode >= Q_MODES_FROM {
+                (r, p, y)
+            } else {
+                hover_to_wing(nalgebra::UnitQuaternion::from_euler_angles(r, p, y)).euler_angles()
+            };
             // Hover rates (0.01, −0.02, 0) about the wing's axes: (−r, q, p).
             let rates = [0.0, -0.02, 0.01];
             (

@@ -1,6 +1,7 @@
 //! Telemetry: which messages the twin can produce, how each is built from a [`Telemetry`]
-//! snapshot (NED at the wire, attitudes and body axes in ArduPilot's fixed-wing body frame,
-//! converted here through [`crate::model::frames`]), and the per-link schedule of rates.
+//! snapshot (NED at the wire, attitudes and body axes in ArduPilot's fixed-wing body frame —
+//! ATTITUDE's angles in its VTOL view while hovering —, converted here through
+//! [`crate::model::frames`]), and the per-link schedule of rates.
 //!
 //! A message's rate on a link is, in order of precedence: a `SET_MESSAGE_INTERVAL` for that
 //! message on that link; the rate of its ArduPlane stream group, set on that link by
@@ -401,7 +402,7 @@ fn sensors() -> apm::MavSysStatusSensor {
 pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMessage> {
     use apm::MavMessage as M;
     let ms = time_boot_ms(t);
-    // ArduPlane reports a tailsitter in its fixed-wing body frame (nose up on the tail).
+    // ArduPlane reports a tailsitter's rates in its fixed-wing body frame, in every message.
     let [p, q, r] = body_vector(&t.omega_est_rad_s);
     Some(match msgid {
         id::SYS_STATUS => {
@@ -444,7 +445,12 @@ pub fn build(msgid: u32, t: &Telemetry, errors_comm: u16) -> Option<apm::MavMess
             time_boot_ms: ms,
         }),
         id::ATTITUDE => {
-            let a = fixed_wing::attitude(&t.euler_est);
+            // In ArduPlane's VTOL view while flying as a multicopter (fixed_wing.rs).
+            let fw = fixed_wing::attitude(&t.euler_est);
+            let a = match t.vtol_state {
+                VtolState::Mc | VtolState::TransitionToFw => fixed_wing::vtol_view(&fw),
+                VtolState::Fw | VtolState::TransitionToMc => fw,
+            };
             M::ATTITUDE(apm::ATTITUDE_DATA {
                 time_boot_ms: ms,
                 roll: a.roll_rad as f32,

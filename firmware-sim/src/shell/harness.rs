@@ -11,7 +11,7 @@
 //! | request | reply |
 //! |---|---|
 //! | `advance SECONDS` | `{"t_us":N}` once the twin has flown SECONDS more of sim time (rounded to whole 1 ms physics steps) and every frame that became due on the way is queued on its link. Lockstep only. |
-//! | `state` | the true state: `{"t_us", "armed", "mode", "system_status", "landed", "position_ned_m": [n, e, d], "altitude_m", "velocity_ned_m_s": [..], "roll_rad", "pitch_rad", "yaw_rad", "rates_frd_rad_s": [p, q, r], "pwm_us": [5]}`, MAVLink's frames: NED, and ArduPilot's fixed-wing body frame for the attitude and rates (nose x, right wing y, belly z; pitch 90° on the tail), as ATTITUDE reports them |
+//! | `state` | the true state: `{"t_us", "armed", "mode", "system_status", "landed", "position_ned_m": [n, e, d], "altitude_m", "velocity_ned_m_s": [..], "roll_rad", "pitch_rad", "yaw_rad", "rates_frd_rad_s": [p, q, r], "pwm_us": [5]}`, MAVLink's frames: NED, and ArduPilot's fixed-wing body frame for the attitude and rates (nose x, right wing y, belly z; pitch 90° on the tail), as ATTITUDE reports them on the wing |
 //! | `param NAME VALUE` | `{"name", "value"}`: the value stored, after the same checks and effects as a PARAM_SET; every GCS link gets its PARAM_VALUE |
 //!
 //! Anything else, a bad number or a refused value gets `{"error": "why"}`, and the connection

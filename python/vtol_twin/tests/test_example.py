@@ -20,13 +20,14 @@ def ack_of(m, command):
 
 
 def attitude_until(m, end_ms):
-    """(time_boot_ms, tilt) of every ATTITUDE up to sim time end_ms. ATTITUDE is in ArduPilot's
-    fixed-wing body frame (x the nose): hovering, the pitch is 90° less the nose's tilt."""
+    """(time_boot_ms, tilt) of every ATTITUDE up to sim time end_ms. Hovering, ATTITUDE is
+    ArduPlane's VTOL view of a tailsitter (upright reads roll 0°, pitch 0°): the nose's tilt from
+    vertical is acos(cos roll · cos pitch)."""
     out = []
     while not out or out[-1][0] < end_ms:
         a = m.recv_match(type="ATTITUDE", blocking=True, timeout=5)
         assert a is not None, f"ATTITUDE stopped at {out[-1:]}"
-        out.append((a.time_boot_ms, math.pi / 2 - a.pitch))
+        out.append((a.time_boot_ms, math.acos(max(-1.0, min(1.0, math.cos(a.roll) * math.cos(a.pitch))))))
     return out
 
 

@@ -162,6 +162,9 @@ struct Past<'h> {
     from: f64,
     /// The frame the attitude is shown in now (a tailsitter's hover frame is converted).
     frame: AttFrame,
+    /// Whether ATTITUDE's history is turned into that hover frame (not when the vehicle
+    /// reports ATTITUDE in its VTOL view already, as ArduPilot does).
+    turn: bool,
 }
 
 impl Past<'_> {
@@ -171,7 +174,7 @@ impl Past<'_> {
                 .iter()
                 .filter(|(t, _)| *t >= self.from)
                 .map(|(t, a)| {
-                    let a = if self.frame == AttFrame::Hover {
+                    let a = if self.frame == AttFrame::Hover && self.turn {
                         let [r, p, y] = [a[0], a[1], a[2]].map(f64::from);
                         let q = wing_to_hover(nalgebra::UnitQuaternion::from_euler_angles(r, p, y));
                         let (r, p, y) = q.euler_angles();
@@ -213,6 +216,7 @@ fn past<'h>(app: &App, snap: &Snapshot<'h>, v: &VehicleView) -> Past<'h> {
         now_t,
         from: now_t - app.window_s,
         frame: shown_attitude(app, snap, v).map_or(AttFrame::Body, |s| s.frame),
+        turn: crate::tui::attitude::turn_history(snap.state, v),
     }
 }
 

@@ -1,6 +1,6 @@
-//! ArduPilot's fixed-wing body frame: the frame every attitude the twin reports is in.
+//! ArduPilot's fixed-wing body frame: the frame the twin reports its attitude in.
 //!
-//! ArduPlane reports a tailsitter in its fixed-wing body frame whatever it flies: x along the
+//! ArduPlane reports a tailsitter in its fixed-wing body frame: x along the
 //! nose, y along the right wing, z down through the belly. Standing or hovering on its tail the
 //! nose points up (pitch 90°); level on the wing the pitch is the angle of attack and the heading
 //! the course.
@@ -20,8 +20,17 @@
 //! so ArduPilot's VTOL view (the fixed-wing frame pitched by 90°, its x through the belly) is
 //! the hover frame turned half a turn about the vertical.
 //!
+//! ArduPlane's ATTITUDE message (and only it: not ATTITUDE_QUATERNION, VFR_HUD's heading,
+//! AHRS2 or GLOBAL_POSITION_INT's `hdg`) switches to that VTOL view while the tailsitter flies
+//! as a multicopter (`GCS_MAVLINK_Plane::send_attitude`, `QuadPlane::show_vtol_view`: a VTOL
+//! mode, or a forward transition still pitching down; not a back transition still pitching
+//! up): upright on the tail reads roll 0°, pitch 0°, the yaw the belly's heading. Its body
+//! rates stay the fixed-wing frame's. [`vtol_view`] gives those angles.
+//!
 //! Only what the twin reports goes through here: the model, the controller and `simulate` keep
 //! the paper's frames.
+
+use std::f64::consts::FRAC_PI_2;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
@@ -83,7 +92,25 @@ pub fn rotation_to_ned(e: &Euler) -> Matrix3<f64> {
 /// R_fw→NED as ArduPilot's `Matrix3::to_euler` takes them (ZYX).
 #[must_use]
 pub fn attitude(e: &Euler) -> FixedWingAttitude {
-    let r = rotation_to_ned(e);
+    from_matrix(&rotation_to_ned(e))
+}
+
+/// ArduPilot's VTOL view of a fixed-wing attitude (`AP_AHRS_View` with `ROTATION_PITCH_90`):
+/// R_view = R_fw→NED · Ry(90°)ᵀ, its roll, pitch and yaw taken as [`attitude`] takes them.
+/// Its x axis is the fixed-wing frame's z (the belly), its z the nose reversed.
+#[must_use]
+pub fn vtol_view(a: &FixedWingAttitude) -> FixedWingAttitude {
+    let [w, x, y, z] = a.quaternion;
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+    let r = q.to_rotation_matrix().into_inner()
+        * Rotation3::from_euler_angles(0.0, FRAC_PI_2, 0.0)
+            .into_inner()
+            .transpose();
+    from_matrix(&r)
+}
+
+/// Roll, pitch, yaw and quaternion of a rotation to NED, as ArduPilot's `Matrix3::to_euler`.
+fn from_matrix(r: &Matrix3<f64>) -> FixedWingAttitude {
     let pitch = -r[(2, 0)].clamp(-1.0, 1.0).asin();
     let (roll, yaw) = if r[(2, 1)].hypot(r[(2, 2)]) < GIMBAL_LOCK_COS {
         // R = Rz(ψ)·Ry(±π/2) with the roll put to 0: the right wing's column is (−sψ, cψ, 0).
@@ -91,7 +118,7 @@ pub fn attitude(e: &Euler) -> FixedWingAttitude {
     } else {
         (r[(2, 1)].atan2(r[(2, 2)]), r[(1, 0)].atan2(r[(0, 0)]))
     };
-    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
     let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
     FixedWingAttitude {
         roll_rad: wrap_pi(roll),
@@ -149,6 +176,47 @@ mod tests {
         // A small tilt leaves the pitch near 90°.
         let a = attitude(&Euler::new(0.3, 0.02, -0.01));
         assert!((a.pitch_rad.to_degrees() - 90.0).abs() < 1.5, "{a:?}");
+    }
+
+    #[test]
+    fn the_vtol_view_of_a_hover_is_level_facing_the_belly() {
+        for psi in [0.0, 0.5, -2.0, PI] {
+            let fw = attitude(&Euler::new(psi, 0.0, 0.0));
+            let v = vtol_view(&fw);
+            assert!(v.roll_rad.abs() < 1e-9 && v.pitch_rad.abs() < 1e-9, "{v:?}");
+            // The belly's heading, which is the fixed-wing yaw on the tail.
+            assert!(close(v.yaw_rad, fw.yaw_rad), "ψ {psi}: {v:?} {fw:?}");
+        }
+        // ArduPlane SITL's tailsitter standing on its tail, read in MANUAL (fixed-wing frame)
+        // and QSTABILIZE (VTOL view): roll 110.6° pitch 90° yaw 97.6° is roll 0°, pitch 0°,
+        // yaw −13.0° (the yaw minus the roll).
+        let fw = {
+            let r = Euler::new(
+                97.6_f64.to_radians(),
+                90_f64.to_radians() - 1e-7,
+                110.6_f64.to_radians(),
+            )
+            .rotation_body_to_inertial();
+            from_matrix(&r)
+        };
+        let v = vtol_view(&fw);
+        assert!(
+            v.roll_rad.to_degrees().abs() < 0.01 && v.pitch_rad.to_degrees().abs() < 0.01,
+            "{v:?}"
+        );
+        assert!((v.yaw_rad.to_degrees() + 13.0).abs() < 0.01, "{v:?}");
+    }
+
+    #[test]
+    fn the_vtol_view_of_level_flight_on_the_wing_is_nose_down() {
+        // On the wing at 5.5° of pitch the VTOL view reads pitch 5.5° − 90°, yaw the course.
+        let alpha = 5.5_f64.to_radians();
+        let v = vtol_view(&attitude(&on_the_wing(0.7, alpha, 0.0)));
+        assert!(
+            (v.pitch_rad.to_degrees() - (5.5 - 90.0)).abs() < 1e-6,
+            "{v:?}"
+        );
+        assert!(close(v.yaw_rad, 0.7), "{v:?}");
     }
 
     #[test]

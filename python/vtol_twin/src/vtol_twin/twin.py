@@ -154,7 +154,8 @@ class TwinOptions:
 class TrueState:
     """The vehicle's true state (not what its sensors or estimator say), in MAVLink's frames:
     NED position and velocity; roll/pitch/yaw (radians) and body rates in ArduPilot's fixed-wing
-    body frame, as ATTITUDE reports them (x the nose, z the belly: pitch 90° on the tail)."""
+    body frame (x the nose, z the belly: pitch 90° on the tail), as ATTITUDE reports them on the
+    wing (hovering, ATTITUDE is ArduPlane's VTOL view instead)."""
 
     t_us: int
     armed: bool
