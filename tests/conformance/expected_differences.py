@@ -87,10 +87,6 @@ EXPECTED_DIFFERENCES: list[dict] = [
     {"name": "unsolicited-item", "scenario": "mission_errors", "keys": r"protocol:unsolicited_item",
      "arduplane": "answers a mission item sent outside an upload with MISSION_ACK ERROR",
      "twin": "ignores it"},
-    # -- box_short_land ----------------------------------------------------------------------
-    {"name": "vtol-land-too-short", "scenario": "box_short_land", "keys": r"protocol:arm(\.reasons)?",
-     "arduplane": "refuses to arm: \"PreArm: VTOL land too short, min 30m\" (FAILED)",
-     "twin": "arms and flies it"},
     # -- reboot ------------------------------------------------------------------------------
     {"name": "reboot-armed-result", "scenario": "reboot", "keys": r"protocol:armed\.reboot",
      "arduplane": "FAILED while armed", "twin": "DENIED while armed"},

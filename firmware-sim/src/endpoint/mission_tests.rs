@@ -737,4 +737,23 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
             assert!(!ep.vehicle().telemetry().armed);
         }
     }
+    // With ArduPlane SITL's landing airspeed (its AIRSPEED_CRUISE of 22 m/s, as TECS_LAND_ARSPD
+    // here) the minimum is SITL's 30 m, and its box mission's 29.9 m last leg is refused.
+    let mut ep = endpoint();
+    ep.set_param("TECS_LAND_ARSPD", 22.0).unwrap();
+    let [home, takeoff] = home_and_vtol_takeoff(20.0);
+    let plan = [
+        home,
+        takeoff,
+        item(mcmd::NAV_WAYPOINT, 100.0, 0.0, 20.0),
+        item(mcmd::NAV_VTOL_LAND, 70.1, 0.0, 0.0),
+    ];
+    upload(&mut ep, &plan);
+    let out = run_until(&mut ep, 3_000_000);
+    assert_eq!(prearm_healthy(&out), Some(false));
+    assert!(
+        texts(&out)
+            .iter()
+            .any(|t| t.text.to_str().unwrap() == "PreArm: VTOL land too short, min 30m")
+    );
 }

@@ -119,12 +119,19 @@ impl Endpoint {
     }
 
     /// ArduPlane's pre-arm mission checks ([`vtol_land_too_short`]): the reason the stored
-    /// mission stops arming, if it does.
+    /// mission stops arming, if it does. The landing airspeed is `TECS_LAND_ARSPD` when
+    /// positive, else the cruise airspeed, as ArduPlane takes it.
     pub(super) fn mission_prearm(&self) -> Option<String> {
+        let land = self.params.value("TECS_LAND_ARSPD");
+        let speed = if land > 0.0 {
+            land
+        } else {
+            self.params.value("TRIM_ARSPD_CM") / 100.0
+        };
         vtol_land_too_short(
             &self.mission,
             &self.origin,
-            self.params.value("TRIM_ARSPD_CM") / 100.0,
+            speed,
             self.params.value("Q_TRANS_DECEL"),
         )
     }

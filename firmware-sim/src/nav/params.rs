@@ -231,6 +231,7 @@ pub static TABLE: &[ParamDef] = &[
     def("HOV_ATT_ACC", F32, "rad/s/s", (0.5, 50.0), 12.0, RW, "Hover hold: attitude law's angular acceleration budget"),
     def("HOV_YAW_ACC", F32, "rad/s/s", (0.5, 100.0), 24.0, RW, "Hover hold: heading law's angular acceleration budget"),
     def("Q_WP_RADIUS", F32, "cm", (5.0, 1000.0), 200.0, RW, "In a hover a mission point is reached within this (an item's param2 overrides)"),
+    def("TECS_LAND_ARSPD", F32, "m/s", (-1.0, 127.0), -1.0, RW, "Airspeed of a fixed-wing landing approach (-1: the cruise airspeed); the twin lands vertically, so only the VTOL-land pre-arm check reads it, as ArduPlane's does"),
     def("Q_TRANS_DECEL", F32, "m/s/s", (0.2, 10.0), 6.0, RW, "Deceleration of the VTOL landing approach (ArduPlane's tailsitter default): its distances are v^2 / (2 Q_TRANS_DECEL)"),
     def("RTL_RADIUS", I16, "m", (-32767.0, 32767.0), 0.0, RW, "RTL's loiter radius (0: WP_LOITER_RAD); with Q_RTL_MODE 1 QRTL starts within it"),
     def("RTL_ALTITUDE", F32, "m", (-1.0, 1000.0), 100.0, RW, "RTL flies home this high above home; negative: at the altitude it starts at"),
