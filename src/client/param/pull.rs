@@ -17,6 +17,14 @@
 //! A request unanswered for its timeout (1.25 × the round trip, or the slowest recent answer
 //! to a request if that is longer; doubling after a few tries) is asked again.
 //!
+//! The vehicle's own pacing is waited out on every link (ArduPilot's stream pauses about 100 ms
+//! every couple of hundred values): a stream counts as over only after [`FAST_PAUSE`] of quiet
+//! (or four times its longest gap while it has lost nothing), and reads never go out more than
+//! [`CLEAN_WINDOW`] copies at a time (ArduPilot queues 20, for every link together, and drops
+//! the rest). A stream that ends with more than [`RELIST_MISSING`] values missing is asked for
+//! again whole: on a lossy link with a long round trip a pass of the stream brings most of the
+//! rest far sooner than a window of reads a round trip.
+//!
 //! Echoes with index 65535 (a by-name answer or another client's write) update values by name.
 
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
@@ -78,11 +86,13 @@ const FAST_PAUSE: Duration = Duration::from_millis(300);
 /// longest gap so far: a vehicle's main loop (ArduPilot's, a few values every 2.5 ms) now and
 /// then pauses for longer.
 const GAP_FACTOR: u32 = 4;
+/// The longest pause of the vehicle's own pacing waited out as such.
+const MAX_PACING_PAUSE: Duration = Duration::from_secs(1);
 /// How long a vehicle takes to answer one queued read (ArduPilot's IO thread: one a
 /// millisecond).
 const READ_SERVICE: Duration = Duration::from_millis(1);
-/// On a fast link, a stream that stops with more than this many values missing is asked for
-/// again (PARAM_REQUEST_LIST) rather than read index by index…
+/// A stream that stops with more than this many values missing is asked for again
+/// (PARAM_REQUEST_LIST) rather than read index by index…
 const RELIST_MISSING: usize = 2 * CLEAN_WINDOW;
 /// …at most this often.
 const RELIST_EVERY: Duration = Duration::from_secs(1);
@@ -240,18 +250,41 @@ impl PullMachine {
 
     fn quiet(&self) -> Duration {
         let quiet = self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET);
-        if self.fast && self.holes_seen == 0 {
-            // Nothing lost on a fast link: a pause is the vehicle's pacing (ArduPilot's
-            // stream stops for about 100 ms every couple of hundred values), not its end.
-            quiet.max(self.gap_max * GAP_FACTOR).max(FAST_PAUSE)
+        if self.holes_seen == 0 {
+            // Nothing lost: a pause is the vehicle's pacing (ArduPilot's stream stops for
+            // about 100 ms every couple of hundred values), not its end.
+            quiet
+                .max((self.gap_max * GAP_FACTOR).min(MAX_PACING_PAUSE))
+                .max(FAST_PAUSE)
         } else {
+            // Values lost: a gap may be a loss as well as a pause. A pause taken for the end
+            // costs little: the reads of the last indices start early, and the stream is asked
+            // for again only after a vehicle's own pause of quiet (see `on_time`).
             quiet
         }
     }
 
-    /// Indices that may be outstanding at once.
-    fn window(&self) -> usize {
-        if self.fast { CLEAN_WINDOW } else { PULL_WINDOW }
+    /// How long a hole the stream showed waits before it is asked for, the stream still
+    /// running: a link with jitter delivers a burst out of order (a reorder allowance, a quarter
+    /// of a round trip), and on a fast link the vehicle's pacing is waited out first.
+    fn hole_allowance(&self) -> Duration {
+        if self.fast {
+            self.quiet()
+        } else {
+            self.srtt().mul_f64(QUIET_SHARE).max(MIN_QUIET)
+        }
+    }
+
+    /// Indices that may be outstanding at once, each asked in `copies` copies: on a fast link
+    /// [`CLEAN_WINDOW`]; on a slow one [`PULL_WINDOW`], but never more than [`CLEAN_WINDOW`]
+    /// copies in all, which arrive together and must fit ArduPilot's read queue.
+    fn window(&self, copies: u32) -> usize {
+        if self.fast {
+            CLEAN_WINDOW
+        } else {
+            (CLEAN_WINDOW / usize::try_from(copies.max(1)).unwrap_or(usize::MAX))
+                .clamp(1, PULL_WINDOW)
+        }
     }
 
     /// The table changed size (an enable parameter written while the download ran): its
@@ -311,7 +344,18 @@ impl PullMachine {
             return MAX_COPIES;
         }
         let k = (HOLES_LEFT / holes.max(1) as f64).ln() / f.ln();
-        (k.ceil() as u32).clamp(1, MAX_COPIES)
+        let wanted = (k.ceil() as u32).clamp(1, MAX_COPIES);
+        // The copies share the window's budget ([`CLEAN_WINDOW`] in all): past the point where
+        // the window binds, more copies answer fewer holes a round. Take no more copies than
+        // the count that answers the most holes a round.
+        let per_round = |k: u32| {
+            let window = (CLEAN_WINDOW / k as usize).clamp(1, PULL_WINDOW);
+            holes.min(window) as f64 * (1.0 - f.powi(k as i32))
+        };
+        let best = (1..=MAX_COPIES)
+            .max_by(|a, b| per_round(*a).total_cmp(&per_round(*b)).then(b.cmp(a)))
+            .unwrap_or(1);
+        wanted.min(best.max(1))
     }
 
     fn list(&mut self, now: Instant) -> Vec<MavMessage> {
@@ -381,11 +425,11 @@ impl PullMachine {
             return Vec::new();
         };
         let missing = usize::from(count) - self.values.len();
-        if self.fast && self.stream_over && missing > RELIST_MISSING {
+        if self.stream_over && missing > RELIST_MISSING {
             return Vec::new();
         }
         let copies = self.copies(missing);
-        let room = self.window().saturating_sub(self.outstanding.len());
+        let room = self.window(copies).saturating_sub(self.outstanding.len());
         if room == 0 {
             return Vec::new();
         }
@@ -394,8 +438,11 @@ impl PullMachine {
                 .filter(|i| !self.values.contains_key(i) && !self.outstanding.contains_key(i))
                 .take(room)
                 .collect()
+        } else if self.shown.len() + self.outstanding.len() > RELIST_MISSING {
+            // So many holes already that the stream will be asked for again when it ends.
+            return Vec::new();
         } else {
-            let allowance = self.quiet();
+            let allowance = self.hole_allowance();
             self.shown
                 .iter()
                 .filter(|(_, at)| now.duration_since(**at) >= allowance)
@@ -546,15 +593,19 @@ impl Machine for PullMachine {
                 Vec::new()
             };
         }
-        if !self.stream_over && silent >= self.quiet() {
+        // The stream's own end: answers to reads go on arriving after it.
+        let stream_silent = now.duration_since(self.last_streamed.unwrap_or(self.last_rx));
+        if !self.stream_over && stream_silent >= self.quiet() {
             self.stream_over = true;
         }
         let missing = self.count.map_or(0, usize::from) - self.values.len();
-        if self.fast && self.stream_over && missing > RELIST_MISSING {
-            // On a fast link the stream brings the rest sooner than reads one at a time (and
-            // ArduPilot sends no stream while it answers reads): ask for it again.
-            if now >= self.relist_due {
-                self.relist_due = now + RELIST_EVERY;
+        if self.stream_over && missing > RELIST_MISSING {
+            // The stream brings the rest sooner than reads one at a time (a window of them a
+            // round trip; and ArduPilot sends no stream while it answers reads): ask for it
+            // again, once it has been quiet for longer than a vehicle's own pause (a new list
+            // request restarts the stream from its first value).
+            if now >= self.relist_due && stream_silent >= FAST_PAUSE {
+                self.relist_due = now + RELIST_EVERY.max(self.srtt() * 2);
                 self.stream_over = false;
                 // The pause before the new stream is no gap of it.
                 self.last_streamed = None;
@@ -583,12 +634,24 @@ impl Machine for PullMachine {
     fn deadline(&self) -> Instant {
         // The next stall check, at the latest.
         let mut d = self.check;
+        let missing = self.count.map_or(0, usize::from) - self.values.len();
+        if self.stream_over && missing > RELIST_MISSING {
+            // Waiting to ask for the stream again: the reads outstanding wait with it.
+            let silent_enough = self.last_streamed.unwrap_or(self.last_rx) + FAST_PAUSE;
+            return d.min(self.relist_due.max(silent_enough));
+        }
         if self.count.is_none() {
             d = d.min(self.list_due);
         } else if !self.stream_over {
-            d = d.min(self.last_rx + self.quiet());
-            if let Some(at) = self.shown.values().min() {
-                d = d.min(*at + self.quiet());
+            d = d.min(self.last_streamed.unwrap_or(self.last_rx) + self.quiet());
+            // Holes are asked for when they have waited, if the window has room (else an
+            // answer or a timeout makes room).
+            let room = self.window(self.copies(missing)) > self.outstanding.len();
+            if let Some(at) = self.shown.values().min()
+                && room
+                && self.shown.len() + self.outstanding.len() <= RELIST_MISSING
+            {
+                d = d.min(*at + self.hole_allowance());
             }
         }
         if let Some(due) = self.outstanding.values().map(|a| a.due).min() {

@@ -65,7 +65,7 @@ fn a_hole_is_asked_for_while_the_stream_runs_once_it_has_stayed_missing_a_while(
     assert_eq!(m.progress(), (4, 9));
     m.on_message(at + ms(60), &indexed(7, 9));
     m.on_message(at + ms(60), &indexed(8, 9));
-    // The stream goes quiet: 5 and 6 are asked for.
+    // 7 showed 5 and 6 missing: they are asked for a reorder allowance later.
     assert_eq!(m.deadline(), at + ms(110));
     let asks = m.on_time(at + ms(110));
     let mut asked = read_indices(&asks);
@@ -95,9 +95,9 @@ fn the_indices_after_the_last_one_heard_are_asked_for_once_the_stream_is_quiet()
     for i in 0..6 {
         m.on_message(at, &indexed(i, 10));
     }
-    // A quarter of the round trip without a value ends the stream.
+    // A vehicle's own pause (FAST_PAUSE) without a value ends the stream.
     let quiet = m.deadline();
-    assert_eq!(quiet.duration_since(at), Duration::from_millis(50));
+    assert_eq!(quiet.duration_since(at), FAST_PAUSE);
     let asks = m.on_time(quiet);
     assert_eq!(
         read_indices(&asks),
@@ -128,11 +128,14 @@ fn requests_go_out_in_copies_once_loss_is_seen_and_one_copy_on_a_clean_link() {
     let asked = read_indices(&asks);
     let copies_of_1 = asked.iter().filter(|&&i| i == 1).count();
     assert!(copies_of_1 >= 2, "{asked:?}");
-    // Every hole is asked for, each index in as many copies as its round wanted.
+    // The holes are asked for in order, as many as the copies leave room for: never more than
+    // ArduPilot's read queue holds at once.
     let mut holes: Vec<i16> = asked.clone();
     holes.dedup();
-    assert_eq!(holes, (0..30).filter(|i| i % 3 == 1).collect::<Vec<i16>>());
-    assert!(asked.len() as u32 <= 10 * MAX_COPIES);
+    let all: Vec<i16> = (0..30).filter(|i| i % 3 == 1).collect();
+    assert_eq!(holes, all[..holes.len()]);
+    assert!(holes.len() >= 5, "{asked:?}");
+    assert!(asked.len() <= CLEAN_WINDOW, "{asked:?}");
 }
 
 #[test]
@@ -146,7 +149,8 @@ fn a_request_waits_a_quarter_more_than_the_round_trip_not_the_first_samples_spre
     m.start(t0);
     m.on_message(at, &indexed(1, 3));
     m.on_message(at, &indexed(2, 3));
-    let asked = at + Duration::from_millis(50);
+    let asked = m.deadline();
+    assert_eq!(asked, at + Duration::from_millis(50));
     let asks = m.on_time(asked);
     assert!(read_indices(&asks).iter().all(|&i| i == 0), "{asks:?}");
     assert!(!asks.is_empty());
@@ -359,11 +363,14 @@ fn on_a_clean_link_the_pull_is_one_round_trip_and_the_stream_without_a_single_re
 
 /// At 30 % loss each way and 200 ms of round trip with ±20 ms of jitter each way, the machine
 /// alone (the process start, connection and round-trip probe come on top in a real pull, the
-/// same at any loss) takes a median of about two round trips more than on a clean link: the
-/// list exchange, the stream, one round of requests for its holes and now and then a second.
-/// Asking for the holes only after the stream, one copy each, took about ten more.
+/// same at any loss) takes a median of about four round trips more than on a clean link: the
+/// list exchange, the stream, and rounds of requests for its holes, never more than 16 copies
+/// in flight (what ArduPilot's read queue holds: a larger round of copies took two round trips
+/// less here, and against ArduPlane was dropped, taken for loss and asked again in more copies
+/// until the pull took minutes). Asking for the holes only after the stream, one copy each,
+/// took about ten more.
 #[test]
-fn at_30_percent_loss_and_200_ms_the_pull_takes_about_two_round_trips_more_than_clean() {
+fn at_30_percent_loss_and_200_ms_the_pull_takes_about_four_round_trips_more_than_clean() {
     let runs = 40;
     let clean = median((0..runs).map(|s| simulate(s, 0.0, 100, 0).took).collect());
     let outcomes: Vec<Outcome> = (0..runs).map(|s| simulate(s, 0.3, 100, 20)).collect();
@@ -376,10 +383,10 @@ fn at_30_percent_loss_and_200_ms_the_pull_takes_about_two_round_trips_more_than_
     );
     let rt = Duration::from_millis(200);
     assert!(
-        lossy <= clean + rt * 5 / 2,
+        lossy <= clean + rt * 9 / 2,
         "median {lossy:?} against {clean:?}"
     );
-    assert!(worst <= clean + rt * 6, "worst {worst:?} against {clean:?}");
+    assert!(worst <= clean + rt * 8, "worst {worst:?} against {clean:?}");
     assert!(
         reads / outcomes.len() < 200,
         "{reads} reads in {runs} pulls"
