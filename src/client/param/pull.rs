@@ -18,11 +18,13 @@
 //! to a request if that is longer; doubling after a few tries) is asked again.
 //!
 //! The vehicle's own pacing is waited out on every link (ArduPilot's stream pauses about 100 ms
-//! every couple of hundred values): a stream counts as over only after [`FAST_PAUSE`] of quiet
-//! (or four times its longest gap while it has lost nothing), and reads never go out more than
-//! [`CLEAN_WINDOW`] copies at a time (ArduPilot queues 20, for every link together, and drops
-//! the rest). A stream that ends with more than [`RELIST_MISSING`] values missing is asked for
-//! again whole: on a lossy link with a long round trip a pass of the stream brings most of the
+//! every couple of hundred values): while it has lost nothing a stream counts as over only
+//! after [`FAST_PAUSE`] of quiet (or four times its longest gap), and reads leave paced, at
+//! most [`CLEAN_WINDOW`] at once and then one a [`READ_SERVICE`] (ArduPilot queues 20 for every
+//! link together, takes about one a millisecond, and drops what finds its queue full). A
+//! stream that ends with more than [`RELIST_MISSING`] values missing is asked for again whole,
+//! after [`FAST_PAUSE`] of quiet: on a lossy link with a long round trip a pass of the stream
+//! brings most of the
 //! rest far sooner than a window of reads a round trip.
 //!
 //! Echoes with index 65535 (a by-name answer or another client's write) update values by name.
@@ -165,6 +167,13 @@ pub struct PullMachine {
     /// PARAM_REQUEST_READs sent, copies included (for the benchmark's report).
     pub rerequests: usize,
     done: Option<Result<ParamSet, PullStalled>>,
+    /// Reads waiting for their turn: they leave at most one a [`READ_SERVICE`] after a burst of
+    /// [`CLEAN_WINDOW`], the pace ArduPilot takes them from its 20-deep queue.
+    paced: VecDeque<MavMessage>,
+    /// The time credit of the reads that may leave ([`READ_SERVICE`] each, at most
+    /// [`CLEAN_WINDOW`] of them), and when it was counted.
+    credit: Duration,
+    credit_at: Instant,
 }
 
 impl PullMachine {
@@ -204,6 +213,9 @@ impl PullMachine {
             stale_counts: Vec::new(),
             rerequests: 0,
             done: None,
+            paced: VecDeque::new(),
+            credit: READ_SERVICE * CLEAN_WINDOW as u32,
+            credit_at: now,
         }
     }
 
@@ -275,16 +287,29 @@ impl PullMachine {
         }
     }
 
-    /// Indices that may be outstanding at once, each asked in `copies` copies: on a fast link
-    /// [`CLEAN_WINDOW`]; on a slow one [`PULL_WINDOW`], but never more than [`CLEAN_WINDOW`]
-    /// copies in all, which arrive together and must fit ArduPilot's read queue.
-    fn window(&self, copies: u32) -> usize {
-        if self.fast {
-            CLEAN_WINDOW
-        } else {
-            (CLEAN_WINDOW / usize::try_from(copies.max(1)).unwrap_or(usize::MAX))
-                .clamp(1, PULL_WINDOW)
+    /// Indices that may be outstanding at once (their copies leave paced, see `paced`).
+    fn window(&self, _copies: u32) -> usize {
+        if self.fast { CLEAN_WINDOW } else { PULL_WINDOW }
+    }
+
+    /// The reads whose turn has come ([`READ_SERVICE`] apart after a burst of
+    /// [`CLEAN_WINDOW`]).
+    fn flush(&mut self, now: Instant, mut out: Vec<MavMessage>) -> Vec<MavMessage> {
+        let elapsed = now.saturating_duration_since(self.credit_at);
+        self.credit = (self.credit + elapsed).min(READ_SERVICE * CLEAN_WINDOW as u32);
+        self.credit_at = now;
+        while self.credit >= READ_SERVICE
+            && let Some(m) = self.paced.pop_front()
+        {
+            self.credit -= READ_SERVICE;
+            out.push(m);
         }
+        out
+    }
+
+    /// When the next paced read may leave, if one waits.
+    fn pace_due(&self) -> Option<Instant> {
+        (!self.paced.is_empty()).then(|| self.credit_at + READ_SERVICE.saturating_sub(self.credit))
     }
 
     /// The table changed size (an enable parameter written while the download ran): its
@@ -344,18 +369,7 @@ impl PullMachine {
             return MAX_COPIES;
         }
         let k = (HOLES_LEFT / holes.max(1) as f64).ln() / f.ln();
-        let wanted = (k.ceil() as u32).clamp(1, MAX_COPIES);
-        // The copies share the window's budget ([`CLEAN_WINDOW`] in all): past the point where
-        // the window binds, more copies answer fewer holes a round. Take no more copies than
-        // the count that answers the most holes a round.
-        let per_round = |k: u32| {
-            let window = (CLEAN_WINDOW / k as usize).clamp(1, PULL_WINDOW);
-            holes.min(window) as f64 * (1.0 - f.powi(k as i32))
-        };
-        let best = (1..=MAX_COPIES)
-            .max_by(|a, b| per_round(*a).total_cmp(&per_round(*b)).then(b.cmp(a)))
-            .unwrap_or(1);
-        wanted.min(best.max(1))
+        (k.ceil() as u32).clamp(1, MAX_COPIES)
     }
 
     fn list(&mut self, now: Instant) -> Vec<MavMessage> {
@@ -385,7 +399,9 @@ impl PullMachine {
             self.outstanding.values().map(|a| a.copies).sum::<u32>()
                 + copies * u32::try_from(indices.len()).unwrap_or(u32::MAX)
         } else {
-            0
+            // The reads paced out before the last of these.
+            u32::try_from(self.paced.len()).unwrap_or(u32::MAX)
+                + copies * u32::try_from(indices.len()).unwrap_or(u32::MAX)
         };
         let rto = self.hole_rto() + READ_SERVICE * queued;
         let mut out = Vec::new();
@@ -396,9 +412,13 @@ impl PullMachine {
                 .outstanding
                 .get(&index)
                 .map_or(1, |a| a.tries.saturating_add(1));
+            // When its first copy leaves, after the reads paced out before it.
+            let free = (self.credit.as_nanos() / READ_SERVICE.as_nanos()) as usize;
+            let ahead = (self.paced.len() + out.len()).saturating_sub(free);
+            let sent = now + READ_SERVICE * u32::try_from(ahead).unwrap_or(u32::MAX);
             let ask = Ask {
                 due: now + retry_wait(rto, tries),
-                sent: now,
+                sent,
                 tries,
                 copies,
             };
@@ -415,7 +435,8 @@ impl PullMachine {
                 ));
             }
         }
-        out
+        self.paced.extend(out);
+        self.flush(now, Vec::new())
     }
 
     /// Asks for missing indices not already asked for, up to the window: the holes the stream
@@ -569,13 +590,37 @@ impl Machine for PullMachine {
         if self.done.is_some() {
             return Vec::new();
         }
-        self.refill(now)
+        let out = self.refill(now);
+        self.flush(now, out)
     }
 
     fn on_time(&mut self, now: Instant) -> Vec<MavMessage> {
         if self.done.is_some() || now < self.deadline() {
             return Vec::new();
         }
+        let out = self.on_time_inner(now);
+        if self.done.is_some() {
+            return out;
+        }
+        self.flush(now, out)
+    }
+
+    fn deadline(&self) -> Instant {
+        self.next_deadline()
+    }
+
+    fn result(&mut self) -> Option<Self::Output> {
+        self.done.take()
+    }
+
+    fn take_rtt_samples(&mut self) -> Vec<Duration> {
+        std::mem::take(&mut self.samples)
+    }
+}
+
+impl PullMachine {
+    /// What is due at `now` (the reads paced out by the caller).
+    fn on_time_inner(&mut self, now: Instant) -> Vec<MavMessage> {
         let silent = now.duration_since(self.last_rx);
         if now >= self.check {
             self.check = now + self.rto;
@@ -606,6 +651,8 @@ impl Machine for PullMachine {
             // request restarts the stream from its first value).
             if now >= self.relist_due && stream_silent >= FAST_PAUSE {
                 self.relist_due = now + RELIST_EVERY.max(self.srtt() * 2);
+                // The stream answers what the reads waiting to leave would have asked.
+                self.paced.clear();
                 self.stream_over = false;
                 // The pause before the new stream is no gap of it.
                 self.last_streamed = None;
@@ -628,12 +675,12 @@ impl Machine for PullMachine {
         let copies = self.copies(missing);
         let mut out = self.read(&overdue, copies, now);
         out.extend(self.refill(now));
-        out
+        self.flush(now, out)
     }
 
-    fn deadline(&self) -> Instant {
-        // The next stall check, at the latest.
-        let mut d = self.check;
+    fn next_deadline(&self) -> Instant {
+        // The next stall check, at the latest; the next paced read.
+        let mut d = self.pace_due().map_or(self.check, |p| p.min(self.check));
         let missing = self.count.map_or(0, usize::from) - self.values.len();
         if self.stream_over && missing > RELIST_MISSING {
             // Waiting to ask for the stream again: the reads outstanding wait with it.
@@ -658,14 +705,6 @@ impl Machine for PullMachine {
             d = d.min(due);
         }
         d
-    }
-
-    fn result(&mut self) -> Option<Self::Output> {
-        self.done.take()
-    }
-
-    fn take_rtt_samples(&mut self) -> Vec<Duration> {
-        std::mem::take(&mut self.samples)
     }
 }
 

@@ -124,18 +124,25 @@ fn requests_go_out_in_copies_once_loss_is_seen_and_one_copy_on_a_clean_link() {
     for i in (0..30).filter(|i| i % 3 != 1) {
         assert!(lossy.on_message(at, &indexed(i, 30)).is_empty());
     }
-    let asks = lossy.on_time(lossy.deadline());
-    let asked = read_indices(&asks);
+    // The reads leave paced: at most CLEAN_WINDOW at once (what ArduPilot's read queue
+    // holds), then one a READ_SERVICE.
+    let first = lossy.deadline();
+    let burst = read_indices(&lossy.on_time(first));
+    assert!(burst.len() <= CLEAN_WINDOW, "{burst:?}");
+    let mut asked = burst.clone();
+    while lossy.deadline() < first + Duration::from_millis(100) {
+        let at = lossy.deadline();
+        let next = read_indices(&lossy.on_time(at));
+        assert!(next.len() <= 1, "{next:?}");
+        asked.extend(next);
+    }
     let copies_of_1 = asked.iter().filter(|&&i| i == 1).count();
     assert!(copies_of_1 >= 2, "{asked:?}");
-    // The holes are asked for in order, as many as the copies leave room for: never more than
-    // ArduPilot's read queue holds at once.
+    // Every hole is asked for, in order, each index in as many copies as its round wanted.
     let mut holes: Vec<i16> = asked.clone();
     holes.dedup();
-    let all: Vec<i16> = (0..30).filter(|i| i % 3 == 1).collect();
-    assert_eq!(holes, all[..holes.len()]);
-    assert!(holes.len() >= 5, "{asked:?}");
-    assert!(asked.len() <= CLEAN_WINDOW, "{asked:?}");
+    assert_eq!(holes, (0..30).filter(|i| i % 3 == 1).collect::<Vec<i16>>());
+    assert!(asked.len() as u32 <= 10 * MAX_COPIES);
 }
 
 #[test]
@@ -154,9 +161,11 @@ fn a_request_waits_a_quarter_more_than_the_round_trip_not_the_first_samples_spre
     let asks = m.on_time(asked);
     assert!(read_indices(&asks).iter().all(|&i| i == 0), "{asks:?}");
     assert!(!asks.is_empty());
-    assert_eq!(
-        m.deadline().duration_since(asked),
-        Duration::from_millis(250)
+    // 1.25 round trips, and the vehicle's service of the reads ahead of it (READ_SERVICE each).
+    let wait = m.deadline().duration_since(asked);
+    assert!(
+        wait >= Duration::from_millis(250) && wait <= Duration::from_millis(260),
+        "{wait:?}"
     );
     // An answer slower than that lengthens the next requests' timeouts to it (and a tenth).
     let mut m = PullMachine::new(V, r);
@@ -166,7 +175,12 @@ fn a_request_waits_a_quarter_more_than_the_round_trip_not_the_first_samples_spre
     let quiet = m.deadline();
     assert_eq!(read_indices(&m.on_time(quiet)), [2, 3]);
     m.on_message(quiet + Duration::from_millis(240), &indexed(2, 4));
-    let late = quiet + Duration::from_millis(250);
+    let late = m.deadline();
+    assert!(
+        late <= quiet + Duration::from_millis(260),
+        "{:?}",
+        late - quiet
+    );
     // One of two requests unanswered: the link loses, so the request goes out in copies.
     let again = read_indices(&m.on_time(late));
     assert!(
@@ -363,14 +377,15 @@ fn on_a_clean_link_the_pull_is_one_round_trip_and_the_stream_without_a_single_re
 
 /// At 30 % loss each way and 200 ms of round trip with ±20 ms of jitter each way, the machine
 /// alone (the process start, connection and round-trip probe come on top in a real pull, the
-/// same at any loss) takes a median of about four round trips more than on a clean link: the
-/// list exchange, the stream, and rounds of requests for its holes, never more than 16 copies
-/// in flight (what ArduPilot's read queue holds: a larger round of copies took two round trips
-/// less here, and against ArduPlane was dropped, taken for loss and asked again in more copies
-/// until the pull took minutes). Asking for the holes only after the stream, one copy each,
-/// took about ten more.
+/// same at any loss) takes a median of about two round trips more than on a clean link: the
+/// list exchange, the stream, one round of requests for its holes and now and then a second,
+/// the requests paced out at most 16 at once and then one a millisecond (ArduPilot's read
+/// queue holds 20 and drops the rest; a round sent at once was dropped against ArduPlane,
+/// taken for loss and asked again in more copies until the pull took minutes; 16 in flight
+/// without pacing took four round trips more). Asking for the holes only after the stream, one
+/// copy each, took about ten more.
 #[test]
-fn at_30_percent_loss_and_200_ms_the_pull_takes_about_four_round_trips_more_than_clean() {
+fn at_30_percent_loss_and_200_ms_the_pull_takes_about_two_round_trips_more_than_clean() {
     let runs = 40;
     let clean = median((0..runs).map(|s| simulate(s, 0.0, 100, 0).took).collect());
     let outcomes: Vec<Outcome> = (0..runs).map(|s| simulate(s, 0.3, 100, 20)).collect();
@@ -383,10 +398,10 @@ fn at_30_percent_loss_and_200_ms_the_pull_takes_about_four_round_trips_more_than
     );
     let rt = Duration::from_millis(200);
     assert!(
-        lossy <= clean + rt * 9 / 2,
+        lossy <= clean + rt * 5 / 2,
         "median {lossy:?} against {clean:?}"
     );
-    assert!(worst <= clean + rt * 8, "worst {worst:?} against {clean:?}");
+    assert!(worst <= clean + rt * 6, "worst {worst:?} against {clean:?}");
     assert!(
         reads / outcomes.len() < 200,
         "{reads} reads in {runs} pulls"
