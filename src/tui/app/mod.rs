@@ -688,6 +688,7 @@ impl App {
                 let radius = self.param("WP_LOITER_RAD").unwrap_or(60.0);
                 self.map.items = crate::tui::view::map::items_from_mission(&items, radius);
                 let n = items.len().saturating_sub(1);
+                self.map.mission = Some(items);
                 self.note(
                     Level::Ok,
                     format!("mission of {n} items (r: download again)"),

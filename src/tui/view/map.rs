@@ -263,6 +263,8 @@ pub struct MapState {
     pub camera: MapCamera,
     /// The mission drawn (downloaded when the view is first entered; `r` again).
     pub items: Vec<MapItem>,
+    /// The mission as downloaded (item 0 home), for the Flight view's progress line.
+    pub mission: Option<Vec<crate::mission::Item>>,
     /// Whether the mission was asked for.
     pub requested: bool,
 }
