@@ -8,10 +8,15 @@
 //! 3. Keypress to redrawn screen while 5 000 frames/s arrive on a client link: `?` is sent,
 //!    the time until a frame with the help overlay is flushed; p50/p99/max.
 //! 4. The Fleet view with 250 vehicles: CPU time per frame at 120×40 and 200×50.
+//! 5. The Map view with a mission of 50 items and a track of 3 000 points, following the
+//!    vehicle: CPU time per frame at 80×24, 120×40 and 200×50; on the live twin (the same
+//!    mission uploaded, the track loaded into the history as two minutes of flight would leave
+//!    it, GLOBAL_POSITION_INT at 50 Hz) the UI thread's CPU and keypress to redraw.
 //!
 //! CPU times come from `/proc` (thread: `schedstat`, ns; process: `stat`, clock ticks), so they
-//! are less disturbed by other load than wall time. Run: `cargo bench --bench tui`. Under
-//! `cargo test` (no `--bench` argument) it runs a short smoke version.
+//! are less disturbed by other load than wall time. Run: `cargo bench --bench tui` (`-- map`
+//! for one part: `render`, `fleet`, `map` or `live`). Under `cargo test` (no `--bench`
+//! argument) it runs a short smoke version.
 
 use std::io::Write;
 use std::sync::{Arc, Mutex};
@@ -61,6 +66,8 @@ fn process_cpu_s() -> f64 {
 struct TimedSink {
     pending: Arc<Mutex<Vec<u8>>>,
     flushes: Arc<Mutex<Vec<(Instant, bool)>>>,
+    /// Whether a frame drew the mission's last item (`L50`): the Map view has its mission.
+    landing_drawn: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl Write for TimedSink {
@@ -77,6 +84,18 @@ impl Write for TimedSink {
             // frames, not cursor writes.
             if p.as_slice() != b"\x1b[?25l" && !p.is_empty() {
                 let help = p.windows(4).any(|w| w == b"Keys");
+                if std::env::var_os("DUMP_MAP").is_some() {
+                    let mut f = std::fs::OpenOptions::new()
+                        .append(true)
+                        .create(true)
+                        .open("/tmp/mission-ui-dump.bin")
+                        .unwrap();
+                    f.write_all(&p).unwrap();
+                }
+                if p.windows(3).any(|w| w == b"L50") {
+                    self.landing_drawn
+                        .store(true, std::sync::atomic::Ordering::Relaxed);
+                }
                 f.push((now, help));
             }
             p.clear();
@@ -279,6 +298,140 @@ fn fleet_render_cost(frames: usize) {
     }
 }
 
+/// The twin's home, 1e-7 degree.
+const HOME: (i32, i32) = (-353_632_610, 1_491_652_300);
+/// Points of the track (the Map view keeps at most 3 000).
+const TRACK_POINTS: usize = 3000;
+
+fn offset(north_m: f64, east_m: f64) -> (i32, i32) {
+    let o = firmware_sim::nav::globe::Origin(firmware_sim::nav::globe::GeoPoint {
+        lat_e7: HOME.0,
+        lon_e7: HOME.1,
+        alt_amsl_m: 0.0,
+    });
+    let p = o.to_global(&nalgebra::Vector3::new(north_m, east_m, 0.0));
+    (p.lat_e7, p.lon_e7)
+}
+
+/// A mission of home and 50 items around the twin's home: a VTOL take-off, waypoints on a
+/// star out to 450 m with a loiter every tenth item, a VTOL landing at home.
+fn map_mission() -> Vec<vtol_gcs::mission::Item> {
+    let item = |command: u16, at: (i32, i32), radius: f32| vtol_gcs::mission::Item {
+        frame: 3,
+        command,
+        current: false,
+        autocontinue: true,
+        params: [0.0, 0.0, radius, 0.0],
+        x: f64::from(at.0) / 1e7,
+        y: f64::from(at.1) / 1e7,
+        z: 40.0,
+    };
+    let mut items = vec![vtol_gcs::mission::Item {
+        frame: 0,
+        ..item(16, HOME, 0.0)
+    }];
+    items.push(item(84, (0, 0), 0.0));
+    for k in 2..50u32 {
+        let a = f64::from(k) * 2.4;
+        let r = 150.0 + 300.0 * f64::from(k % 2);
+        let at = offset(r * a.cos(), r * a.sin());
+        if k % 10 == 0 {
+            items.push(item(19, at, 60.0));
+        } else {
+            items.push(item(16, at, 0.0));
+        }
+    }
+    items.push(item(85, HOME, 0.0));
+    items
+}
+
+/// The track: a spiral from 150 m to 250 m around home flown at 25 m/s, one point every 20 ms
+/// (each 0.5 m from the last, so every one is kept), ending at home; frame `i` at `t(i)`.
+fn track_frames(t: impl Fn(usize) -> Instant) -> Vec<(Frame, MavMessage, Instant)> {
+    (0..TRACK_POINTS)
+        .map(|i| {
+            let left = (TRACK_POINTS - 1 - i) as f64;
+            let (n, e) = if left == 0.0 {
+                (0.0, 0.0)
+            } else {
+                let r = 150.0 + 100.0 * left / TRACK_POINTS as f64;
+                let a = left * 0.5 / r;
+                (r * a.cos(), r * a.sin())
+            };
+            let (lat, lon) = offset(n, e);
+            let msg = MavMessage::GLOBAL_POSITION_INT(dialect::GLOBAL_POSITION_INT_DATA {
+                lat,
+                lon,
+                alt: 624_000,
+                relative_alt: 40_000,
+                vx: 1500,
+                vy: 2000,
+                hdg: 5300,
+                ..Default::default()
+            });
+            let f = Frame::encode_v2(
+                vtol_link::SystemId(1),
+                vtol_link::ComponentId(1),
+                i as u8,
+                &msg,
+            );
+            (f, msg, t(i))
+        })
+        .collect()
+}
+
+/// The Map view following the vehicle with the 50-item mission and a 3 000-point track: CPU
+/// per frame at 80×24, 120×40 and 200×50.
+fn map_render_cost(frames: usize) {
+    let (t0, mut state, mut history) = recording();
+    // The 60 s of track end at 29 s of the hover recording's clock.
+    let start = t0 + Duration::from_secs(29);
+    for (f, msg, at) in
+        track_frames(|i| start - Duration::from_millis(20 * (TRACK_POINTS - i) as u64))
+    {
+        state.apply(LinkId(1), Side::Vehicle, &f, at);
+        history.record(&f, Some(&msg), at);
+    }
+    let extra = [
+        MavMessage::HOME_POSITION(dialect::HOME_POSITION_DATA {
+            latitude: HOME.0,
+            longitude: HOME.1,
+            ..Default::default()
+        }),
+        MavMessage::MISSION_CURRENT(dialect::MISSION_CURRENT_DATA {
+            seq: 10,
+            total: 50,
+            ..Default::default()
+        }),
+    ];
+    for (k, m) in extra.iter().enumerate() {
+        let f = Frame::encode_v2(
+            vtol_link::SystemId(1),
+            vtol_link::ComponentId(1),
+            k as u8,
+            m,
+        );
+        state.apply(LinkId(1), Side::Vehicle, &f, start);
+    }
+    let mission = map_mission();
+    println!(
+        "Map view, {} items, {} track points, following, {frames} frames",
+        mission.len() - 1,
+        TRACK_POINTS
+    );
+    for (w, h) in [(80, 24), (W, H), (200, 50)] {
+        let mut app = App {
+            view: View::Map,
+            ..App::default()
+        };
+        app.on_outcome(Outcome::Mission(Ok(mission.clone())));
+        let (cpu, b) = draw_cost(&mut app, (w, h), &state, &history, frames, |i| {
+            start + Duration::from_millis((i as u64 * 33) % 1000)
+        });
+        println!("{:<10} {cpu:>12.0} {b:>12}", format!("{w}x{h}"));
+    }
+}
+
 struct CountingSink(Arc<Mutex<usize>>);
 
 impl Write for CountingSink {
@@ -338,6 +491,37 @@ fn live(seconds: f64, keypresses: usize) {
         }
         r
     });
+    let map_setup = || {
+        rt.block_on(async {
+            let c = &running.client;
+            c.param_set("SR0_POSITION", 50.0)
+                .await
+                .expect("stream rate");
+            let done = c
+                .mission_upload(&map_mission(), vtol_gcs::mission::Kind::Mission, |_, _| {})
+                .await
+                .expect("mission upload");
+            assert!(
+                matches!(
+                    done,
+                    vtol_gcs::client::mission::UploadOutcome::Acked {
+                        result: dialect::MavMissionResult::MAV_MISSION_ACCEPTED,
+                        ..
+                    }
+                ),
+                "mission upload: {done:?}"
+            );
+        });
+        // Two minutes of flight's track, ending at home where the twin stands, as the history
+        // would hold it.
+        let now = Instant::now();
+        let mut h = running.history.lock().expect("history");
+        for (f, msg, at) in
+            track_frames(|i| now - Duration::from_millis(20 * (TRACK_POINTS - i) as u64))
+        {
+            h.record(&f, Some(&msg), at);
+        }
+    };
     let serve_addr = running.serving[0].1.expect("bound");
     let control = rt.block_on(async { ClientControl::new(running.client.clone()) });
 
@@ -345,6 +529,7 @@ fn live(seconds: f64, keypresses: usize) {
     let run_ui = |view_key: Option<KeyCode>, keys: Option<(usize, f64)>| {
         let sink = TimedSink::default();
         let flushes = Arc::clone(&sink.flushes);
+        let landing = Arc::clone(&sink.landing_drawn);
         let (ev_tx, ev_rx) = mpsc::channel(64);
         let ui_cancel = CancellationToken::new();
         let running2 = running.clone();
@@ -370,6 +555,17 @@ fn live(seconds: f64, keypresses: usize) {
         let key = |c| Event::Key(KeyEvent::new(c, KeyModifiers::NONE));
         if let Some(k) = view_key {
             ev_tx.blocking_send(key(k)).expect("key");
+        }
+        if view_key == Some(KeyCode::BackTab) {
+            // The Map view has downloaded and drawn its mission before anything is measured.
+            let deadline = Instant::now() + Duration::from_secs(30);
+            while !landing.load(std::sync::atomic::Ordering::Relaxed) {
+                assert!(
+                    Instant::now() < deadline,
+                    "the Map view never drew the mission"
+                );
+                std::thread::sleep(Duration::from_millis(10));
+            }
         }
         let mut latencies = Vec::new();
         let cpu0 = process_cpu_s();
@@ -423,6 +619,12 @@ fn live(seconds: f64, keypresses: usize) {
         let (ui, rest, fps, _) = run_ui(k, None);
         println!("{name:<10} {ui:>14.2} {rest:>22.2} {fps:>8.1}");
     }
+    // The Map view (Shift-Tab from Flight) downloads the mission when shown, and follows the
+    // vehicle with GLOBAL_POSITION_INT at 50 Hz.
+    map_setup();
+    println!("(GLOBAL_POSITION_INT 50 Hz, a 50-item mission, a 3000-point track)");
+    let (ui, rest, fps, _) = run_ui(Some(KeyCode::BackTab), None);
+    println!("{:<10} {ui:>14.2} {rest:>22.2} {fps:>8.1}", "Map");
 
     let flood_cancel = CancellationToken::new();
     rt.spawn(flood(serve_addr, 5000, flood_cancel.clone()));
@@ -433,35 +635,50 @@ fn live(seconds: f64, keypresses: usize) {
             .frames_in
             .load(std::sync::atomic::Ordering::Relaxed)
     };
-    let (in0, t_in) = (frames_in(), Instant::now());
-    let (ui, rest, fps, mut lat) = run_ui(None, Some((keypresses, 0.0)));
-    let arrived = (frames_in() - in0) as f64 / t_in.elapsed().as_secs_f64();
+    for (name, view_key) in [("Flight", None), ("Map", Some(KeyCode::BackTab))] {
+        let (in0, t_in) = (frames_in(), Instant::now());
+        let (ui, rest, fps, mut lat) = run_ui(view_key, Some((keypresses, 0.0)));
+        let arrived = (frames_in() - in0) as f64 / t_in.elapsed().as_secs_f64();
+        lat.sort();
+        let pct =
+            |p: f64| lat[((lat.len() as f64 - 1.0) * p).round() as usize].as_secs_f64() * 1000.0;
+        println!(
+            "\n{name} view: keypress to redrawn screen while 5000 frames/s are sent ({arrived:.0} frames/s reached the router, {} presses)",
+            lat.len()
+        );
+        println!(
+            "p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms   (UI CPU {ui:.1} % core, rest {rest:.1} %, {fps:.1} fps)",
+            pct(0.5),
+            pct(0.99),
+            pct(1.0)
+        );
+    }
     flood_cancel.cancel();
-    lat.sort();
-    let pct = |p: f64| lat[((lat.len() as f64 - 1.0) * p).round() as usize].as_secs_f64() * 1000.0;
-    println!(
-        "\nkeypress to redrawn screen while 5000 frames/s are sent ({arrived:.0} frames/s reached the router, {} presses)",
-        lat.len()
-    );
-    println!(
-        "p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms   (UI CPU {ui:.1} % core, rest {rest:.1} %, {fps:.1} fps)",
-        pct(0.5),
-        pct(0.99),
-        pct(1.0)
-    );
     cancel.cancel();
     rt.block_on(async { while tasks.join_next().await.is_some() {} });
 }
 
 fn main() {
-    let bench = std::env::args().any(|a| a == "--bench");
-    if bench {
-        render_cost(2000);
-        fleet_render_cost(2000);
-        live(10.0, 300);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let bench = args.iter().any(|a| a == "--bench");
+    // `cargo bench --bench tui -- map` runs one part: render, fleet, map or live.
+    let part = args.iter().find(|a| !a.starts_with('-')).cloned();
+    let run = |name: &str| part.as_deref().is_none_or(|p| p == name);
+    let (frames, seconds, presses) = if bench {
+        (2000, 10.0, 300)
     } else {
-        render_cost(20);
-        fleet_render_cost(20);
-        live(1.0, 10);
+        (20, 1.0, 10)
+    };
+    if run("render") {
+        render_cost(frames);
+    }
+    if run("fleet") {
+        fleet_render_cost(frames);
+    }
+    if run("map") {
+        map_render_cost(frames);
+    }
+    if run("live") {
+        live(seconds, presses);
     }
 }

@@ -9,7 +9,8 @@ use clap::{Args, Subcommand, ValueEnum};
 use vtol_gcs::client::ClientHandle;
 use vtol_gcs::client::mission::{UploadOutcome, result_words};
 use vtol_gcs::mission::file::{self, Format};
-use vtol_gcs::mission::{Item, Kind, check, command_name, frame_name};
+use vtol_gcs::mission::verify::{difference, load};
+use vtol_gcs::mission::{Item, Kind, command_name, frame_name};
 use vtol_link::dialect::MavMissionResult;
 use vtol_link::text_file;
 
@@ -73,21 +74,6 @@ enum MissionCommand {
         /// A mission file to show instead of the vehicle's list.
         file: Option<PathBuf>,
     },
-}
-
-/// Reads and checks a file: its items, or every problem, each naming where it is.
-fn load(path: &Path, kind: Kind) -> Result<Vec<Item>, Vec<String>> {
-    let name = path.display();
-    let text = text_file::read_text(path).map_err(|e| vec![e.to_string()])?;
-    let items = file::read(&text, kind).map_err(|e| vec![format!("{name}: {e}")])?;
-    let problems = check::problems(&items, kind);
-    if !problems.is_empty() {
-        return Err(problems
-            .into_iter()
-            .map(|p| format!("{name}: {p}"))
-            .collect());
-    }
-    Ok(items.into_iter().map(|l| l.item).collect())
 }
 
 /// `mission ...`.
@@ -243,43 +229,6 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
     Ok(())
 }
 
-/// How the vehicle's list differs from what was sent, if it does ([`Item::held_as`]). A
-/// mission's item 0 is home, which ArduPilot replaces with the real one: only its presence is
-/// compared. Fence and rally
-/// items have no use for `autocontinue` (ArduPilot reports 0 whatever was sent).
-fn difference(sent: &[Item], back: &[Item], kind: Kind) -> Option<String> {
-    if sent.len() != back.len() {
-        return Some(format!("{} items, not {}", back.len(), sent.len()));
-    }
-    let skip = usize::from(kind == Kind::Mission);
-    sent.iter()
-        .zip(back)
-        .enumerate()
-        .skip(skip)
-        .find(|(_, (a, b))| {
-            let mut a = **a;
-            if kind != Kind::Mission {
-                a.autocontinue = b.autocontinue;
-            }
-            !a.held_as(b)
-        })
-        .map(|(seq, (a, b))| format!("item {seq} is {}; sent {}", describe(b), describe(a)))
-}
-
-/// An item in one line of words, every field.
-fn describe(i: &Item) -> String {
-    let [p1, p2, p3, p4] = i.params;
-    format!(
-        "{} frame {} at {}, {} alt {} params {p1} {p2} {p3} {p4} autocontinue {}",
-        command_name(i.command),
-        frame_name(i.frame),
-        i.x,
-        i.y,
-        i.z,
-        u8::from(i.autocontinue)
-    )
-}
-
 /// The meaning of a command's first four parameters, where it is well known.
 fn param_names(command: u16) -> [&'static str; 4] {
     match command {
@@ -399,35 +348,5 @@ mod tests {
         );
         assert!(lines[3].ends_with("hold s 5, accept m 2"), "{t}");
         assert_eq!(table(&[], Kind::Fence), "no fence items\n");
-    }
-
-    #[test]
-    fn only_a_mission_s_home_may_differ() {
-        let text = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.363262\t149.165237\t584.09\t1\n\
-                    1\t0\t3\t84\t0\t0\t0\t0\t0\t0\t30\t1\n";
-        let sent: Vec<Item> = file::read(text, Kind::Mission)
-            .expect("reads")
-            .into_iter()
-            .map(|l| l.item)
-            .collect();
-        let mut back = sent.clone();
-        back[0].z = 600.0;
-        assert_eq!(difference(&sent, &back, Kind::Mission), None);
-        assert!(difference(&sent, &back, Kind::Rally).is_some());
-        back[1].autocontinue = false;
-        assert!(
-            difference(&sent[1..], &back[1..], Kind::Rally).is_none(),
-            "no autocontinue"
-        );
-        back[1].z = 31.0;
-        assert_eq!(
-            difference(&sent, &back, Kind::Mission).as_deref(),
-            Some(
-                "item 1 is NAV_VTOL_TAKEOFF frame GLOBAL_RELATIVE_ALT at 0, 0 alt 31 params 0 0 0 0 \
-                 autocontinue 0; sent NAV_VTOL_TAKEOFF frame GLOBAL_RELATIVE_ALT at 0, 0 alt 30 \
-                 params 0 0 0 0 autocontinue 1"
-            )
-        );
-        assert!(difference(&sent, &back[..1], Kind::Mission).is_some());
     }
 }

@@ -5,9 +5,11 @@
 //! - [`file`](mod@file): QGroundControl's `QGC WPL 110` text and `.plan` JSON, read and written.
 //! - [`check`]: what is refused before an upload (unknown command or frame, a NaN position,
 //!   latitude or longitude out of range, a VTOL landing approach ArduPlane refuses).
+//! - [`verify`]: a file read and checked for an upload, and the list held afterwards compared.
 
 pub mod check;
 pub mod file;
+pub mod verify;
 
 use std::fmt;
 

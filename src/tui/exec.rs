@@ -1,18 +1,23 @@
 //! The UI's requests carried out by the ground station's own client ([`ClientHandle`]):
 //! commands with their ACKs, verified parameter writes, the table download and the gains-file
-//! upload with its diff and progress. Holding a [`ClientControl`] marks an operator as present,
+//! upload with its diff and progress; a mission file checked, uploaded and verified, the mission
+//! downloaded into a file, started, its current item set. Holding a [`ClientControl`] marks an operator as present,
 //! so the daemon's GCS heartbeat flows only while the UI is open.
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use tokio::sync::{mpsc, watch};
-use vtol_link::dialect::{self, MavFrame, MavMessage, PositionTargetTypemask};
+use vtol_link::dialect::{self, MavFrame, MavMessage, MavMissionResult, PositionTargetTypemask};
+use vtol_link::text_file;
 use vtol_link::{ComponentId, SystemId};
 
 use super::Control;
 use super::app::{Outcome, Request};
+use crate::client::mission::{UploadOutcome, result_words};
 use crate::client::{ClientError, ClientHandle, OperatorGuard};
+use crate::mission::file::{self, Format};
+use crate::mission::{Item, Kind, verify};
 use crate::params::file::ParamFile;
 use crate::params::plan::PushResult;
 use crate::params::{ParamSet, diff, unknown_names};
@@ -171,6 +176,93 @@ impl ClientControl {
     }
 }
 
+/// A mission file read and checked as `vtol-gcs mission upload` checks it: (path, items), or
+/// its first problem (and how many more).
+fn check_mission(path: &str) -> Result<(String, Vec<Item>), String> {
+    match verify::load(Path::new(path), Kind::Mission) {
+        Ok(items) => Ok((path.to_owned(), items)),
+        Err(problems) => {
+            let first = problems.first().cloned().unwrap_or_default();
+            let more = match problems.len() {
+                0 | 1 => String::new(),
+                n => format!(" (and {} more)", n - 1),
+            };
+            Err(format!("{first}{more}; nothing sent"))
+        }
+    }
+}
+
+impl ClientControl {
+    /// Uploads `items`, then downloads the mission again and compares, as `vtol-gcs mission
+    /// upload` does; the vehicle's mission goes to the map whatever it holds.
+    async fn mission_upload(
+        &self,
+        path: &str,
+        items: &[Item],
+        out: &mpsc::Sender<Outcome>,
+    ) -> Result<String, String> {
+        let c = &self.client;
+        let fail = |e: ClientError| format!("mission upload: {}", reason(&e));
+        let outcome = c
+            .mission_upload(items, Kind::Mission, |_, _| {})
+            .await
+            .map_err(fail)?;
+        let acked = match outcome {
+            UploadOutcome::Acked {
+                result: MavMissionResult::MAV_MISSION_ACCEPTED,
+                ..
+            } => true,
+            UploadOutcome::Acked { result, reason } => {
+                return Err(format!(
+                    "mission upload refused by the vehicle: {}{}",
+                    result_words(result),
+                    reason.map(|r| format!(": {r}")).unwrap_or_default(),
+                ));
+            }
+            UploadOutcome::NoAck { .. } => false,
+        };
+        let back = c
+            .mission_download(Kind::Mission, |_, _| {})
+            .await
+            .map_err(fail)?;
+        let _ = out.send(Outcome::Mission(Ok(back.clone()))).await;
+        if let Some(diff) = verify::difference(items, &back, Kind::Mission) {
+            return Err(format!(
+                "the vehicle {} the upload but holds another mission: {diff}",
+                if acked {
+                    "acknowledged"
+                } else {
+                    "did not acknowledge"
+                }
+            ));
+        }
+        Ok(format!(
+            "uploaded {} mission items from {path} (verified by download)",
+            items.len().saturating_sub(1)
+        ))
+    }
+
+    /// Downloads the mission into `path` (`.plan` JSON, else QGC WPL 110), as `vtol-gcs
+    /// mission download FILE` does; the map shows it too.
+    async fn mission_save(
+        &self,
+        path: &str,
+        out: &mpsc::Sender<Outcome>,
+    ) -> Result<String, String> {
+        let items = self
+            .client
+            .mission_download(Kind::Mission, |_, _| {})
+            .await
+            .map_err(|e| format!("mission download: {}", reason(&e)))?;
+        let path_ref = Path::new(path);
+        let text = file::write(&items, Kind::Mission, Format::for_path(path_ref));
+        text_file::write_text(path_ref, &text).map_err(|e| e.to_string())?;
+        let n = items.len().saturating_sub(1);
+        let _ = out.send(Outcome::Mission(Ok(items))).await;
+        Ok(format!("mission of {n} items written to {path}"))
+    }
+}
+
 impl Control for ClientControl {
     async fn execute(&self, request: Request, out: mpsc::Sender<Outcome>) {
         let c = &self.client;
@@ -213,6 +305,18 @@ impl Control for ClientControl {
                 c.mission_download(crate::mission::Kind::Mission, |_, _| {})
                     .await
                     .map_err(|e| reason(&e)),
+            ),
+            Request::MissionCheck(path) => Outcome::MissionChecked(check_mission(&path)),
+            Request::MissionUpload { path, items } => {
+                Outcome::MissionDone(self.mission_upload(&path, &items, &out).await)
+            }
+            Request::MissionSave(path) => {
+                Outcome::MissionDone(self.mission_save(&path, &out).await)
+            }
+            Request::MissionStart => command("mission start".into(), c.mission_start(None).await),
+            Request::MissionSetCurrent(seq) => command(
+                format!("current item {seq}"),
+                c.mission_set_current(seq).await,
             ),
             Request::PushGains => {
                 let result = self.push_gains(&out).await;

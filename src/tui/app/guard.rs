@@ -84,6 +84,12 @@ impl App {
     pub(super) fn on_confirm(&mut self, c: Confirm, key: KeyEvent) -> Vec<Request> {
         let yes = matches!(key.code, KeyCode::Char('y' | 'Y'));
         match (c, yes) {
+            (
+                c @ (Confirm::MissionUpload { .. }
+                | Confirm::MissionStart { .. }
+                | Confirm::MissionSetCurrent { .. }),
+                _,
+            ) => self.on_mission_confirm(c, yes),
             (Confirm::Arm { force }, true) => {
                 self.note(
                     Level::Info,
@@ -162,6 +168,9 @@ impl Confirm {
                 ),
             ),
             Confirm::Upload => ("Upload these gains as one transaction?".into(), None),
+            Confirm::MissionUpload { .. }
+            | Confirm::MissionStart { .. }
+            | Confirm::MissionSetCurrent { .. } => self.mission_text(),
         }
     }
 }

@@ -16,6 +16,7 @@ use crate::tui::vitals::with_recovery;
 pub mod fleet;
 mod guard;
 mod lists;
+pub mod mission_keys;
 pub mod picker;
 
 /// Step of the QLOITER position target per arrow key, m.
@@ -115,6 +116,27 @@ pub enum Confirm {
     Reboot,
     /// Upload the loaded gains file (the diff is shown).
     Upload,
+    /// Upload a checked mission file.
+    MissionUpload {
+        /// The file.
+        path: String,
+        /// Its items (item 0 home).
+        items: Vec<crate::mission::Item>,
+    },
+    /// Start the mission (MAV_CMD_MISSION_START).
+    MissionStart {
+        /// The current item, as MISSION_CURRENT said.
+        from: Option<u16>,
+        /// The vehicle was armed when asked.
+        armed: bool,
+        /// The vehicle was in the air when asked.
+        airborne: bool,
+    },
+    /// Make an item current while the vehicle flies the mission.
+    MissionSetCurrent {
+        /// The item.
+        seq: u16,
+    },
 }
 
 /// What the UI asks the client to do.
@@ -150,6 +172,21 @@ pub enum Request {
     PushGains,
     /// Download the vehicle's mission, for the Map view.
     MissionDownload,
+    /// Read a mission file and check it as `vtol-gcs mission upload` does.
+    MissionCheck(String),
+    /// Upload checked items, then download them again to verify.
+    MissionUpload {
+        /// The file they came from.
+        path: String,
+        /// The items (item 0 home).
+        items: Vec<crate::mission::Item>,
+    },
+    /// Download the vehicle's mission into this file.
+    MissionSave(String),
+    /// MAV_CMD_MISSION_START.
+    MissionStart,
+    /// MAV_CMD_DO_SET_MISSION_CURRENT.
+    MissionSetCurrent(u16),
 }
 
 /// What came back from a request.
@@ -186,6 +223,10 @@ pub enum Outcome {
     GainsPushed(Result<String, String>),
     /// The vehicle's mission arrived (item 0 is home), or why not.
     Mission(Result<Vec<crate::mission::Item>, String>),
+    /// A mission file was read and checked: (path, items), or its first problem.
+    MissionChecked(Result<(String, Vec<crate::mission::Item>), String>),
+    /// A mission upload or a download into a file finished: a summary line, or why not.
+    MissionDone(Result<String, String>),
 }
 
 /// Where a parameter stands in the UI.
@@ -319,6 +360,10 @@ pub struct App {
     pub replay: bool,
     /// The Map view's camera and mission.
     pub map: crate::tui::view::map::MapState,
+    /// The Map view's mission prompt, while typed.
+    pub mission_prompt: Option<mission_keys::MissionPrompt>,
+    /// The mission file last named (the prompts offer it).
+    pub mission_file: String,
     /// Set by `q`.
     pub quit: bool,
 }
@@ -341,6 +386,8 @@ impl Default for App {
             picker: None,
             replay: false,
             map: Default::default(),
+            mission_prompt: None,
+            mission_file: mission_keys::DEFAULT_MISSION_FILE.to_owned(),
             quit: false,
         }
     }
@@ -496,6 +543,9 @@ impl App {
         if let Some(p) = self.picker.take() {
             return self.on_picker_key(p, key, state);
         }
+        if self.typing && self.mission_prompt.is_some() {
+            return self.on_mission_prompt_key(key, state);
+        }
         if self.typing {
             return self.on_text(key);
         }
@@ -533,7 +583,7 @@ impl App {
             View::Messages => self.on_messages_key(key),
             View::Params => self.on_params_key(key),
             View::Fleet => self.on_fleet_key(key),
-            View::Map => self.map.on_key(key.code),
+            View::Map => self.on_map_key(key, state),
             View::Flight | View::Charts | View::Links => None,
         } {
             return reqs;
@@ -688,12 +738,16 @@ impl App {
                 let radius = self.param("WP_LOITER_RAD").unwrap_or(60.0);
                 self.map.items = crate::tui::view::map::items_from_mission(&items, radius);
                 let n = items.len().saturating_sub(1);
+                self.map.mission = Some(items);
                 self.note(
                     Level::Ok,
                     format!("mission of {n} items (r: download again)"),
                 );
             }
             Outcome::Mission(Err(e)) => self.note(Level::Error, format!("mission download: {e}")),
+            Outcome::MissionChecked(checked) => self.on_mission_checked(checked),
+            Outcome::MissionDone(Ok(s)) => self.note(Level::Ok, s),
+            Outcome::MissionDone(Err(e)) => self.note(Level::Error, e),
             Outcome::GainsPushed(result) => {
                 self.params.progress = None;
                 if result.is_ok() {

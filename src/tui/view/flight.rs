@@ -125,7 +125,14 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
         None => " Attitude and position ".to_owned(),
     };
     f.render_widget(
-        Paragraph::new(numbers(app, snap, vehicle, shown)).block(Block::bordered().title(title)),
+        Paragraph::new(numbers(
+            app,
+            snap,
+            vehicle,
+            shown,
+            right.width.saturating_sub(2),
+        ))
+        .block(Block::bordered().title(title)),
         right,
     );
     draw_outputs(f, app, vehicle, &outputs, pwm);
@@ -218,12 +225,14 @@ fn draw_horizon(
     f.render_widget(canvas, horizon);
 }
 
-/// The attitude, position against the setpoint, air data and VTOL state, one line each.
+/// The attitude, position against the setpoint, air data, VTOL state and the mission's
+/// progress, one line each, in `width` columns.
 fn numbers(
     app: &App,
     snap: &Snapshot<'_>,
     vehicle: Option<&VehicleView>,
     shown: Option<crate::tui::attitude::Shown>,
+    width: u16,
 ) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
     let (v, a) = match (vehicle, shown) {
@@ -283,6 +292,10 @@ fn numbers(
         lines.push(Line::styled("VTOL  -", Style::new().fg(Color::DarkGray)));
     } else {
         lines.extend(air_lines(app, snap, v));
+        let mission = app.map.mission.as_deref();
+        if let Some(m) = crate::tui::progress::mission_line(snap.state, v, mission, snap.now) {
+            lines.push(Line::raw(m.text(usize::from(width))));
+        }
     }
     lines
 }

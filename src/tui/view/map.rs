@@ -263,6 +263,8 @@ pub struct MapState {
     pub camera: MapCamera,
     /// The mission drawn (downloaded when the view is first entered; `r` again).
     pub items: Vec<MapItem>,
+    /// The mission as downloaded (item 0 home), for the Flight view's progress line.
+    pub mission: Option<Vec<crate::mission::Item>>,
     /// Whether the mission was asked for.
     pub requested: bool,
 }
@@ -468,11 +470,19 @@ fn draw_side(f: &mut Frame<'_>, scene: &MapScene<'_>, area: Rect) {
 
 fn paint(ctx: &mut Context<'_>, scene: &MapScene<'_>, center: LatLon, mpc: f64) {
     let xy = |p: LatLon| east_north_m(center, p);
-    // The track, as segments (no list of points to build).
+    // The track, as segments (no list of points to build). A braille dot is half a cell wide
+    // and a quarter of a cell tall, mpc/2 m either way: points closer than half a dot to the
+    // last one drawn land on its dot, so they are passed over (the last point always drawn),
+    // which at the default zoom skips most of a track kept 0.3 m apart.
+    let step = mpc / 4.0;
     let mut last: Option<(f64, f64)> = None;
-    for p in scene.track {
+    for (i, p) in scene.track.iter().enumerate() {
         let (x, y) = xy(*p);
         if let Some((x0, y0)) = last {
+            let near = (x - x0).abs() < step && (y - y0).abs() < step;
+            if near && i + 1 < scene.track.len() {
+                continue;
+            }
             ctx.draw(&Line::new(x0, y0, x, y, Color::DarkGray));
         }
         last = Some((x, y));

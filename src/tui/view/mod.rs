@@ -276,6 +276,9 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Fleet => draw_fleet(f, app, snap, body),
         View::Map => map::draw_map_view(f, app, snap, &cache.track, body),
     }
+    if let Some(p) = &app.mission_prompt {
+        overlay::draw_mission_prompt(f, p, body);
+    }
     draw_footer(f, app, footer);
     if let Some(p) = &app.picker {
         draw_picker(f, app, p, snap.state, area);

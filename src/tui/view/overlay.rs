@@ -7,6 +7,7 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Cell, Clear, Paragraph, Row, Table, Wrap};
 
 use crate::tracker::state::VehicleState;
+use crate::tui::app::mission_keys::MissionPrompt;
 use crate::tui::app::picker::Picker;
 use crate::tui::app::{App, Confirm};
 
@@ -93,11 +94,34 @@ pub(super) const HELP: &[(&str, &str)] = &[
         "load a gains file (diff, then upload) / download again",
     ),
     (
+        "Map: u w g n r",
+        "mission: upload / write a file / start / item / reload",
+    ),
+    (
         "Fleet: / ↑↓ Enter",
         "search; scroll (PgUp/PgDn); show and command it",
     ),
     ("/ … Enter, Esc", "type a filter; Esc clears it"),
 ];
+
+/// The Map view's mission prompt: a box over the bottom of `area` with what is typed.
+pub(super) fn draw_mission_prompt(f: &mut Frame<'_>, p: &MissionPrompt, area: Rect) {
+    let h = 3.min(area.height);
+    let r = Rect {
+        y: area.y + area.height - h,
+        height: h,
+        ..area
+    };
+    f.render_widget(Clear, r);
+    f.render_widget(
+        Paragraph::new(format!("{}▏", p.text())).block(
+            Block::bordered()
+                .title(p.title())
+                .border_style(Style::new().fg(Color::Yellow)),
+        ),
+        r,
+    );
+}
 
 pub(super) fn draw_help(f: &mut Frame<'_>, area: Rect) {
     let rows: Vec<Row> = HELP
