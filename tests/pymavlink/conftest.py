@@ -30,7 +30,8 @@ from pymavlink import mavutil  # noqa: E402
 from procs import ManagedProcess, ProcessFactory, factory_fixtures  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-TWIN_BIN = Path(os.environ.get("FIRMWARE_SIM_BIN", ROOT / "target" / "debug" / "firmware-sim"))
+# A relative path in the environment is taken from where the command was started.
+TWIN_BIN = Path(os.environ.get("FIRMWARE_SIM_BIN", ROOT / "target" / "debug" / "firmware-sim")).absolute()
 
 VEHICLE_SYSID = 1
 VEHICLE_COMPID = 1

@@ -22,7 +22,8 @@ from typing import Iterable
 from conftest import ROOT, VEHICLE_COMPID, VEHICLE_SYSID, Gcs
 from procs import ManagedProcess, ProcessFactory, factory_fixtures
 
-DAEMON_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs"))
+# A relative path in the environment is taken from where the command was started.
+DAEMON_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs")).absolute()
 
 # An endpoint with a policy is printed with its query (`serving tcpin:127.0.0.1:5770?trust=sign`).
 SERVING_RE = re.compile(r"^serving\s+(?P<scheme>[a-z]+):(?P<addr>[^\s?]+)(?P<query>\?\S*)?\s*$")

@@ -23,7 +23,8 @@ from conftest import Gcs
 from daemon_support import daemon_factory  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
-GCS_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs"))
+# A relative path in the environment is taken from where the command was started.
+GCS_BIN = Path(os.environ.get("VTOL_GCS_BIN", ROOT / "target" / "debug" / "vtol-gcs")).absolute()
 
 WIDTH, HEIGHT = 120, 36
 

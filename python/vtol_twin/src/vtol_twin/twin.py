@@ -54,7 +54,7 @@ def find_binary(explicit: Optional[Union[str, os.PathLike]] = None,
     tried: list[str] = []
     for label, value in (("--vtol-twin-bin", explicit), ("FIRMWARE_SIM_BIN", os.environ.get("FIRMWARE_SIM_BIN"))):
         if value:
-            p = Path(value).expanduser()
+            p = Path(value).expanduser().absolute()
             if p.is_file() and os.access(p, os.X_OK):
                 return p
             raise TwinError(f"{label} names {p}, which is not an executable file")
