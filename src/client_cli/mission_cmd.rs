@@ -191,7 +191,9 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
         }
         UploadOutcome::NoAck { .. } => true,
     };
+    let t1 = std::time::Instant::now();
     let back = c.mission_download(kind, |_, _| {}).await?;
+    let verify = t1.elapsed();
     let diff = difference(items, &back, kind);
     if let (Some(diff), UploadOutcome::NoAck { requested, total }) = (&diff, &outcome) {
         return Err(super::link_failure(format!(
@@ -220,11 +222,12 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
         });
     }
     println!(
-        "uploaded {} {} items from {} (verified by download; upload {:.0} ms)",
+        "uploaded {} {} items from {} (verified by download; upload {:.0} ms, verify {:.0} ms)",
         items.len(),
         kind.name(),
         path.display(),
-        took.as_secs_f64() * 1e3
+        took.as_secs_f64() * 1e3,
+        verify.as_secs_f64() * 1e3
     );
     Ok(())
 }
