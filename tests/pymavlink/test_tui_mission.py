@@ -109,7 +109,8 @@ def test_a_mission_flown_on_the_map(screen_factory, tmp_path):  # noqa: F811
         if m := re.search(CURRENT, screen):
             if not highlighted or highlighted[-1] != m.group(1):
                 highlighted.append(m.group(1))
-        home_seen = home_seen or bool(re.search(on_map(r"\bH\b"), plain))
+        # Home's `H`, alone or leading the labels of the items at home (`HL5`, `HT1/L5`).
+        home_seen = home_seen or bool(re.search(on_map(r"(?<!\w)H(?=T1|L5|\W|$)"), plain))
         most = max(most, braille(plain))
         if highlighted[-1:] == ["4"]:
             mid = plain  # the last screen on the east leg, the box almost flown
