@@ -29,7 +29,8 @@ EXPECTED_DIFFERENCES: list[dict] = [
      "keys": r"protocol:extended_sys_state",
      "arduplane": "EXTENDED_SYS_STATE vtol_state follows the mode: FW (4) in MANUAL and the other "
                   "fixed-wing modes, MC (3) in the Q modes, also on the ground",
-     "twin": "vtol_state MC (3) whatever the mode"},
+     "twin": "vtol_state MC (3) whatever the mode, and so ATTITUDE in the VTOL view on the ground in "
+             "FBWA and CRUISE too (ArduPlane: the fixed-wing frame)"},
     # -- identify ----------------------------------------------------------------------------
     {"name": "capabilities", "scenario": "identify", "keys": r"protocol:autopilot_version\.capabilities",
      "arduplane": "adds FTP, MISSION_FENCE, MISSION_RALLY, COMPASS_CALIBRATION, TERRAIN, SET_ATTITUDE_TARGET; "
