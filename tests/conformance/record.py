@@ -39,6 +39,9 @@ from typing import Iterator
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scenarios import SCENARIOS, run  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sitl"))
+from sitl import reboot_once  # noqa: E402
 from vehicle import suite  # noqa: E402
 
 # The twin's speed per kind of scenario: as fast as its telemetry still samples each flight
@@ -66,46 +69,6 @@ def sitl(binary: str, defaults: str, instance: int, speedup: float, model: str) 
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-
-
-def heartbeat(url: str, timeout: float = 60.0):
-    """A pymavlink connection to `url` that has heard a heartbeat (SITL may not listen yet)."""
-    from pymavlink import mavutil
-
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            m = mavutil.mavlink_connection(url, source_system=254, autoreconnect=False)
-            if m.wait_heartbeat(timeout=max(0.1, deadline - time.monotonic())) is not None:
-                return m
-            m.close()
-        except OSError:
-            pass
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"no heartbeat from {url} in {timeout} s")
-        time.sleep(0.2)
-
-
-def reboot_once(url: str) -> None:
-    """Reboots a freshly booted SITL once, as ArduPilot's own autotest does for a tailsitter
-    (Tools/autotest/arduplane.py: "tailsitter needs extra re-boot to pick up the rotated AHRS
-    view"): parameters from --defaults are loaded after QuadPlane has set itself up, so on the
-    first boot ArduPlane has no VTOL view and reports ATTITUDE in the fixed-wing frame in every
-    mode; a vehicle whose parameters are stored, as every real one, boots with it."""
-    from pymavlink import mavutil
-
-    m = heartbeat(url)
-    m.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0, 1, 0, 0, 0, 0, 0, 0)
-    ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=10)
-    if ack is None or ack.result != mavutil.mavlink.MAV_RESULT_ACCEPTED:
-        m.close()
-        raise RuntimeError(f"SITL did not accept the reboot: {ack}")
-    # The process restarts: the old one closes its TCP connection, then the new one listens.
-    m.port.settimeout(30)
-    while m.port.recv(65536):
-        pass
-    m.close()
-    heartbeat(url).close()
 
 
 @contextmanager

@@ -94,37 +94,8 @@ class Sitl:
         threading.Thread(target=drain, daemon=True).start()
 
     def reboot_once(self, timeout: float = 90.0) -> None:
-        """Reboots SITL once, as ArduPilot's own autotest does for a tailsitter: booted from a
-        `--defaults` file its parameters arrive after QuadPlane's set-up, so until a reboot it
-        has no VTOL view (ATTITUDE in the fixed-wing frame in every mode) and its hover wanders.
-        A real vehicle, whose parameters are stored, always boots with it."""
-        from pymavlink import mavutil
-
-        m = mavutil.mavlink_connection(self.url1, source_system=254, autoreconnect=False)
-        try:
-            assert m.wait_heartbeat(timeout=timeout) is not None, "no heartbeat from SITL"
-            m.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0,
-                                    1, 0, 0, 0, 0, 0, 0)
-            ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=10)
-            assert ack is not None and ack.result == mavutil.mavlink.MAV_RESULT_ACCEPTED, ack
-            # The process restarts: the old one closes the connection.
-            m.port.settimeout(timeout)
-            while m.port.recv(65536):
-                pass
-        finally:
-            m.close()
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                m = mavutil.mavlink_connection(self.url1, source_system=254, autoreconnect=False)
-                ok = m.wait_heartbeat(timeout=max(0.1, deadline - time.monotonic())) is not None
-                m.close()
-                if ok:
-                    return
-            except OSError:
-                pass
-            assert time.monotonic() < deadline, "SITL did not come back after its reboot"
-            time.sleep(0.2)  # polling a port that is not open yet; there is no event to wait on
+        """[`reboot_once`] on this SITL's second port."""
+        reboot_once(self.url1, timeout)
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -148,3 +119,38 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def reboot_once(url: str, timeout: float = 90.0) -> None:
+    """Reboots the SITL at `url` once, as ArduPilot's own autotest does for a tailsitter
+    (Tools/autotest/arduplane.py: "tailsitter needs extra re-boot to pick up the rotated AHRS
+    view"): booted from a `--defaults` file its parameters arrive after QuadPlane's set-up, so
+    until a reboot it has no VTOL view (ATTITUDE in the fixed-wing frame in every mode) and its
+    hover wanders. A real vehicle, whose parameters are stored, always boots with it. Returns
+    once SITL answers again on `url`."""
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(url, source_system=254, autoreconnect=False)
+    try:
+        assert m.wait_heartbeat(timeout=timeout) is not None, f"no heartbeat from SITL on {url}"
+        m.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0, 1, 0, 0, 0, 0, 0, 0)
+        ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=10)
+        assert ack is not None and ack.result == mavutil.mavlink.MAV_RESULT_ACCEPTED, ack
+        # The process restarts: the old one closes the connection.
+        m.port.settimeout(timeout)
+        while m.port.recv(65536):
+            pass
+    finally:
+        m.close()
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            m = mavutil.mavlink_connection(url, source_system=254, autoreconnect=False)
+            ok = m.wait_heartbeat(timeout=max(0.1, deadline - time.monotonic())) is not None
+            m.close()
+            if ok:
+                return
+        except OSError:
+            pass
+        assert time.monotonic() < deadline, "SITL did not come back after its reboot"
+        time.sleep(0.2)  # polling a port that is not open yet; there is no event to wait on
