@@ -119,4 +119,21 @@ EXPECTED_DIFFERENCES: list[dict] = [
      "arduplane": "after VTOL_TAKEOFF transitions to fixed wing for the NAV_WAYPOINTs and reaches them; "
                   "in the recording the SITL model had not landed and disarmed when the scenario ended",
      "twin": "flies the box on the wing, lands at home and disarms"},
+    {"name": "box-transition-flight", "scenario": "box_transition_mission", "strict": False,
+     "keys": r"protocol:(items_reached|landed_and_disarmed|vtol_states|land\..*|mode_sequence_commanded)",
+     "arduplane": "the DO_VTOL_TRANSITION item after the take-off starts the forward transition (reached "
+                  "as item 2); in the recording the SITL model then hit the ground again and again on the "
+                  "wing (\"SIM Hit ground\"), reached item 3 only, and QLAND ended the scenario",
+     "twin": "flies the box on the wing, back to MC at the second DO_VTOL_TRANSITION, lands at home and "
+             "disarms"},
+    {"name": "disarm-in-flight-text", "scenario": "air_arm_modes", "keys": r"protocol:air\.disarm\.reasons",
+     "arduplane": "refuses a disarm in flight (FAILED) without a STATUSTEXT",
+     "twin": "refuses it (FAILED) and says why: \"Disarm: refusing to disarm in flight (use force)\", "
+             "so an operator knows what a forced disarm would do"},
+    {"name": "sitl-back-transition", "scenario": "air_arm_modes", "strict": False,
+     "keys": r"protocol:air\.back\.vtol_states",
+     "arduplane": "in the recording the SITL model had hit the ground in CRUISE and its back transition "
+                  "ended at once (\"Transition VTOL done, roll error\"): MC with no TRANSITION_TO_MC "
+                  "between (in AUTO, auto_vtol_transition, it reports TRANSITION_TO_MC)",
+     "twin": "TRANSITION_TO_MC, then MC"},
 ]

@@ -456,6 +456,171 @@ def box_mission(v: Vehicle, tr: Trace) -> None:
     tr.phys("landed_from_land_point_m", round(distance_m(lat, lon, g.lat, g.lon), 1))
 
 
+def _states_since(v: Vehicle, mark: int) -> list[str]:
+    """The VTOL states EXTENDED_SYS_STATE reported since `mark` (an index into `ext_states`),
+    by name, repeats merged."""
+    names = []
+    for vtol, _landed in v.ext_states[mark:]:
+        e = MAV.enums["MAV_VTOL_STATE"].get(vtol)
+        name = e.name[len("MAV_VTOL_STATE_"):] if e else str(vtol)
+        if not names or names[-1] != name:
+            names.append(name)
+    return names
+
+
+def _to_wing(v: Vehicle, tr: Trace, key: str, mode: str = "FBWA") -> bool:
+    """From a hover to the wing in `mode`, with a pilot's throttle held at cruise; True once the
+    vehicle reports FW (or 20 s of its time have passed)."""
+    mark = len(v.ext_states)
+    tr.proto(f"{key}.mode_{mode}", v.mode(mode))
+    fw = v.until(lambda: any(s[0] == MAV.MAV_VTOL_STATE_FW for s in v.ext_states[mark:]),
+                 timeout=60, vehicle_s=20, ok_on_time=True)
+    tr.proto(f"{key}.vtol_states", _states_since(v, mark))
+    return fw
+
+
+def air_arm_modes(v: Vehicle, tr: Trace) -> None:
+    """In the air: arm again, disarm (refused in flight), then the Q modes and CRUISE with a
+    pilot's throttle held at mid stick, with the vehicle's VTOL state after each change; back to
+    QHOVER, QLAND to end."""
+    if not take_off(v, tr):
+        return
+    mark = len(v.statustexts)
+    tr.proto("air.arm_again", v.arm())
+    tr.proto("air.disarm", v.disarm())
+    v.wait_vehicle_time(1.0)
+    tr.proto("air.still_armed", v.armed())
+    tr.proto("air.disarm.reasons", sorted({category(t) for t in v.texts_since(mark) if prefix(t) == "Disarm"}))
+    v.hold_sticks(1500)
+    for i, mode in enumerate(("QHOVER", "QLOITER", "QSTABILIZE", "QHOVER")):
+        mark_s = len(v.ext_states)
+        tr.proto(f"air.{i}.{mode}.ack", v.mode(mode))
+        v.wait_vehicle_time(2.0)
+        tr.proto(f"air.{i}.{mode}.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
+        tr.proto(f"air.{i}.{mode}.vtol_states", _states_since(v, mark_s))
+    tr.proto("air.armed_after_q_modes", v.armed())
+    if v.armed():
+        _to_wing(v, tr, "air.wing", "CRUISE")
+        tr.proto("air.CRUISE.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
+        mark_s = len(v.ext_states)
+        tr.proto("air.back.QHOVER", v.mode("QHOVER"))
+        v.until(lambda: any(s[0] == MAV.MAV_VTOL_STATE_MC for s in v.ext_states[mark_s:]),
+                timeout=60, vehicle_s=20, ok_on_time=True)
+        tr.proto("air.back.vtol_states", _states_since(v, mark_s))
+    v.hold_sticks(None)
+    if v.armed():
+        land_here(v, tr)
+
+
+def guided_waypoint(v: Vehicle, tr: Trace) -> None:
+    """GUIDED take-off, then a point 200 m north at 30 m sent as DroneKit's `simple_goto` sends
+    it (MISSION_ITEM_INT with current = 2): ArduPlane (Q_GUIDED_MODE 0) flies it on the wing."""
+    if not take_off(v, tr):
+        return
+    lat, lon, _ = v.home()
+    tlat, tlon = offset(lat, lon, 200, 0)
+    v.drain()
+    mark = len(v.ext_states)
+    v.m.mav.mission_item_int_send(1, 1, 0, REL, MAV.MAV_CMD_NAV_WAYPOINT, 2, 0, 0, 0, 0, 0, tlat, tlon, 30.0)
+    try:
+        ack = v.recv("MISSION_ACK", timeout=10)
+        tr.proto("goto.ack", _ack_name(ack.type))
+    except Timeout:
+        tr.proto("goto.ack", None)
+    with v.window() as w:
+        v.until(lambda: any(s[0] == MAV.MAV_VTOL_STATE_FW for s in v.ext_states[mark:]),
+                timeout=60, vehicle_s=30, ok_on_time=True)
+    tr.proto("goto.vtol_states", _states_since(v, mark))
+    tr.phys("goto.first_30s", phase_summary(w))
+    tr.proto("goto.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
+    if v.armed():
+        land_here(v, tr)
+
+
+def rtl_wing(v: Vehicle, tr: Trace) -> None:
+    """GUIDED take-off, to the wing in CRUISE, then RTL: the modes and VTOL states it goes
+    through (Q_RTL_MODE 0: home on the wing)."""
+    if not take_off(v, tr):
+        return
+    _to_wing(v, tr, "wing", "CRUISE")
+    mark = len(v.ext_states)
+    tr.proto("RTL.ack", v.mode("RTL"))
+    with v.window() as w:
+        v.wait_vehicle_time(30.0)
+    tr.phys("RTL.first_30s", phase_summary(w))
+    tr.proto("RTL.vtol_states", _states_since(v, mark))
+    tr.proto("RTL.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
+    if v.armed():
+        land_here(v, tr)
+
+
+def _mission_run(v: Vehicle, tr: Trace, items: list[tuple], key: str, vehicle_s: float) -> None:
+    r = upload(v, items)
+    tr.proto(f"{key}.upload", r["ack"])
+    tr.proto(f"{key}.mode_auto", v.mode("AUTO"))
+    mark = len(v.statustexts)
+    tr.proto(f"{key}.arm", v.arm())
+    reasons(v, mark, tr, f"{key}.arm")
+
+
+def auto_vtol_transition(v: Vehicle, tr: Trace) -> None:
+    """DO_VTOL_TRANSITION as a command in AUTO: a mission of a VTOL take-off and a far
+    waypoint; once on the wing, to MC and back to FW, each answered and followed."""
+    begin(v, tr)
+    lat, lon, alt = where(v)
+    items = [(MAV.MAV_FRAME_GLOBAL, MAV.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, lat, lon, alt / 1000.0),
+             (REL, MAV.MAV_CMD_NAV_VTOL_TAKEOFF, 0, 0, 0, 0, lat, lon, TAKEOFF_ALT),
+             (REL, MAV.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *offset(lat, lon, 600, 0), TAKEOFF_ALT),
+             (REL, MAV.MAV_CMD_NAV_VTOL_LAND, 0, 0, 0, 0, lat, lon, 0)]
+    _mission_run(v, tr, items, "mission", 0)
+    if not v.until(v.armed, timeout=10, vehicle_s=3, ok_on_time=True):
+        return
+    mark = len(v.ext_states)
+    fw = v.until(lambda: any(s[0] == MAV.MAV_VTOL_STATE_FW for s in v.ext_states[mark:]),
+                 timeout=120, vehicle_s=90, ok_on_time=True)
+    tr.proto("takeoff.vtol_states", _states_since(v, mark))
+    if not fw:
+        return
+    for state, key in ((MAV.MAV_VTOL_STATE_MC, "to_mc"), (MAV.MAV_VTOL_STATE_FW, "to_fw")):
+        mark = len(v.ext_states)
+        smark = len(v.statustexts)
+        tr.proto(f"{key}.ack", v.cmd(MAV.MAV_CMD_DO_VTOL_TRANSITION, state))
+        v.until(lambda: any(s[0] == state for s in v.ext_states[mark:]), timeout=60, vehicle_s=15, ok_on_time=True)
+        v.wait_vehicle_time(3.0)
+        tr.proto(f"{key}.vtol_states", _states_since(v, mark))
+        tr.proto(f"{key}.heartbeat_mode", MODE_NAMES.get(v.heartbeat().custom_mode))
+        tr.info(f"{key}.texts", v.texts_since(smark))
+    if v.armed():
+        land_here(v, tr)
+
+
+def box_transition_mission(v: Vehicle, tr: Trace) -> None:
+    """The box mission with DO_VTOL_TRANSITION items: to FW after the take-off, to MC before
+    the VTOL_LAND; the items reached and the VTOL states flown, until disarmed."""
+    begin(v, tr)
+    lat, lon, alt = where(v)
+    box = box_items(lat, lon, alt, 0, 0)
+    to = lambda state: (REL, MAV.MAV_CMD_DO_VTOL_TRANSITION, state, 0, 0, 0, 0, 0, 0)  # noqa: E731
+    items = box[:2] + [to(MAV.MAV_VTOL_STATE_FW)] + box[2:-1] + [to(MAV.MAV_VTOL_STATE_MC)] + box[-1:]
+    _mission_run(v, tr, items, "mission", 0)
+    if not v.armed() and not v.until(v.armed, timeout=10, vehicle_s=3, ok_on_time=True):
+        return
+    mark = len(v.ext_states)
+    reached: list[int] = []
+
+    def done():
+        m = v.last.get("MISSION_ITEM_REACHED")
+        if m is not None and (not reached or reached[-1] != m.seq):
+            reached.append(m.seq)
+        return not v.armed()
+    landed = v.until(done, timeout=400, vehicle_s=900, ok_on_time=True)
+    tr.proto("landed_and_disarmed", landed)
+    tr.proto("items_reached", reached)
+    tr.proto("vtol_states", _states_since(v, mark))
+    if v.armed():
+        land_here(v, tr)
+
+
 # name -> (function, is a flight)
 SCENARIOS = {
     "identify": (identify, False),
@@ -471,6 +636,11 @@ SCENARIOS = {
     "qrtl": (qrtl, True),
     "rtl_hover": (rtl_hover, True),
     "box_mission": (box_mission, True),
+    "air_arm_modes": (air_arm_modes, True),
+    "guided_waypoint": (guided_waypoint, True),
+    "rtl_wing": (rtl_wing, True),
+    "auto_vtol_transition": (auto_vtol_transition, True),
+    "box_transition_mission": (box_transition_mission, True),
 }
 
 
@@ -492,5 +662,9 @@ def run(name: str, url: str) -> dict:
             tr.proto("mode_sequence_commanded", [MODE_NAMES.get(m, m) for m in v.modes[v.first_commanded:]])
         tr.proto("extended_sys_state", [list(s) for s in v.ext_states])
         tr.info("statustext", [f"{s['t_ms'] / 1000:.1f} s [{s['severity']}] {s['text']}" for s in v.statustexts])
+        try:
+            v.hold_sticks(None)
+        except OSError:
+            pass
         v.close()
     return tr.data

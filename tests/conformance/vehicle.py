@@ -143,6 +143,34 @@ class Vehicle(Gcs):
         self._chunks: dict[int, list[str]] = {}
         self.m.mav.set_callback(self._seen)
 
+    # -- a pilot's sticks -------------------------------------------------------------------
+
+    def hold_sticks(self, throttle: int | None) -> None:
+        """A pilot's transmitter: sticks centred, the throttle at `throttle` (PWM µs), sent as
+        RC_CHANNELS_OVERRIDE at 20 Hz of wall time by a thread of its own (both vehicles drop an
+        override 3 s of their time after its last refresh, a fraction of a second of the wall at
+        their speed-ups); None releases them. The modes a pilot flies (QHOVER, QSTABILIZE,
+        CRUISE) read the throttle stick, and neither SITL nor the twin has one of its own."""
+        import threading
+
+        stop = getattr(self, "_sticks_stop", None)
+        if stop is not None:
+            stop.set()
+            self._sticks_thread.join(timeout=5)
+            self._sticks_stop = None
+        if throttle is None:
+            self.m.mav.rc_channels_override_send(suite.VEHICLE_SYSID, suite.VEHICLE_COMPID, 0, 0, 0, 0, 0, 0, 0, 0)
+            return
+        stop = threading.Event()
+
+        def send():
+            while not stop.wait(0.05):
+                self.m.mav.rc_channels_override_send(suite.VEHICLE_SYSID, suite.VEHICLE_COMPID,
+                                                     1500, 1500, throttle, 1500, 0, 0, 0, 0)
+        self._sticks_stop = stop
+        self._sticks_thread = threading.Thread(target=send, daemon=True)
+        self._sticks_thread.start()
+
     # -- the recorder ----------------------------------------------------------------------
 
     def _seen(self, msg, *_):
