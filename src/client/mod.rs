@@ -674,7 +674,9 @@ impl ClientHandle {
                 .fetch_add(1, Ordering::Relaxed)
                 .wrapping_add(1);
             let mut m = param::FtpPullMachine::new(target, session, self.rto());
-            match self.drive(&mut m, |_| {}).await? {
+            let out = self.drive(&mut m, |_| {}).await?;
+            tracing::debug!("{}: {}", param::PARAM_FILE, m.summary());
+            match out {
                 Ok(set) => {
                     if let Some(p) = &progress {
                         p.send_replace((set.len(), set.len()));

@@ -4,11 +4,20 @@
 //! offers FTP; any failure (a NAK on open, a file that does not decode, silence) hands over to
 //! the parameter protocol ([`super::PullMachine`]).
 //!
-//! The exchange: OpenFileRO, then BurstReadFile from offset 0: the vehicle sends the file in
-//! 239-byte chunks until its end (a short chunk, or a NAK EndOfFile). Chunks lost on the way
-//! leave gaps, asked for again by a burst from the first one; the file is complete when its
-//! bytes from the start decode to as many parameters as its header announces. Then
-//! TerminateSession frees the vehicle's one FTP session.
+//! The exchange: OpenFileRO, then the file in 239-byte chunks until its end (a short chunk, or a
+//! NAK EndOfFile), then TerminateSession, which frees the vehicle's one FTP session. The file is
+//! complete when its bytes from the start decode to as many parameters as its header announces.
+//! - On a fast link (the open answered within 30 ms) the chunks are asked for by ReadFile, four
+//!   at once and then one every 3 ms, up to 32 in flight: ArduPilot answers those as they come
+//!   (one every 2–3 ms on SITL), where it paces a burst to a third of what it believes the port
+//!   carries (one chunk every 5.8 ms on SITL's TCP port).
+//! - On a slower link, one BurstReadFile from the start: the vehicle's pace suits the link. The
+//!   chunks lost on the way are then asked for by ReadFile at the burst's pace.
+//! - A request unanswered for a round trip and a quarter (and the time half a window takes to
+//!   leave) is sent again. Each goes in one, two or three copies as the loss seen so far (the
+//!   gaps a burst left, then the reads' timeouts) makes a lost round likely.
+//! - An open refused with Fail means this session already has a file open (the answer to an
+//!   earlier open was lost): TerminateSession, then the open again.
 //!
 //! The packed format: a header `u16 magic (0x671b, or 0x671c with defaults) | u16 count |
 //! u16 total`, then per parameter `u8 type (low 4 bits: 1 int8, 2 int16, 3 int32, 4 float;
@@ -48,7 +57,10 @@ const OP_READ: u8 = 5;
 const OP_BURST: u8 = 15;
 const OP_ACK: u8 = 128;
 const OP_NAK: u8 = 129;
+const ERR_FAIL: u8 = 1;
 const ERR_EOF: u8 = 6;
+/// Resets of a session the vehicle says already has a file open, before FTP is given up.
+const RESETS: u8 = 2;
 
 const MAGIC: u16 = 0x671b;
 const MAGIC_DEFAULTS: u16 = 0x671c;
@@ -142,10 +154,41 @@ pub fn decode_pck(data: &[u8]) -> Result<ParamSet, PckError> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
     Open,
-    Read,
+    /// The open was refused because this session already has a file open (the answer to an
+    /// earlier open was lost, or an earlier reader with this session number never closed it):
+    /// TerminateSession, then the open again.
+    Reset,
+    /// One BurstReadFile: the vehicle sends chunk after chunk at its own pace.
+    Burst,
+    /// ReadFile requests, several in flight: the whole file on a fast link, the gaps a burst
+    /// left on a slow one.
+    Window,
     /// The table is in; TerminateSession waits for its ACK (a few tries at most), so that the
     /// vehicle's one session is free for the next reader even when this process ends at once.
     Close,
+}
+
+/// An open round trip at most this long makes the link a fast one: the file is read with
+/// requests in flight from the start. ArduPilot paces a burst to a third of what it believes
+/// the port carries (one chunk every 5.8 ms on SITL's TCP port); several ReadFile requests in
+/// flight are answered as fast as they come, one every 2–3 ms.
+const FAST_LINK: Duration = Duration::from_millis(30);
+/// Requests sent back to back. ArduPilot queues five FTP requests and drops what comes while
+/// the queue is full, so at most four arrive together.
+const READ_BURST: u32 = 4;
+/// Then one request per this long at most (or per chunk interval of the burst, if longer: the
+/// pace the vehicle chose for the link).
+const READ_PACE: Duration = Duration::from_millis(3);
+/// Requests in flight at most.
+const READ_WINDOW: usize = 32;
+/// A request unanswered this long at least is sent again.
+const READ_TIMEOUT_MIN: Duration = Duration::from_millis(40);
+
+/// A ReadFile request in flight.
+#[derive(Debug, Clone, Copy)]
+struct Read {
+    offset: u32,
+    sent: Instant,
 }
 
 /// The table over FTP: `Ok(table)`, or `Err(why)` when the parameter protocol should be used.
@@ -161,17 +204,46 @@ pub struct FtpPullMachine {
     /// The end of the file, once a short chunk or an end-of-file NAK has shown it.
     end: Option<u32>,
     last_rx: Instant,
+    /// When the open was last sent, for the link's round trip.
+    open_sent: Instant,
+    /// ReadFile requests in flight, by their sequence number (the vehicle answers with it
+    /// plus one, and leaves a NAK's offset stale).
+    reads: BTreeMap<u16, Read>,
+    /// Requests that may leave now (a token bucket of `READ_BURST`), and when the next accrues.
+    tokens: u32,
+    next_token: Instant,
+    pace: Duration,
+    read_timeout: Duration,
+    /// The open's round trip.
+    rtt: Duration,
+    resets: u8,
+    /// The chance that a request or its answer is lost: from the gaps a burst left, then
+    /// from the reads' answers and timeouts. Each request goes in as many copies as make a
+    /// round without its chunk unlikely.
+    loss: f64,
+    reads_answered: usize,
+    /// The burst's first chunk and chunks, for its pace.
+    burst_first: Option<Instant>,
+    burst_chunks: u32,
     /// The table, read, while the session closes.
     table: Option<ParamSet>,
     done: Option<Result<ParamSet, String>>,
     /// Chunks received (duplicates included), for the benchmark's report.
     pub chunks_received: usize,
+    /// Requests sent (opens, bursts, reads, terminates), and reads sent again after a timeout.
+    sent: usize,
+    reads_timed_out: usize,
+    started: Instant,
+    /// When the open was answered and the burst ended, for the summary.
+    opened_at: Option<Instant>,
+    burst_end: Option<Instant>,
 }
 
 impl FtpPullMachine {
     /// Reads `@PARAM/param.pck` from `target` in FTP session `session`.
     #[must_use]
     pub fn new(target: (SystemId, ComponentId), session: u8, rto: Duration) -> Self {
+        let now = Instant::now();
         Self {
             target,
             session,
@@ -181,15 +253,33 @@ impl FtpPullMachine {
             retry: Retry::new(rto, FTP_TRIES, Duration::ZERO),
             chunks: BTreeMap::new(),
             end: None,
-            last_rx: Instant::now(),
+            last_rx: now,
+            open_sent: now,
+            reads: BTreeMap::new(),
+            tokens: READ_BURST,
+            next_token: now,
+            pace: READ_PACE,
+            read_timeout: READ_TIMEOUT_MIN,
+            rtt: Duration::ZERO,
+            resets: 0,
+            loss: 0.0,
+            reads_answered: 0,
+            burst_first: None,
+            burst_chunks: 0,
             table: None,
             done: None,
             chunks_received: 0,
+            sent: 0,
+            reads_timed_out: 0,
+            started: now,
+            opened_at: None,
+            burst_end: None,
         }
     }
 
     fn request(&mut self, opcode: u8, offset: u32, data: &[u8]) -> MavMessage {
         self.seq = self.seq.wrapping_add(1);
+        self.sent += 1;
         let mut payload = [0u8; 251];
         payload[..2].copy_from_slice(&self.seq.to_le_bytes());
         payload[2] = self.session;
@@ -205,24 +295,31 @@ impl FtpPullMachine {
         })
     }
 
-    fn open(&mut self, now: Instant) -> MavMessage {
-        self.retry.send(now);
-        let mut path = PARAM_FILE.as_bytes().to_vec();
-        path.push(0);
-        self.request(OP_OPEN_RO, 0, &path)
-    }
-
-    /// A burst from the first byte not received.
-    fn burst(&mut self, now: Instant) -> MavMessage {
-        self.retry.send(now);
-        let from = self.contiguous();
-        let mut m = self.request(OP_BURST, from, &[]);
+    /// A request for `CHUNK` bytes from `offset` (a burst's or a read's).
+    fn chunk_request(&mut self, opcode: u8, offset: u32) -> MavMessage {
+        let mut m = self.request(opcode, offset, &[]);
         // The size of each chunk asked for: a whole payload (the vehicle pads its values
         // to chunks of this size).
         if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = &mut m {
             f.payload[4] = CHUNK as u8;
         }
         m
+    }
+
+    fn open(&mut self, now: Instant) -> MavMessage {
+        self.retry.send(now);
+        self.open_sent = now;
+        let mut path = PARAM_FILE.as_bytes().to_vec();
+        path.push(0);
+        self.request(OP_OPEN_RO, 0, &path)
+    }
+
+    /// A burst from the first byte.
+    fn burst(&mut self, now: Instant) -> MavMessage {
+        self.phase = Phase::Burst;
+        self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
+        self.retry.send(now);
+        self.chunk_request(OP_BURST, 0)
     }
 
     /// Bytes received without a gap from the start.
@@ -256,13 +353,19 @@ impl FtpPullMachine {
     fn close(&mut self, now: Instant) -> Vec<MavMessage> {
         if self.phase != Phase::Close {
             self.phase = Phase::Close;
+            self.reads.clear();
             self.retry = Retry::new(self.rto, CLOSE_TRIES, Duration::ZERO);
         }
         self.retry.send(now);
         vec![self.request(OP_TERMINATE, 0, &[])]
     }
 
-    /// After a burst ends, or the stream of chunks stops: done, or a burst from the gap.
+    /// Whether every byte up to the end is in.
+    fn complete(&self) -> bool {
+        self.end.is_some_and(|e| self.contiguous() >= e)
+    }
+
+    /// Done, or the gaps asked for by ReadFile.
     fn settle(&mut self, now: Instant) -> Vec<MavMessage> {
         match decode_pck(&self.assembled()) {
             Ok(set) => {
@@ -270,15 +373,172 @@ impl FtpPullMachine {
                 self.close(now)
             }
             Err(PckError::Incomplete { .. } | PckError::Truncated(_) | PckError::Short)
-                if self.end.is_none_or(|e| self.contiguous() < e) =>
+                if !self.complete() =>
             {
-                self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
-                vec![self.burst(now)]
+                if self.phase == Phase::Burst {
+                    self.burst_end = Some(now);
+                    // Read the gaps at the pace the vehicle chose for its burst.
+                    if let Some(first) = self.burst_first
+                        && self.burst_chunks > 1
+                    {
+                        let interval = self.last_rx.duration_since(first) / (self.burst_chunks - 1);
+                        self.pace = interval.clamp(READ_PACE, Duration::from_millis(100));
+                        self.set_read_timeout();
+                    }
+                    self.phase = Phase::Window;
+                    self.tokens = READ_BURST;
+                    // The burst lost chunks, each one way: a read and its answer go both ways.
+                    let want = self.end.map_or_else(
+                        || {
+                            self.chunks
+                                .keys()
+                                .next_back()
+                                .map_or(1, |o| o / CHUNK as u32 + 1)
+                        },
+                        |e| e.div_ceil(CHUNK as u32),
+                    );
+                    let got = self.chunks.len() as f64 / f64::from(want.max(1));
+                    self.loss = 1.0 - got.min(1.0).powi(2);
+                }
+                self.fill(now)
             }
-            Err(e) => {
-                self.done = Some(Err(format!("{PARAM_FILE}: {e}")));
-                vec![self.request(OP_TERMINATE, 0, &[])]
+            Err(e) => self.fail(format!("{PARAM_FILE}: {e}")),
+        }
+    }
+
+    fn fail(&mut self, why: String) -> Vec<MavMessage> {
+        self.done = Some(Err(why));
+        vec![self.request(OP_TERMINATE, 0, &[])]
+    }
+
+    /// The chunks to ask for next, in file order: not received, not in flight, before the end
+    /// (or past everything received while the end is unknown).
+    fn wanted(&self, n: usize) -> Vec<u32> {
+        let in_flight: Vec<u32> = self.reads.values().map(|r| r.offset).collect();
+        let mut out = Vec::with_capacity(n);
+        let mut ofs = 0u32;
+        while out.len() < n && self.end.is_none_or(|e| ofs < e) {
+            if !self.chunks.contains_key(&ofs) && !in_flight.contains(&ofs) {
+                out.push(ofs);
             }
+            ofs = ofs.saturating_add(CHUNK as u32);
+            if ofs == u32::MAX {
+                break;
+            }
+        }
+        out
+    }
+
+    /// A round trip and a quarter, and the time half a window takes to leave: a lost request
+    /// costs little more than its round trip, a queued one is not sent twice.
+    fn set_read_timeout(&mut self) {
+        self.read_timeout =
+            (self.rtt * 5 / 4 + self.pace * (READ_WINDOW as u32 / 2)).max(READ_TIMEOUT_MIN);
+    }
+
+    /// What the read took, for the log: requests, chunks, timeouts and when each step ended.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        let ms = |t: Option<Instant>| {
+            t.map_or_else(
+                || "-".to_owned(),
+                |t| format!("{} ms", t.duration_since(self.started).as_millis()),
+            )
+        };
+        format!(
+            "{} requests ({} resets), {} chunks in, {} reads timed out, open answered at {}, \
+             burst ended at {}, last chunk at {}, pace {:?}, read timeout {:?}",
+            self.sent,
+            self.resets,
+            self.chunks_received,
+            self.reads_timed_out,
+            ms(self.opened_at),
+            ms(self.burst_end),
+            ms(Some(self.last_rx)),
+            self.pace,
+            self.read_timeout,
+        )
+    }
+
+    /// Copies of each request: one on a clean link, two when one in fifty is lost, three
+    /// when one in five is (at 30 % loss each way, half the round trips fail; three copies
+    /// leave one chunk in eight to the next round).
+    fn copies(&self) -> usize {
+        match self.loss {
+            l if l < 0.02 => 1,
+            l if l < 0.2 => 2,
+            _ => 3,
+        }
+    }
+
+    /// The loss estimate from the reads, once there are enough of them.
+    fn update_loss(&mut self) {
+        let n = self.reads_answered + self.reads_timed_out;
+        if n >= 8 {
+            self.loss = self.reads_timed_out as f64 / n as f64;
+        }
+    }
+
+    /// Chunks that may be asked for now, as far as the window goes.
+    fn room(&self) -> usize {
+        READ_WINDOW.saturating_sub(self.reads.len()) / self.copies()
+    }
+
+    /// Requests timed out go again; new ones leave as the window and the pace allow.
+    fn fill(&mut self, now: Instant) -> Vec<MavMessage> {
+        let timeout = self.read_timeout;
+        let before = self.reads.len();
+        self.reads
+            .retain(|_, r| now.duration_since(r.sent) < timeout);
+        if self.reads.len() < before {
+            self.reads_timed_out += before - self.reads.len();
+            self.update_loss();
+        }
+        while self.tokens < READ_BURST && self.next_token <= now {
+            self.tokens += 1;
+            self.next_token += self.pace;
+        }
+        if self.tokens == READ_BURST {
+            self.next_token = now + self.pace;
+        }
+        let copies = self.copies();
+        let mut out = Vec::new();
+        for offset in self.wanted(self.room()) {
+            if self.tokens == 0 {
+                break;
+            }
+            for _ in 0..copies {
+                self.tokens = self.tokens.saturating_sub(1);
+                out.push(self.chunk_request(OP_READ, offset));
+                self.reads.insert(self.seq, Read { offset, sent: now });
+            }
+        }
+        out
+    }
+
+    /// A read's answer (`offset` from its request), or the end of the file there.
+    fn on_read(&mut self, now: Instant, offset: u32, data: Option<Vec<u8>>) -> Vec<MavMessage> {
+        match data {
+            Some(data) => {
+                if data.len() < CHUNK {
+                    let end = offset + u32::try_from(data.len()).unwrap_or(0);
+                    self.end = Some(self.end.map_or(end, |e| e.min(end)));
+                }
+                self.chunks.entry(offset).or_insert(data);
+                self.reads_answered += 1;
+                self.update_loss();
+                // The other copy's answer, if it comes, is not waited for.
+                self.reads.retain(|_, r| r.offset != offset);
+            }
+            None => self.end = Some(self.end.map_or(offset, |e| e.min(offset))),
+        }
+        if let Some(end) = self.end {
+            self.reads.retain(|_, r| r.offset < end);
+        }
+        if self.complete() {
+            self.settle(now)
+        } else {
+            self.fill(now)
         }
     }
 }
@@ -299,22 +559,43 @@ impl Machine for FtpPullMachine {
             return Vec::new();
         };
         let p = &f.payload;
+        let seq = u16::from_le_bytes([p[0], p[1]]);
         let (session, opcode, size, req) = (p[2], p[3], usize::from(p[4]), p[5]);
         let burst_complete = p[6] != 0;
         let offset = u32::from_le_bytes([p[8], p[9], p[10], p[11]]);
         if session != self.session || !matches!(opcode, OP_ACK | OP_NAK) {
             return Vec::new();
         }
+        self.last_rx = now;
         match (self.phase, opcode, req) {
             (Phase::Close, _, OP_TERMINATE) => {
                 self.done = self.table.take().map(Ok);
                 Vec::new()
             }
             (Phase::Open, OP_ACK, OP_OPEN_RO) => {
-                self.phase = Phase::Read;
                 self.last_rx = now;
+                self.opened_at = Some(now);
+                let rtt = now.duration_since(self.open_sent);
+                self.rtt = rtt;
+                self.set_read_timeout();
+                if rtt <= FAST_LINK {
+                    self.phase = Phase::Window;
+                    self.fill(now)
+                } else {
+                    vec![self.burst(now)]
+                }
+            }
+            (Phase::Open, OP_NAK, OP_OPEN_RO) if p[12] == ERR_FAIL && self.resets < RESETS => {
+                self.resets += 1;
+                self.phase = Phase::Reset;
                 self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
-                vec![self.burst(now)]
+                self.retry.send(now);
+                vec![self.request(OP_TERMINATE, 0, &[])]
+            }
+            (Phase::Reset, OP_ACK, OP_TERMINATE) => {
+                self.phase = Phase::Open;
+                self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
+                vec![self.open(now)]
             }
             (Phase::Open, OP_NAK, OP_OPEN_RO) => {
                 self.done = Some(Err(format!(
@@ -323,9 +604,11 @@ impl Machine for FtpPullMachine {
                 )));
                 Vec::new()
             }
-            (Phase::Read, OP_ACK, OP_BURST | OP_READ) => {
+            (Phase::Burst, OP_ACK, OP_BURST) => {
                 self.last_rx = now;
                 self.chunks_received += 1;
+                self.burst_first.get_or_insert(now);
+                self.burst_chunks += 1;
                 let data = p[12..12 + size.min(CHUNK)].to_vec();
                 if size < CHUNK {
                     self.end = Some(offset + u32::try_from(size).unwrap_or(0));
@@ -333,30 +616,41 @@ impl Machine for FtpPullMachine {
                 self.chunks.entry(offset).or_insert(data);
                 // The next chunk is due at once: the retry waits for a pause in the burst.
                 self.retry.wait_until(now + self.rto.max(BURST_PAUSE));
-                if burst_complete || self.end.is_some_and(|e| self.contiguous() >= e) {
+                if burst_complete || self.complete() {
                     self.settle(now)
                 } else {
                     Vec::new()
                 }
             }
-            (Phase::Read, OP_NAK, OP_BURST | OP_READ) => {
+            (Phase::Burst, OP_NAK, OP_BURST) if p[12] == ERR_EOF => {
                 self.last_rx = now;
-                if p[12] == ERR_EOF {
-                    // The end is at most where the vehicle ran out.
-                    let received = self
-                        .chunks
-                        .iter()
-                        .next_back()
-                        .map_or(0, |(o, d)| o + u32::try_from(d.len()).unwrap_or(0));
-                    self.end = Some(self.end.unwrap_or(u32::MAX).min(received.max(offset)));
-                    self.settle(now)
-                } else {
-                    self.done = Some(Err(format!(
-                        "{PARAM_FILE}: read refused (FTP error {})",
-                        p[12]
-                    )));
-                    Vec::new()
+                // The end is at most where the vehicle ran out.
+                let received = self
+                    .chunks
+                    .iter()
+                    .next_back()
+                    .map_or(0, |(o, d)| o + u32::try_from(d.len()).unwrap_or(0));
+                self.end = Some(self.end.unwrap_or(u32::MAX).min(received.max(offset)));
+                self.settle(now)
+            }
+            (Phase::Window, OP_ACK, OP_READ) => {
+                self.last_rx = now;
+                self.chunks_received += 1;
+                self.reads.remove(&seq.wrapping_sub(1));
+                let data = p[12..12 + size.min(CHUNK)].to_vec();
+                self.on_read(now, offset, Some(data))
+            }
+            (Phase::Window, OP_NAK, OP_READ) if p[12] == ERR_EOF => {
+                self.last_rx = now;
+                // A NAK's offset is whatever the vehicle's last reply had: the request's is
+                // the one that ran out.
+                match self.reads.remove(&seq.wrapping_sub(1)) {
+                    Some(r) => self.on_read(now, r.offset, None),
+                    None => Vec::new(),
                 }
+            }
+            (Phase::Burst | Phase::Window, OP_NAK, OP_BURST | OP_READ) => {
+                self.fail(format!("{PARAM_FILE}: read refused (FTP error {})", p[12]))
             }
             _ => Vec::new(),
         }
@@ -366,9 +660,15 @@ impl Machine for FtpPullMachine {
         if self.done.is_some() {
             return Vec::new();
         }
-        if self.phase != Phase::Close && now.duration_since(self.last_rx) > FTP_STALL {
+        // The open and the reset have their tries; a read stalls.
+        if matches!(self.phase, Phase::Burst | Phase::Window)
+            && now.duration_since(self.last_rx) > FTP_STALL
+        {
             self.done = Some(Err(format!("{PARAM_FILE}: no answer")));
             return Vec::new();
+        }
+        if self.phase == Phase::Window {
+            return self.fill(now);
         }
         match (self.retry.step(now), self.phase) {
             (Step::Wait, _) => Vec::new(),
@@ -377,24 +677,48 @@ impl Machine for FtpPullMachine {
                 Vec::new()
             }
             (Step::Send, Phase::Open) => vec![self.open(now)],
-            (Step::GiveUp, Phase::Read) => {
-                self.done = Some(Err(format!("{PARAM_FILE}: read stalled")));
+            (Step::Send, Phase::Reset) => {
+                self.retry.send(now);
                 vec![self.request(OP_TERMINATE, 0, &[])]
             }
-            // The burst paused: what came may already be all of it, or a burst from the gap.
-            (Step::Send, Phase::Read) => self.settle(now),
+            (Step::GiveUp, Phase::Reset) => {
+                self.done = Some(Err(format!(
+                    "{PARAM_FILE}: no answer to the session's reset"
+                )));
+                Vec::new()
+            }
+            // The burst paused, or its request was lost: what came may already be all of it,
+            // or the gaps are read.
+            (Step::Send | Step::GiveUp, Phase::Burst) => self.settle(now),
             (Step::Send, Phase::Close) => self.close(now),
             (Step::GiveUp, Phase::Close) => {
                 self.done = self.table.take().map(Ok);
                 Vec::new()
             }
+            (_, Phase::Window) => Vec::new(),
         }
     }
 
     fn deadline(&self) -> Instant {
-        self.retry
-            .deadline()
-            .min(self.last_rx + FTP_STALL + Duration::from_millis(1))
+        let stall = self.last_rx + FTP_STALL + Duration::from_millis(1);
+        if self.phase == Phase::Window {
+            let oldest = self
+                .reads
+                .values()
+                .map(|r| r.sent + self.read_timeout)
+                .min();
+            let token = (self.room() > 0 && !self.wanted(1).is_empty()).then_some(self.next_token);
+            return [Some(stall), oldest, token]
+                .into_iter()
+                .flatten()
+                .min()
+                .unwrap_or(stall);
+        }
+        if self.phase == Phase::Burst {
+            self.retry.deadline().min(stall)
+        } else {
+            self.retry.deadline()
+        }
     }
 
     fn result(&mut self) -> Option<Self::Output> {

@@ -109,6 +109,8 @@ fn ftp(payload: [u8; 251]) -> Inbound {
 
 fn reply(req: &[u8; 251], op: u8, data: &[u8], offset: u32, complete: bool) -> Inbound {
     let mut p = [0u8; 251];
+    let seq = u16::from_le_bytes([req[0], req[1]]).wrapping_add(1);
+    p[..2].copy_from_slice(&seq.to_le_bytes());
     p[2] = req[2];
     p[3] = op;
     p[4] = u8::try_from(data.len()).expect("chunk");
@@ -126,35 +128,73 @@ fn payload(m: &MavMessage) -> [u8; 251] {
     }
 }
 
-/// Runs the machine against `file`, served as ArduPilot serves it, dropping the chunks whose
-/// number (over the whole read) is in `lose`. Returns the table and the bursts asked for.
-fn serve(file: &[u8], lose: &[usize]) -> (ParamSet, usize) {
+/// What a read cost.
+#[derive(Debug, Default)]
+struct Served {
+    opens: usize,
+    bursts: usize,
+    reads: usize,
+}
+
+/// Runs the machine against `file`, served as ArduPilot serves it, dropping the replies whose
+/// number (over the whole read, 1 first) is in `lose`; the open is answered after `open_rtt`
+/// (a fast link reads by ReadFile, a slow one bursts). Returns the table and what it took.
+fn serve(file: &[u8], lose: &[usize], open_rtt: Duration) -> (ParamSet, Served) {
+    serve_with(file, lose, open_rtt, false)
+}
+
+/// [`serve`], losing the first open's answer if `lose_open_ack`: the vehicle has the file open
+/// in that session when the open comes again, and refuses it (FTP error Fail) until the
+/// session is terminated, as ArduPilot does.
+fn serve_with(
+    file: &[u8],
+    lose: &[usize],
+    open_rtt: Duration,
+    lose_open_ack: bool,
+) -> (ParamSet, Served) {
     let t0 = Instant::now();
     let mut now = t0;
     let mut m = FtpPullMachine::new(V, 7, Duration::from_millis(20));
     let mut out = m.start(now);
-    let (mut sent, mut bursts) = (0usize, 0usize);
-    for _ in 0..1000 {
+    let (mut sent, mut cost) = (0usize, Served::default());
+    let (mut is_open, mut lose_open_ack) = (false, lose_open_ack);
+    let eof = |req: &[u8; 251]| {
+        let mut eof = reply(req, OP_NAK, &[ERR_EOF], 12345, false);
+        if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = &mut eof.msg {
+            f.payload[4] = 1;
+        }
+        eof
+    };
+    for _ in 0..5000 {
         if let Some(r) = m.result() {
-            return (r.expect("read"), bursts);
+            return (r.expect("read"), cost);
         }
         let mut inbound = Vec::new();
         for msg in out.drain(..) {
             let req = payload(&msg);
             assert_eq!(req[2], 7, "the session");
+            let ofs = u32::from_le_bytes([req[8], req[9], req[10], req[11]]) as usize;
             match req[3] {
-                OP_OPEN_RO => inbound.push(reply(&req, OP_ACK, &400u32.to_le_bytes(), 0, false)),
+                OP_OPEN_RO => {
+                    cost.opens += 1;
+                    now += open_rtt;
+                    if is_open {
+                        inbound.push(reply(&req, OP_NAK, &[ERR_FAIL], 0, false));
+                        continue;
+                    }
+                    is_open = true;
+                    if std::mem::take(&mut lose_open_ack) {
+                        continue;
+                    }
+                    inbound.push(reply(&req, OP_ACK, &400u32.to_le_bytes(), 0, false));
+                }
                 OP_BURST => {
-                    bursts += 1;
-                    let mut ofs = u32::from_le_bytes([req[8], req[9], req[10], req[11]]) as usize;
+                    cost.bursts += 1;
+                    let mut ofs = ofs;
                     loop {
                         let chunk = &file[ofs.min(file.len())..(ofs + CHUNK).min(file.len())];
                         if chunk.is_empty() {
-                            let mut eof = reply(&req, OP_NAK, &[ERR_EOF], ofs as u32, false);
-                            if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = &mut eof.msg {
-                                f.payload[4] = 1;
-                            }
-                            inbound.push(eof);
+                            inbound.push(eof(&req));
                             break;
                         }
                         let last = chunk.len() < CHUNK;
@@ -168,7 +208,24 @@ fn serve(file: &[u8], lose: &[usize]) -> (ParamSet, usize) {
                         }
                     }
                 }
-                OP_TERMINATE => inbound.push(reply(&req, OP_ACK, &[], 0, false)),
+                OP_READ => {
+                    cost.reads += 1;
+                    assert_eq!(usize::from(req[4]), CHUNK, "a whole chunk asked for");
+                    let chunk = &file[ofs.min(file.len())..(ofs + CHUNK).min(file.len())];
+                    sent += 1;
+                    if lose.contains(&sent) {
+                        continue;
+                    }
+                    if chunk.is_empty() {
+                        inbound.push(eof(&req));
+                    } else {
+                        inbound.push(reply(&req, OP_ACK, chunk, ofs as u32, false));
+                    }
+                }
+                OP_TERMINATE => {
+                    is_open = false;
+                    inbound.push(reply(&req, OP_ACK, &[], 0, false));
+                }
                 other => panic!("opcode {other}"),
             }
         }
@@ -177,11 +234,19 @@ fn serve(file: &[u8], lose: &[usize]) -> (ParamSet, usize) {
             out.extend(m.on_message(now, i));
         }
         if out.is_empty() && m.result_pending() {
-            now = m.deadline();
+            now = now.max(m.deadline());
             out = m.on_time(now);
         }
     }
-    panic!("no end");
+    panic!(
+        "no end: {:?} end {:?} contiguous {} reads {} chunks {} cost {cost:?} done {:?}",
+        m.phase,
+        m.end,
+        m.contiguous(),
+        m.reads.len(),
+        m.chunks.len(),
+        m.done.is_some()
+    );
 }
 
 impl FtpPullMachine {
@@ -190,19 +255,100 @@ impl FtpPullMachine {
     }
 }
 
+const SLOW: Duration = Duration::from_millis(100);
+const FAST: Duration = Duration::from_millis(1);
+
 #[test]
-fn the_file_comes_in_one_burst_and_lost_chunks_are_asked_for_again() {
+fn on_a_slow_link_the_file_comes_in_one_burst_and_lost_chunks_are_read_again() {
     let t = table(1566);
     let file = pack(&borrowed(&t));
-    let (set, bursts) = serve(&file, &[]);
-    assert_eq!(set.len(), 1566);
-    assert_eq!(bursts, 1);
-    // The second chunk and the last one lost.
     let chunks = file.len().div_ceil(CHUNK);
-    let (set, bursts) = serve(&file, &[2, chunks]);
+    let (set, cost) = serve(&file, &[], SLOW);
     assert_eq!(set.len(), 1566);
-    assert!(bursts >= 2, "{bursts}");
+    assert_eq!((cost.bursts, cost.reads), (1, 0));
+    // The second chunk and the last one lost: read by themselves, not by a second burst.
+    let (set, cost) = serve(&file, &[2, chunks], SLOW);
     assert_eq!(set, decode_pck(&file).expect("decodes"));
+    assert_eq!(cost.bursts, 1);
+    assert!((2..=4).contains(&cost.reads), "{cost:?}");
+    // The reads of the gaps lost too: asked for again, in two copies from then on.
+    let lose: Vec<usize> = (1..=chunks + 4).filter(|n| n % 3 == 0).collect();
+    let (set, cost) = serve(&file, &lose, SLOW);
+    assert_eq!(set, decode_pck(&file).expect("decodes"));
+    assert_eq!(cost.bursts, 1, "{cost:?}");
+}
+
+#[test]
+fn on_a_fast_link_the_file_is_read_by_requests_in_flight() {
+    let t = table(1566);
+    let file = pack(&borrowed(&t));
+    let chunks = file.len().div_ceil(CHUNK);
+    let (set, cost) = serve(&file, &[], FAST);
+    assert_eq!(set, decode_pck(&file).expect("decodes"));
+    assert_eq!(cost.bursts, 0);
+    // Each chunk once, and at most a window's worth of requests past the end.
+    assert!(
+        cost.reads >= chunks && cost.reads <= chunks + READ_WINDOW,
+        "{cost:?} for {chunks}"
+    );
+    // A file that ends on a chunk boundary ends with the NAK EndOfFile.
+    let mut t = table(40);
+    loop {
+        let n = pack(&borrowed(&t)).len();
+        if n % CHUNK == 0 {
+            break;
+        }
+        t.push((format!("Z{}", t.len()), 1, 1.0));
+    }
+    let even = pack(&borrowed(&t));
+    let (set, _) = serve(&even, &[], FAST);
+    assert_eq!(set, decode_pck(&even).expect("decodes"));
+    // Every fifth reply lost, the first and the last chunk among them.
+    let lose: Vec<usize> = (1..=3 * chunks)
+        .filter(|n| n % 5 == 1 || *n == chunks)
+        .collect();
+    let (set, cost) = serve(&file, &lose, FAST);
+    assert_eq!(set, decode_pck(&file).expect("decodes"));
+    assert_eq!(cost.bursts, 0);
+}
+
+#[test]
+fn an_open_whose_answer_was_lost_is_reset_and_opened_again() {
+    let t = table(300);
+    let file = pack(&borrowed(&t));
+    for rtt in [FAST, SLOW] {
+        let (set, cost) = serve_with(&file, &[], rtt, true);
+        assert_eq!(set, decode_pck(&file).expect("decodes"));
+        // The open, its retry (refused: the file is open), the open after the reset.
+        assert_eq!(cost.opens, 3, "{cost:?}");
+    }
+}
+
+#[test]
+fn requests_leave_four_at_once_then_paced_within_the_window() {
+    let t0 = Instant::now();
+    let mut m = FtpPullMachine::new(V, 1, Duration::from_millis(20));
+    let open = payload(&m.start(t0)[0]);
+    let now = t0 + FAST;
+    let first = m.on_message(now, &reply(&open, OP_ACK, &[0; 4], 0, false));
+    assert_eq!(first.len(), 4, "four back to back");
+    assert!(first.iter().all(|r| payload(r)[3] == OP_READ));
+    // The next one is due a pace later, not before.
+    assert_eq!(m.deadline(), now + READ_PACE);
+    assert!(m.on_time(now + READ_PACE / 2).is_empty());
+    assert_eq!(m.on_time(now + READ_PACE).len(), 1);
+    // Unanswered, never more than the window in flight.
+    let mut t = now + READ_PACE;
+    let mut sent = 5;
+    for _ in 0..200 {
+        t += READ_PACE;
+        sent += m.on_time(t).len();
+        assert!(m.reads.len() <= READ_WINDOW);
+        if t.duration_since(now) >= m.read_timeout {
+            break;
+        }
+    }
+    assert!(sent >= READ_WINDOW.min(10), "{sent}");
 }
 
 #[test]
