@@ -354,6 +354,36 @@ mod tests {
         }
     }
 
+    /// A drain that records whether the tap's lock was free while it applied what it took.
+    #[derive(Default)]
+    struct Checks {
+        applied: Mutex<Vec<(u8, bool)>>,
+    }
+
+    impl Drain for Checks {
+        fn try_apply(&self, waiting: &Waiting<'_>) -> bool {
+            let mut applied = self.applied.lock().unwrap();
+            let mut frames = Vec::new();
+            waiting.take(&mut frames);
+            let tap_free = waiting.shared.queue.try_lock().is_ok();
+            applied.extend(frames.iter().map(|t| (t.frame.seq(), tap_free)));
+            true
+        }
+    }
+
+    #[test]
+    fn the_sender_applies_frames_with_the_tap_unlocked() {
+        let (tx, rx) = tap(8, 8);
+        let checks = Arc::new(Checks::default());
+        rx.drain_inline(Arc::clone(&checks) as Arc<dyn Drain>, 2);
+        tx.send_run(&mut (0..3).map(tapped).collect());
+        assert_eq!(
+            *checks.applied.lock().unwrap(),
+            vec![(0, true), (1, true), (2, true)],
+            "the frames were applied under the tap's lock, or not at all"
+        );
+    }
+
     #[test]
     fn the_sender_applies_nothing_until_a_run_waits() {
         let (tx, rx) = tap(8, 8);

@@ -355,6 +355,38 @@ mod tests {
         task.await.unwrap();
     }
 
+    /// Publishing shares the state: the half-second republish of a vehicle that sent nothing
+    /// since is the same snapshot, and a frame after it gets a copy of its own.
+    #[tokio::test(start_paused = true)]
+    async fn an_unchanged_state_is_republished_without_a_copy() {
+        let mut t = tracker(UI_PERIOD, LinkId(4));
+        t.tap.send_run(&mut heartbeat_run(LinkId(4), 1));
+        published(&mut t, 1, Duration::from_secs(5))
+            .await
+            .expect("the heartbeat published");
+        let first = Arc::clone(&t.state.borrow_and_update());
+        tokio::time::timeout(Duration::from_secs(5), t.state.changed())
+            .await
+            .expect("republished within the half second")
+            .unwrap();
+        let again = Arc::clone(&t.state.borrow_and_update());
+        assert!(
+            Arc::ptr_eq(&first, &again),
+            "the unchanged state was copied"
+        );
+        t.tap
+            .send_run(&mut heartbeat_run(LinkId(4), 2)[1..].to_vec());
+        published(&mut t, 2, Duration::from_secs(5))
+            .await
+            .expect("the second heartbeat published");
+        assert_eq!(
+            first.messages.values().map(|m| m.count).sum::<u64>(),
+            1,
+            "a published snapshot changed after it was published"
+        );
+        stop(t).await;
+    }
+
     /// Messages counted for sysid 1 compid 1, message 0, in the last published state.
     fn heartbeats_published(t: &mut Tracker) -> Option<u64> {
         let key = (vtol_link::SystemId(1), vtol_link::ComponentId(1), 0);
