@@ -31,7 +31,7 @@ use tokio::io::AsyncWriteExt;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use vtol_gcs::config::Config;
-use vtol_gcs::tap::Side;
+use vtol_gcs::links::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::exec::ClientControl;

@@ -5,17 +5,18 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use firmware_sim::shell::serve::{ServeConfig, Twin};
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
-use vtol_link::{LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_link};
+use vtol_link::{Events, LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_link};
 
 use crate::client::ClientHandle;
 use crate::config::{Config, VehicleSource};
-use crate::router::{InlineRouter, Router, RouterHandle};
-use crate::tap::Side;
+use crate::links::{RouterHandle, Side};
+use crate::router::{InlineRouter, Router};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
 use crate::tracker::{SharedHistory, VehicleState};
@@ -93,8 +94,8 @@ pub struct Running {
     pub signing_state: Option<PathBuf>,
     /// The tlog file, if logging.
     pub tlog_path: Option<PathBuf>,
-    /// Latest vehicle and link state.
-    pub state: watch::Receiver<VehicleState>,
+    /// Latest vehicle and link state (shared: a reader borrows it, never copies it).
+    pub state: watch::Receiver<Arc<VehicleState>>,
     /// Router counters and live links.
     pub router: RouterHandle,
     /// The recent past, for charts.
@@ -144,7 +145,7 @@ pub async fn start(
     let tlog_stats = tlog.as_ref().map(|t| std::sync::Arc::clone(&t.stats));
 
     let (tap_tx, tap_rx) = crate::tap::tap(TAP_QUEUE, tracker::TAP_RUN);
-    let (state_tx, state_rx) = watch::channel(VehicleState::default());
+    let (state_tx, state_rx) = watch::channel(Arc::new(VehicleState::default()));
     let (router, router_handle) = start_router(tlog, tap_tx, signing, cancel, tasks);
     let history: SharedHistory = std::sync::Arc::new(std::sync::Mutex::new(
         crate::tracker::History::new(crate::tracker::now()),
@@ -243,6 +244,57 @@ fn open_signing(config: &Config) -> Result<Option<DaemonSigning>, DaemonError> {
     Ok(signing)
 }
 
+/// The router shared by the link tasks, with the daemon's key when it has one.
+fn inline_router(
+    tlog: Option<TlogHandle>,
+    tap: Option<crate::tap::TapSender>,
+    signing: Option<DaemonSigning>,
+) -> (InlineRouter, RouterHandle) {
+    // The hot path: each link task routes what it receives itself (no router task, no queue
+    // between a link and the router).
+    let (mut router, mut router_handle) = Router::new(tlog, tap);
+    if let Some(s) = signing {
+        router_handle.signing = Some(router.set_signing(s));
+    }
+    (router.inline(), router_handle)
+}
+
+/// The daemon's router without the rest of the daemon (no tracker, no client): links handed
+/// its [`Routing::events`] are routed, logged and signed as in `vtol-gcs run`. For tests and
+/// tools that drive links themselves; the router itself stays inside the daemon.
+#[derive(Debug, Clone)]
+pub struct Routing {
+    router: InlineRouter,
+}
+
+impl Routing {
+    /// A router that logs to `tlog` (if any) and, with `signing`, checks the vehicle's
+    /// signatures and signs for `sign` links. Returns its counters and live links too.
+    #[must_use]
+    pub fn new(tlog: Option<TlogHandle>, signing: Option<DaemonSigning>) -> (Self, RouterHandle) {
+        let (router, handle) = inline_router(tlog, None, signing);
+        (Self { router }, handle)
+    }
+
+    /// Where the links of `side` report.
+    #[must_use]
+    pub fn events(&self, side: Side) -> Events {
+        self.router.events(side)
+    }
+
+    /// Where the links of one endpoint report: each link it opens carries `policy`.
+    #[must_use]
+    pub fn events_with(&self, side: Side, policy: EndpointPolicy) -> Events {
+        self.router.events_with(side, policy)
+    }
+
+    /// Stops routing: later events are refused (their links stop), what the last run routed
+    /// is sent, and the tlog is closed.
+    pub fn close(&self) {
+        self.router.close();
+    }
+}
+
 /// The router, shared by the link tasks, with its tasks: closing it at shutdown (the tlog
 /// flushed), and saving the signing state every [`SAVE_EVERY`].
 fn start_router(
@@ -252,13 +304,7 @@ fn start_router(
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> (InlineRouter, RouterHandle) {
-    // The hot path: each link task routes what it receives itself (no router task, no queue
-    // between a link and the router).
-    let (mut router, mut router_handle) = Router::new(tlog, Some(tap));
-    if let Some(s) = signing {
-        router_handle.signing = Some(router.set_signing(s));
-    }
-    let router = router.inline();
+    let (router, router_handle) = inline_router(tlog, Some(tap), signing);
     {
         let (router, cancel) = (router.clone(), cancel.clone());
         tasks.spawn(async move {
@@ -356,7 +402,7 @@ async fn open_vehicle(
     config: &Config,
     router: &InlineRouter,
     client: &ClientHandle,
-    state: &watch::Receiver<VehicleState>,
+    state: &watch::Receiver<Arc<VehicleState>>,
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> Result<Option<SocketAddr>, DaemonError> {
@@ -434,7 +480,7 @@ const HELLO_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
 /// failsafe (ArduPilot and the twin count any HEARTBEAT from SYSID_MYGCS as the operator's).
 async fn udpout_hello(
     client: ClientHandle,
-    state: watch::Receiver<VehicleState>,
+    state: watch::Receiver<Arc<VehicleState>>,
     cancel: CancellationToken,
 ) {
     let mut every = tokio::time::interval(HELLO_EVERY);

@@ -600,7 +600,7 @@ fn fit(streams: &[Stream], offered: f64, budget: f64) -> Vec<(u32, Change)> {
 /// Runs the fit for the daemon client's vehicle until `cancel` fires, asking for each interval
 /// through `client` and publishing what it knows of the link on `report`.
 pub async fn run(
-    state: watch::Receiver<VehicleState>,
+    state: watch::Receiver<std::sync::Arc<VehicleState>>,
     client: ClientHandle,
     report: watch::Sender<Option<LinkFit>>,
     cancel: CancellationToken,

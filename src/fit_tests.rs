@@ -6,7 +6,7 @@ use vtol_link::Frame;
 use vtol_link::dialect::{self as apm, MavAutopilot, MavModeFlag, MavState, MavType};
 
 use super::*;
-use crate::tap::Side;
+use crate::links::Side;
 
 const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
 const L: LinkId = LinkId(1);

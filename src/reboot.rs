@@ -88,7 +88,7 @@ impl ParamFetches {
 /// the vehicle is first heard and again after every reboot; without it, only logs reboots.
 /// Runs until `cancel` fires or the tracker stops.
 pub async fn watch(
-    mut state: watch::Receiver<VehicleState>,
+    mut state: watch::Receiver<Arc<VehicleState>>,
     client: ClientHandle,
     fetch_params: bool,
     fetches: Arc<ParamFetches>,

@@ -6,7 +6,7 @@ use std::fmt::Write;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-use crate::tap::{LinkInfo, Side};
+use crate::links::{LinkInfo, Side};
 use crate::tracker::VehicleState;
 use crate::trust::policy::EndpointPolicy;
 use crate::trust::signing::SigningSnapshot;
@@ -219,7 +219,7 @@ pub fn policy_part(links: &[LinkInfo], signing: Option<&SigningSnapshot>) -> Str
 #[must_use]
 pub fn fleet_part(
     state: &VehicleState,
-    conflicts: &[crate::tap::SysidConflict],
+    conflicts: &[crate::links::SysidConflict],
     now: Instant,
 ) -> String {
     let mut s = String::new();
@@ -251,7 +251,7 @@ mod tests {
     use vtol_link::{Frame, LinkId, SystemId};
 
     use super::*;
-    use crate::tap::SysidConflict;
+    use crate::links::SysidConflict;
 
     fn heartbeat(armed: bool) -> MavMessage {
         let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;

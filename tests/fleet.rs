@@ -19,8 +19,8 @@ use tokio_util::sync::CancellationToken;
 use ui_support::recording::{draw_snapshot, tailsitter_heartbeat};
 use vtol_gcs::config::{Config, VehicleSource};
 use vtol_gcs::daemon;
-use vtol_gcs::router::Router;
-use vtol_gcs::tap::{Side, SysidConflict};
+use vtol_gcs::daemon::Routing;
+use vtol_gcs::links::{Side, SysidConflict};
 use vtol_gcs::tlog::TlogReader;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
@@ -101,8 +101,7 @@ async fn send_heartbeat(end: &mut DuplexStream, sys: u8, seq: u8, mode: u32, arm
 #[tokio::test]
 async fn a_system_id_claimed_by_two_vehicle_links_is_a_conflict_never_merged() {
     let cancel = CancellationToken::new();
-    let (router, handle) = Router::new(None, None);
-    let router = router.inline();
+    let (router, handle) = Routing::new(None, None);
     let (mut a, a_id, a_task) = stream_link(&router, Side::Vehicle, "vehicle a", &cancel);
     let (mut b, b_id, b_task) = stream_link(&router, Side::Vehicle, "vehicle b", &cancel);
     let (mut client, _, client_task) = stream_link(&router, Side::Client, "client", &cancel);

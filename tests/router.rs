@@ -11,8 +11,8 @@ use common::{logged_router, read_until, stream_link, wait_links};
 use proptest::prelude::*;
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::InlineRouter;
-use vtol_gcs::tap::Side;
+use vtol_gcs::daemon::Routing;
+use vtol_gcs::links::Side;
 use vtol_gcs::tlog::TlogReader;
 use vtol_link::Frame;
 use vtol_link::dialect::{self, MavMessage};
@@ -43,10 +43,10 @@ struct Harness {
     vehicle: DuplexStream,
     clients: Vec<DuplexStream>,
     cancel: CancellationToken,
-    router: InlineRouter,
+    router: Routing,
     link_tasks: Vec<tokio::task::JoinHandle<()>>,
     tlog_path: std::path::PathBuf,
-    handle: vtol_gcs::router::RouterHandle,
+    handle: vtol_gcs::links::RouterHandle,
     _dir: tempfile::TempDir,
 }
 

@@ -18,8 +18,8 @@ use std::time::{Duration, SystemTime};
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::{InlineRouter, Router};
-use vtol_gcs::tap::Side;
+use vtol_gcs::daemon::Routing;
+use vtol_gcs::links::Side;
 use vtol_gcs::trust::policy::{EndpointPolicy, Trust};
 use vtol_gcs::trust::signing::{DaemonSigning, WallClock};
 use vtol_link::dialect::{self, MavMessage};
@@ -88,7 +88,7 @@ struct VehicleEnd {
     dec: FrameDecoder,
 }
 
-async fn open_vehicle_link(router: &InlineRouter, cancel: &CancellationToken) -> VehicleEnd {
+async fn open_vehicle_link(router: &Routing, cancel: &CancellationToken) -> VehicleEnd {
     let (end, far) = tokio::io::duplex(1 << 16);
     spawn_stream_link(
         far,
@@ -124,9 +124,8 @@ async fn a_signed_session_survives_idle_and_outage() {
         clock,
     )
     .unwrap();
-    let (mut router, _handle) = Router::new(None, None);
-    let counters = router.set_signing(daemon_signing);
-    let router = router.inline();
+    let (router, handle) = Routing::new(None, Some(daemon_signing));
+    let counters = handle.signing.expect("signing counters");
     let cancel = CancellationToken::new();
 
     let (mut client, far) = tokio::io::duplex(1 << 16);

@@ -4,7 +4,7 @@
 //! a terminal too small, and the charts, links and messages views.
 
 use ratatui::crossterm::event::KeyCode;
-use vtol_gcs::tap::Side;
+use vtol_gcs::links::Side;
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::view::{LinkRow, RouterCounters, Snapshot, TlogInfo};
 use vtol_link::LinkStatsSnapshot;

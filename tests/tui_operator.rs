@@ -7,7 +7,7 @@ mod ui_support;
 
 use ratatui::crossterm::event::KeyCode;
 use vtol_gcs::daemon::REPLAY_PEER;
-use vtol_gcs::tap::Side;
+use vtol_gcs::links::Side;
 use vtol_gcs::tui::app::{App, Confirm, Request, View};
 use vtol_gcs::tui::view::{LinkRow, RouterCounters, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavState, MavType, MavVtolState};

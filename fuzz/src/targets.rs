@@ -13,7 +13,7 @@ use std::time::{Duration, Instant, UNIX_EPOCH};
 
 use bytes::Bytes;
 use firmware_sim::endpoint::{Endpoint, EndpointConfig, LinkKey};
-use vtol_gcs::tap::Side;
+use vtol_gcs::links::Side;
 use vtol_gcs::tracker::VehicleState;
 use vtol_link::dialect::{MavMessage, STATUSTEXT_DATA};
 use vtol_link::frame::{crc_extra, known_message_ids};
@@ -395,7 +395,7 @@ pub fn signing_verify(data: &[u8]) {
 /// nothing ever goes back to the link it came from, and a targeted frame only goes where its
 /// target was seen.
 pub fn router(data: &[u8]) {
-    use vtol_gcs::router::table::{Route, RoutingTable};
+    use vtol_gcs::links::table::{Route, RoutingTable, addressing};
     let links = [LinkId(1), LinkId(2), LinkId(3)];
     let mut table = RoutingTable::new();
     let mut out = Vec::new();
@@ -407,7 +407,7 @@ pub fn router(data: &[u8]) {
         let ingress = links[i % links.len()];
         let (system, component) = f.sender();
         table.learn(ingress, system, component);
-        let a = vtol_gcs::router::addressing(f);
+        let a = addressing(f);
         if let Some(cmd) = a.command {
             table.note_command(ingress, system, component, cmd);
         }

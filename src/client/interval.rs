@@ -141,7 +141,7 @@ fn heard_ext(s: &VehicleState, key: (SystemId, ComponentId), since: Instant) -> 
 /// answer is logged; a refusal changes nothing else. Runs until `cancel` fires or the tracker
 /// stops.
 pub async fn ask_on_connect(
-    mut state: watch::Receiver<VehicleState>,
+    mut state: watch::Receiver<std::sync::Arc<VehicleState>>,
     client: ClientHandle,
     cancel: CancellationToken,
 ) {

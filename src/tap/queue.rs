@@ -4,17 +4,28 @@
 //!
 //! Where the frames are applied:
 //! - **By the router's thread, inline** ([`TapReceiver::drain_inline`]): once a hand-off
-//!   leaves the drain's run of frames waiting (32 for the tracker), the sender applies
-//!   everything waiting itself if the reader's state is free at that instant
-//!   ([`Drain::try_apply`] never waits). This is the common case under traffic: the frames are
-//!   applied on the CPU that just routed them, in the thread that allocated them, a run at a
-//!   time (the state's maps stay warm from one frame to the next), and the reader is not woken.
+//!   leaves the drain's run of frames waiting (32 for the tracker), the sender has them applied
+//!   itself if the reader's state is free at that instant ([`Drain::try_apply`] never waits).
+//!   This is the common case under traffic: the frames are applied on the CPU that just routed
+//!   them, in the thread that allocated them, a run at a time (the state's maps stay warm from
+//!   one frame to the next), and the reader is not woken.
 //! - **By the reader, on its tick**: what was not applied inline (fewer than a run waited, or
 //!   the reader's state was busy: being published, or read by the terminal UI) waits in the
 //!   tap for the reader's next tick or for the sender's next run. A tap holding `wake_at`
 //!   frames wakes its reader before its tick ([`TapReceiver::filling`]): the reader's work
 //!   comes in short runs however slow its tick (a long run on a small machine holds a CPU that
 //!   forwarding needs, and shows in its latency), and a burst is not dropped.
+//!
+//! Lock order: the reader's state (the tracker's core, then its history), then the tap. The
+//! tap's lock is the innermost and is held only to move frames in or out (the router's run in
+//! under the router's lock, every waiting frame out with one swap); nothing is decoded under
+//! it. Whoever applies frames, the reader on its tick or a sender through the [`Drain`], first
+//! holds the reader's state and only then swaps the waiting frames out of the tap
+//! ([`Waiting::take`], [`TapReceiver::take`]), and decodes them after the tap's lock is
+//! released: frames are applied in the order they were handed over, and a sender handing a
+//! run over never waits on a decode. A drain takes the reader's state without waiting
+//! (`try_lock`) so that a link's thread never waits for the tracker; with the order above,
+//! waiting would be safe too.
 
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 
@@ -24,9 +35,25 @@ use super::Tapped;
 
 /// Work on tapped frames that the sender may do itself, after handing a run over.
 pub trait Drain: Send + Sync {
-    /// Applies `frames` (emptying it) and returns `true` if that needs no waiting: when the
-    /// state it applies them to is busy it returns `false` at once and leaves them.
-    fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool;
+    /// Applies the frames `waiting` in the tap and returns `true` if that needs no waiting:
+    /// when the state it applies them to is busy it returns `false` at once and leaves them.
+    /// It takes them ([`Waiting::take`]) only while it holds that state, and applies them
+    /// after the take (the tap's lock released).
+    fn try_apply(&self, waiting: &Waiting<'_>) -> bool;
+}
+
+/// The frames waiting in a tap, as a [`Drain`] reaches them.
+#[derive(Debug)]
+pub struct Waiting<'a> {
+    shared: &'a Shared,
+}
+
+impl Waiting<'_> {
+    /// Moves every waiting frame, in order, into `into` under the tap's lock, released on
+    /// return ([`TapReceiver::take`]).
+    pub fn take(&self, into: &mut Vec<Tapped>) {
+        self.shared.take(into);
+    }
 }
 
 #[derive(Debug, Default)]
@@ -61,6 +88,18 @@ impl Shared {
     fn lock(&self) -> MutexGuard<'_, Queue> {
         // Plain data: a panic elsewhere leaves it usable.
         self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Moves every waiting frame, in order, into `into` (which should be empty: its buffer is
+    /// given to the sender in exchange). `false` once the sender is gone and nothing is left.
+    fn take(&self, into: &mut Vec<Tapped>) -> bool {
+        let mut q = self.lock();
+        if into.is_empty() {
+            std::mem::swap(&mut q.frames, into);
+        } else {
+            into.append(&mut q.frames);
+        }
+        !(q.closed && into.is_empty())
     }
 }
 
@@ -169,25 +208,22 @@ pub struct TapApplier {
 }
 
 impl TapApplier {
-    /// After `handed` ([`TapSender::hand_over`]): applies everything waiting if it is enough
-    /// for the reader's [`Drain`] and the drain can take it without waiting; otherwise leaves
-    /// it for a later run or the reader, waking the reader if the hand-over filled the tap.
+    /// After `handed` ([`TapSender::hand_over`]): has the reader's [`Drain`] apply everything
+    /// waiting if a run of it waited and the drain can take it without waiting; otherwise
+    /// leaves it for a later run or the reader, waking the reader if the hand-over filled the
+    /// tap. Called with no lock held: the drain takes the reader's state first and the tap's
+    /// lock only to swap the frames out, so the decoding holds no lock a sender takes.
     pub fn apply_waiting(&self, handed: Handed) {
         if !handed.apply {
             return;
         }
-        let Some((drain, at_least)) = self.shared.drain.get() else {
+        let Some((drain, _)) = self.shared.drain.get() else {
             return;
         };
-        // Under the tap's lock, so frames are applied in the order they were handed over
-        // whoever applies them (the reader takes the tap only while it holds its own state).
-        let mut q = self.shared.lock();
-        if q.frames.len() >= *at_least && drain.try_apply(&mut q.frames) {
-            q.frames.clear();
-        }
-        let wake = handed.wake && q.frames.len() >= self.shared.wake_at;
-        drop(q);
-        if wake {
+        drain.try_apply(&Waiting {
+            shared: &self.shared,
+        });
+        if handed.wake && self.shared.lock().frames.len() >= self.shared.wake_at {
             self.shared.filling.notify_one();
         }
     }
@@ -209,13 +245,7 @@ impl TapReceiver {
     /// Moves every waiting frame, in order, into `into` (which should be empty: its buffer is
     /// given to the sender in exchange). `false` once the sender is gone and nothing is left.
     pub fn take(&self, into: &mut Vec<Tapped>) -> bool {
-        let mut q = self.shared.lock();
-        if into.is_empty() {
-            std::mem::swap(&mut q.frames, into);
-        } else {
-            into.append(&mut q.frames);
-        }
-        !(q.closed && into.is_empty())
+        self.shared.take(into)
     }
 
     /// Lets the sender apply frames itself through `drain` when it can ([`Drain::try_apply`])
@@ -236,7 +266,7 @@ impl TapReceiver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tap::Side;
+    use crate::links::Side;
     use vtol_link::{Frame, LinkId};
 
     fn tapped(seq: u8) -> Tapped {
@@ -312,14 +342,46 @@ mod tests {
     }
 
     impl Drain for Gate {
-        fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool {
+        fn try_apply(&self, waiting: &Waiting<'_>) -> bool {
             if !self.open.load(std::sync::atomic::Ordering::Relaxed) {
                 return false;
             }
-            self.took.lock().unwrap().extend(seqs(frames));
-            frames.clear();
+            let mut took = self.took.lock().unwrap();
+            let mut frames = Vec::new();
+            waiting.take(&mut frames);
+            took.extend(seqs(&frames));
             true
         }
+    }
+
+    /// A drain that records whether the tap's lock was free while it applied what it took.
+    #[derive(Default)]
+    struct Checks {
+        applied: Mutex<Vec<(u8, bool)>>,
+    }
+
+    impl Drain for Checks {
+        fn try_apply(&self, waiting: &Waiting<'_>) -> bool {
+            let mut applied = self.applied.lock().unwrap();
+            let mut frames = Vec::new();
+            waiting.take(&mut frames);
+            let tap_free = waiting.shared.queue.try_lock().is_ok();
+            applied.extend(frames.iter().map(|t| (t.frame.seq(), tap_free)));
+            true
+        }
+    }
+
+    #[test]
+    fn the_sender_applies_frames_with_the_tap_unlocked() {
+        let (tx, rx) = tap(8, 8);
+        let checks = Arc::new(Checks::default());
+        rx.drain_inline(Arc::clone(&checks) as Arc<dyn Drain>, 2);
+        tx.send_run(&mut (0..3).map(tapped).collect());
+        assert_eq!(
+            *checks.applied.lock().unwrap(),
+            vec![(0, true), (1, true), (2, true)],
+            "the frames were applied under the tap's lock, or not at all"
+        );
     }
 
     #[test]

@@ -2,6 +2,15 @@
 //! on a `watch` channel for the terminal UI and the headless status line, records the recent
 //! past in a [`History`] for the charts, and forgets links the router reports down.
 //!
+//! The state is published as an `Arc<VehicleState>`: publishing shares it, and every reader
+//! (a redraw, a status line) borrows it. It is copied on write, by whoever applies the first
+//! run of frames after a publish (this task or a link's thread): at most once per publish, and
+//! not at all while nothing changes it.
+//!
+//! Locks, in the order they are taken: the tracker's state (`Core`), then its history, then
+//! the tap's ([`crate::tap::queue`]); frames are decoded holding the first two only. The
+//! router's lock is never held with any of them.
+//!
 //! Its clock is tokio's ([`now`]): under a paused tokio clock a test advances the tracker's
 //! time (rates, link loss, "vehicle lost") instead of waiting for it. Readers of the state
 //! compare it with the same [`now`].
@@ -18,8 +27,8 @@ use tokio::sync::watch;
 use tokio::time::Instant as TokioInstant;
 use tokio_util::sync::CancellationToken;
 
-use crate::tap::{Drain, TapReceiver};
-use crate::tap::{LinkInfo, Tapped};
+use crate::links::LinkInfo;
+use crate::tap::{Drain, TapReceiver, Tapped, Waiting};
 pub use history::{History, SharedHistory};
 pub use state::{Reboot, VehicleState, VehicleView};
 
@@ -49,9 +58,13 @@ pub fn now() -> Instant {
 /// The tracker's state, shared between its task and the router's thread (which applies
 /// frames itself when the state is free, [`Drain`]).
 struct Core {
-    state: VehicleState,
+    /// Shared with the last published snapshot until a frame changes it.
+    state: Arc<VehicleState>,
     /// Changed since it was last published.
     dirty: bool,
+    /// The frames taken from the tap, decoded after its lock is released (a buffer kept from
+    /// one run to the next, traded with the tap's).
+    taken: Vec<Tapped>,
 }
 
 /// What the router's thread needs to apply tapped frames itself.
@@ -61,7 +74,7 @@ struct Inline {
 }
 
 impl Drain for Inline {
-    fn try_apply(&self, frames: &mut Vec<Tapped>) -> bool {
+    fn try_apply(&self, waiting: &Waiting<'_>) -> bool {
         // Never wait: the tracker may be publishing, the terminal UI may be drawing from the
         // history. The frames then wait in the tap for the next run or the tracker's tick.
         let Ok(mut core) = self.core.try_lock() else {
@@ -70,8 +83,13 @@ impl Drain for Inline {
         let Ok(mut history) = self.history.try_lock() else {
             return false;
         };
-        apply(&mut core, &mut history, frames);
+        // Taken holding the state, so no later frame is applied before these; decoded once
+        // the tap's lock is released.
+        let mut frames = std::mem::take(&mut core.taken);
+        waiting.take(&mut frames);
+        apply(&mut core, &mut history, &frames);
         frames.clear();
+        core.taken = frames;
         true
     }
 }
@@ -81,9 +99,11 @@ fn apply(core: &mut Core, history: &mut History, frames: &[Tapped]) {
     if frames.is_empty() {
         return;
     }
+    // Copied here only if the published snapshot still shares it.
+    let state = Arc::make_mut(&mut core.state);
     for t in frames {
-        let stamp = core.state.stamp(t.at);
-        let msg = core.state.apply_stamped(t.link, t.side, &t.frame, &stamp);
+        let stamp = state.stamp(t.at);
+        let msg = state.apply_stamped(t.link, t.side, &t.frame, &stamp);
         history.record_stamped(&t.frame, msg.as_ref(), &stamp);
     }
     core.dirty = true;
@@ -99,14 +119,15 @@ pub async fn run(
     period: Duration,
     tap: TapReceiver,
     mut links: watch::Receiver<Vec<LinkInfo>>,
-    publish: watch::Sender<VehicleState>,
+    publish: watch::Sender<Arc<VehicleState>>,
     history: SharedHistory,
     cancel: CancellationToken,
 ) {
     let epoch = history.lock().map_or_else(|_| now(), |h| h.epoch);
     let core = Arc::new(Mutex::new(Core {
-        state: VehicleState::new(epoch),
+        state: Arc::new(VehicleState::new(epoch)),
         dirty: false,
+        taken: Vec::new(),
     }));
     tap.drain_inline(
         Arc::new(Inline {
@@ -121,7 +142,6 @@ pub async fn run(
     let mut links_open = true;
     let mut tick = tokio::time::interval(period);
     let mut tap_open = true;
-    let mut taken: Vec<Tapped> = Vec::new();
     while tap_open {
         // The tick is the publishing rate: publish what a tick found at once.
         let mut ticked = false;
@@ -134,7 +154,7 @@ pub async fn run(
                 }
                 let live: Vec<_> = links.borrow_and_update().iter().map(|l| l.id).collect();
                 let mut c = lock_core();
-                c.state.retain_links(&live);
+                Arc::make_mut(&mut c.state).retain_links(&live);
                 c.dirty = true;
             }
             // A tap filling up is taken at once.
@@ -147,14 +167,17 @@ pub async fn run(
                 ticked = true;
                 let mut c = lock_core();
                 // What the router could not apply itself, taken while holding the state (so
-                // no later frame is applied before these), in runs of at most TAP_RUN per
-                // lock of the history, which the UI reads.
+                // no later frame is applied before these) and decoded once the tap's lock is
+                // released, in runs of at most TAP_RUN per lock of the history, which the UI
+                // reads.
+                let mut taken = std::mem::take(&mut c.taken);
                 tap_open = tap.take(&mut taken);
                 for run in taken.chunks(TAP_RUN) {
                     let Ok(mut h) = history.lock() else { break };
                     apply(&mut c, &mut h, run);
                 }
                 taken.clear();
+                c.taken = taken;
                 // Time alone changes rates and the lost state: publish once in a while even
                 // when nothing arrives.
                 if last_publish.elapsed() >= Duration::from_millis(500) {
@@ -164,19 +187,19 @@ pub async fn run(
         }
         let mut c = lock_core();
         if c.dirty && (ticked || last_publish.elapsed() >= period) {
-            publish.send_replace(c.state.clone());
+            publish.send_replace(Arc::clone(&c.state));
             c.dirty = false;
             drop(c);
             last_publish = TokioInstant::now();
         }
     }
-    publish.send_replace(lock_core().state.clone());
+    publish.send_replace(Arc::clone(&lock_core().state));
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tap::Side;
+    use crate::links::Side;
     use std::sync::{Arc, Mutex};
     use vtol_link::{Frame, LinkId, LinkStats};
 
@@ -195,7 +218,7 @@ mod tests {
     struct Tracker {
         tap: crate::tap::TapSender,
         links: watch::Sender<Vec<LinkInfo>>,
-        state: watch::Receiver<VehicleState>,
+        state: watch::Receiver<Arc<VehicleState>>,
         history: SharedHistory,
         cancel: CancellationToken,
         task: tokio::task::JoinHandle<()>,
@@ -204,7 +227,7 @@ mod tests {
     fn tracker(period: Duration, link: LinkId) -> Tracker {
         let (tap, tap_rx) = crate::tap::tap(4 * TAP_RUN, TAP_RUN);
         let (links, links_rx) = watch::channel(vec![info(link)]);
-        let (state_tx, state) = watch::channel(VehicleState::default());
+        let (state_tx, state) = watch::channel(Arc::new(VehicleState::default()));
         let history = Arc::new(Mutex::new(History::new(now())));
         let cancel = CancellationToken::new();
         let task = tokio::spawn(run(
@@ -247,7 +270,7 @@ mod tests {
             frame,
             at: now(),
         }]);
-        let wait = |rx: &mut watch::Receiver<VehicleState>, present: bool| {
+        let wait = |rx: &mut watch::Receiver<Arc<VehicleState>>, present: bool| {
             let mut rx = rx.clone();
             async move {
                 tokio::time::timeout(Duration::from_secs(5), async {
@@ -296,7 +319,7 @@ mod tests {
             at: now(),
         };
         // The state as published once its heartbeat time is later than `after`.
-        let heard_after = |rx: &mut watch::Receiver<VehicleState>, after: Option<Instant>| {
+        let heard_after = |rx: &mut watch::Receiver<Arc<VehicleState>>, after: Option<Instant>| {
             let mut rx = rx.clone();
             async move {
                 loop {
@@ -330,6 +353,38 @@ mod tests {
         assert!(!state_rx.borrow().vehicle_lost(now()));
         cancel.cancel();
         task.await.unwrap();
+    }
+
+    /// Publishing shares the state: the half-second republish of a vehicle that sent nothing
+    /// since is the same snapshot, and a frame after it gets a copy of its own.
+    #[tokio::test(start_paused = true)]
+    async fn an_unchanged_state_is_republished_without_a_copy() {
+        let mut t = tracker(UI_PERIOD, LinkId(4));
+        t.tap.send_run(&mut heartbeat_run(LinkId(4), 1));
+        published(&mut t, 1, Duration::from_secs(5))
+            .await
+            .expect("the heartbeat published");
+        let first = Arc::clone(&t.state.borrow_and_update());
+        tokio::time::timeout(Duration::from_secs(5), t.state.changed())
+            .await
+            .expect("republished within the half second")
+            .unwrap();
+        let again = Arc::clone(&t.state.borrow_and_update());
+        assert!(
+            Arc::ptr_eq(&first, &again),
+            "the unchanged state was copied"
+        );
+        t.tap
+            .send_run(&mut heartbeat_run(LinkId(4), 2)[1..].to_vec());
+        published(&mut t, 2, Duration::from_secs(5))
+            .await
+            .expect("the second heartbeat published");
+        assert_eq!(
+            first.messages.values().map(|m| m.count).sum::<u64>(),
+            1,
+            "a published snapshot changed after it was published"
+        );
+        stop(t).await;
     }
 
     /// Messages counted for sysid 1 compid 1, message 0, in the last published state.

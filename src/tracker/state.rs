@@ -12,7 +12,7 @@ use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
 use super::seq::Seen;
 use super::window::{Stamp, Window};
-use crate::tap::Side;
+use crate::links::Side;
 
 /// ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT: the messages the view holds.
 const TRACKED: [u32; 4] = [30, 32, 36, 253];

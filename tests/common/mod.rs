@@ -9,15 +9,15 @@ use tokio::io::{AsyncReadExt, DuplexStream};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
-use vtol_gcs::router::{InlineRouter, Router, RouterHandle};
-use vtol_gcs::tap::{LinkInfo, Side};
+use vtol_gcs::daemon::Routing;
+use vtol_gcs::links::{LinkInfo, RouterHandle, Side};
 use vtol_gcs::tlog::TlogHandle;
 use vtol_link::{Frame, FrameDecoder, LinkId, LinkOptions, spawn_stream_link};
 
 /// A link of `side` named `peer` on an in-memory byte stream, its frames routed by `router`
 /// from its own task: the test's end of the stream, the link's id and its task.
 pub fn stream_link(
-    router: &InlineRouter,
+    router: &Routing,
     side: Side,
     peer: &str,
     cancel: &CancellationToken,
@@ -35,12 +35,12 @@ pub fn stream_link(
 
 /// A router as the daemon's, writing a tlog in a fresh temporary folder: the folder (kept alive
 /// by the caller), the tlog's path, the router routing inline and its handle.
-pub fn logged_router() -> (TempDir, PathBuf, InlineRouter, RouterHandle) {
+pub fn logged_router() -> (TempDir, PathBuf, Routing, RouterHandle) {
     let dir = tempfile::tempdir().unwrap();
     let tlog = TlogHandle::start(dir.path(), 4096).unwrap();
     let tlog_path = tlog.path.clone();
-    let (router, handle) = Router::new(Some(tlog), None);
-    (dir, tlog_path, router.inline(), handle)
+    let (router, handle) = Routing::new(Some(tlog), None);
+    (dir, tlog_path, router, handle)
 }
 
 /// Reads frames from `end` until `stop(frames)` holds or `limit` passes.

@@ -5,6 +5,7 @@
 
 pub mod recording;
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -56,7 +57,7 @@ pub async fn start() -> (
 }
 
 /// Waits until a vehicle reports STANDBY (ready to arm) and returns the tracker's state.
-pub async fn wait_standby(running: &Running) -> VehicleState {
+pub async fn wait_standby(running: &Running) -> Arc<VehicleState> {
     wait_state(running, "STANDBY", |s| {
         s.vehicles
             .values()
@@ -84,7 +85,7 @@ pub async fn wait_state(
     running: &Running,
     what: &str,
     ok: impl Fn(&VehicleState) -> bool,
-) -> VehicleState {
+) -> Arc<VehicleState> {
     let mut rx = running.state.clone();
     tokio::time::timeout(Duration::from_secs(60), async {
         loop {

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use vtol_gcs::tap::Side;
+use vtol_gcs::links::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome};
 use vtol_gcs::tui::attitude::hover_to_wing;

@@ -9,7 +9,7 @@ use ratatui::widgets::Paragraph;
 use vtol_link::dialect::MavState;
 
 use super::{Snapshot, level_style, status_name};
-use crate::tap::Side;
+use crate::links::Side;
 use crate::tracker::state::VehicleView;
 use crate::tui::air::air;
 use crate::tui::app::{App, View};

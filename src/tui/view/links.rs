@@ -9,7 +9,7 @@ use ratatui::text::{Line, Text};
 use ratatui::widgets::{Block, Cell, Paragraph, Row, Table, Wrap};
 
 use super::{Snapshot, wrap};
-use crate::tap::Side;
+use crate::links::Side;
 use crate::tracker::state::LINK_TIMEOUT;
 
 pub(super) fn draw_links(f: &mut Frame<'_>, snap: &Snapshot<'_>, area: Rect) {

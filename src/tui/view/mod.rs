@@ -12,7 +12,7 @@ use vtol_link::dialect::MavState;
 
 use super::app::{App, Level, SeriesKey, View};
 use super::fields;
-use crate::tap::Side;
+use crate::links::Side;
 use crate::tracker::history::{History, TimedFrame};
 use crate::tracker::state::{VehicleState, VehicleView};
 
@@ -81,7 +81,7 @@ pub struct RouterCounters {
     /// Vehicle frames refused because another vehicle link owns their system id.
     pub sysid_conflicts: u64,
     /// A system id two vehicle links claim now (the first, if several).
-    pub conflict: Option<crate::tap::SysidConflict>,
+    pub conflict: Option<crate::links::SysidConflict>,
 }
 
 /// The tlog as shown.

@@ -1,6 +1,6 @@
 //! The router: takes every frame from every link, learns where each sender sits, and forwards
-//! the raw bytes per [`table`]'s rules. It also feeds the taps: the tlog writer (both
-//! directions) and the vehicle tracker.
+//! the raw bytes per the routing table's rules ([`crate::links::table`]). It also feeds the
+//! taps: the tlog writer (both directions) and the vehicle tracker.
 //!
 //! Links are on one of two sides: the vehicle side and the client side (scripts, other ground
 //! stations, and the daemon's own traffic). The side fixes the tlog direction and which link
@@ -23,9 +23,13 @@
 //! one hand-off, and the tracker's tap gets the run's copies in one hand-off too. The lock is
 //! then released, and only then does the link's thread apply the tapped frames to the
 //! tracker's state, once a run of them waits and the state is free ([`crate::tap::queue`]):
-//! the tracker's work never holds up another link's routing.
-
-pub mod table;
+//! it takes the tracker's state without waiting, swaps the frames out of the tap under the
+//! tap's lock (the innermost, held by the router only to hand a run over) and decodes them
+//! holding the tracker's locks only, so another link's routing never waits on a decode.
+//!
+//! Crate-private: the daemon is its only caller ([`crate::daemon::Routing`] for tests). What
+//! others read of it (its counters, the live links, the disputed system ids) is in
+//! [`crate::links`].
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -34,56 +38,18 @@ use std::time::Instant;
 
 use tokio::sync::watch;
 use vtol_link::{
-    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, RawCommandAck, SendSummary,
-    SystemId,
+    Events, Frame, LinkEvent, LinkEventHandler, LinkId, LinkSender, SendSummary, SystemId,
 };
 
-use crate::tap::{Handed, LinkInfo, Side, SysidConflict, TapApplier, TapSender, Tapped, clock};
+use crate::links::table::{Route, RoutingTable, addressing};
+use crate::links::{LinkInfo, RouterHandle, RouterStats, Side, SysidConflict};
+use crate::tap::{Handed, TapApplier, TapSender, Tapped, clock};
 use crate::tlog::{Direction, Record, TlogHandle, unix_time_us};
 use crate::trust::policy::{EndpointPolicy, PolicyCounters, TokenBucket, Trust};
 use crate::trust::signing::{DaemonSigning, SigningCounters};
-use table::{Addressing, Route, RoutingTable};
 
 /// Records and tapped copies a run's buffers hold before they grow.
 const RUN_CAPACITY: usize = 64;
-
-/// Router-wide counters (per-link ones live in each link's [`LinkStats`]).
-#[derive(Debug, Default)]
-pub struct RouterStats {
-    /// Frames received from all links.
-    pub frames_in: AtomicU64,
-    /// Frame copies queued to egress links.
-    pub frames_out: AtomicU64,
-    /// Targeted frames whose target system was never seen.
-    pub unroutable: AtomicU64,
-    /// SETUP_SIGNING frames not forwarded (they carry a key).
-    pub withheld_signing: AtomicU64,
-    /// Copies lost because the link went down between routing and queueing.
-    pub dropped_link_closed: AtomicU64,
-    /// Frames the tracker tap could not take (it was behind).
-    pub dropped_tap: AtomicU64,
-    /// Frames from read-only links, not routed (all links).
-    pub refused_read_only: AtomicU64,
-    /// Copies not sent because of a link's rate limit (all links).
-    pub dropped_rate: AtomicU64,
-    /// Frames from `sign` links that could not be signed (MAVLink 1), not routed.
-    pub unsignable: AtomicU64,
-    /// Vehicle frames whose system id another vehicle link owns: logged, not routed or tracked.
-    pub sysid_conflicts: AtomicU64,
-}
-
-/// What the router publishes for others.
-#[derive(Debug, Clone)]
-pub struct RouterHandle {
-    /// Counters.
-    pub stats: Arc<RouterStats>,
-    /// The live links.
-    pub links: watch::Receiver<Vec<LinkInfo>>,
-    /// Signing counters, when the daemon has a key.
-    pub signing: Option<Arc<SigningCounters>>,
-    /// System ids that two vehicle links claim, while both are up.
-    pub conflicts: watch::Receiver<Vec<SysidConflict>>,
-}
 
 struct Egress {
     side: Side,
@@ -561,19 +527,4 @@ impl LinkEventHandler for SideHandler {
     fn is_closed(&self) -> bool {
         self.router.lock().is_none()
     }
-}
-
-/// Reads what routing needs from a frame without decoding it.
-#[must_use]
-pub fn addressing(frame: &Frame) -> Addressing {
-    let mut a = Addressing {
-        target: frame.target_ids(),
-        ..Addressing::default()
-    };
-    if let Some(cmd) = frame.raw_command() {
-        a.command = Some(cmd.command);
-    } else if let Some(ack) = RawCommandAck::from_frame(frame) {
-        a.ack_of_command = Some(ack.command);
-    }
-    a
 }

@@ -25,7 +25,7 @@
 use foldhash::HashMap;
 use std::time::{Duration, Instant};
 
-use vtol_link::{ComponentId, LinkId, SystemId};
+use vtol_link::{ComponentId, Frame, LinkId, RawCommandAck, SystemId};
 
 /// How long a vehicle link keeps a system id it stopped sending as (the tracker's link
 /// timeout): after that another vehicle link may take it.
@@ -209,6 +209,21 @@ impl RoutingTable {
             Route::Targeted
         }
     }
+}
+
+/// Reads what routing needs from a frame without decoding it.
+#[must_use]
+pub fn addressing(frame: &Frame) -> Addressing {
+    let mut a = Addressing {
+        target: frame.target_ids(),
+        ..Addressing::default()
+    };
+    if let Some(cmd) = frame.raw_command() {
+        a.command = Some(cmd.command);
+    } else if let Some(ack) = RawCommandAck::from_frame(frame) {
+        a.ack_of_command = Some(ack.command);
+    }
+    a
 }
 
 #[cfg(test)]
