@@ -21,3 +21,4 @@ pub mod tlog;
 pub mod tracker;
 pub mod trust;
 pub mod tui;
+pub mod words;

@@ -9,7 +9,7 @@ use ratatui::widgets::{Block, Cell, Row, Table};
 use vtol_link::dialect::MavMessage;
 use vtol_link::protocol::id::SYS_STATUS;
 
-use super::{Snapshot, status_name};
+use super::Snapshot;
 use crate::tracker::VehicleView;
 use crate::tui::app::fleet::{listing, state_word};
 use crate::tui::app::{App, View};
@@ -65,7 +65,7 @@ fn fleet_row(snap: &Snapshot<'_>, v: &VehicleView, shown: bool) -> Row<'static> 
         Cell::from(format!("{mark}{}", v.system_id.0)),
         Cell::from(state_word(v, now)).style(state_style),
         Cell::from(v.mode_name()).style(live),
-        Cell::from(status_name(v.system_status)).style(live),
+        Cell::from(crate::words::mav_state(v.system_status)).style(live),
         Cell::from(rate),
         Cell::from(loss),
         Cell::from(format!("{heard:.0} s")).style(if is_lost { state_style } else { Style::new() }),

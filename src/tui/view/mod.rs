@@ -8,7 +8,6 @@ use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::widgets::{Paragraph, Wrap};
-use vtol_link::dialect::MavState;
 
 use super::app::{App, Level, SeriesKey, View};
 use super::fields;
@@ -200,26 +199,6 @@ pub(super) fn q_tailsit_enable(app: &App) -> Option<f32> {
 
 fn servo_names(app: &App) -> Vec<String> {
     servo_outputs(app).into_iter().map(|o| o.name).collect()
-}
-
-/// A MAV_STATE as the header shows it (`ACTIVE`, `CRITICAL` …).
-#[must_use]
-pub fn status_word(s: MavState) -> &'static str {
-    status_name(s)
-}
-
-fn status_name(s: MavState) -> &'static str {
-    match s {
-        MavState::MAV_STATE_UNINIT => "UNINIT",
-        MavState::MAV_STATE_BOOT => "BOOT",
-        MavState::MAV_STATE_CALIBRATING => "CALIBRATING",
-        MavState::MAV_STATE_STANDBY => "STANDBY",
-        MavState::MAV_STATE_ACTIVE => "ACTIVE",
-        MavState::MAV_STATE_CRITICAL => "CRITICAL",
-        MavState::MAV_STATE_EMERGENCY => "EMERGENCY",
-        MavState::MAV_STATE_POWEROFF => "POWEROFF",
-        MavState::MAV_STATE_FLIGHT_TERMINATION => "TERMINATION",
-    }
 }
 
 /// Draws the whole screen.
