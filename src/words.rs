@@ -48,6 +48,9 @@ mod tests {
         assert_eq!(vehicle_state(false, true), "ARMED");
         assert_eq!(vehicle_state(false, false), "disarmed");
         assert_eq!(link_health(false), "ok");
-        assert_eq!(mav_state(MavState::MAV_STATE_FLIGHT_TERMINATION), "TERMINATION");
+        assert_eq!(
+            mav_state(MavState::MAV_STATE_FLIGHT_TERMINATION),
+            "TERMINATION"
+        );
     }
 }

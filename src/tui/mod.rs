@@ -11,6 +11,7 @@ pub mod app;
 pub mod attitude;
 pub mod exec;
 pub mod fields;
+pub mod map;
 pub mod progress;
 pub mod view;
 pub mod vitals;

@@ -359,7 +359,7 @@ pub struct App {
     /// The shown vehicle is a replayed log: no commands are offered.
     pub replay: bool,
     /// The Map view's camera and mission.
-    pub map: crate::tui::view::map::MapState,
+    pub map: crate::tui::map::MapState,
     /// The Map view's mission prompt, while typed.
     pub mission_prompt: Option<mission_keys::MissionPrompt>,
     /// The mission file last named (the prompts offer it).
@@ -736,7 +736,7 @@ impl App {
             Outcome::GainsLoaded(Err(e)) => self.note(Level::Error, e),
             Outcome::Mission(Ok(items)) => {
                 let radius = self.param("WP_LOITER_RAD").unwrap_or(60.0);
-                self.map.items = crate::tui::view::map::items_from_mission(&items, radius);
+                self.map.items = crate::tui::map::items_from_mission(&items, radius);
                 let n = items.len().saturating_sub(1);
                 self.map.mission = Some(items);
                 self.note(
