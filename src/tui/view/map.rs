@@ -352,7 +352,7 @@ pub(super) fn keep_track(
 /// Draws the Map view of the shown vehicle with the app's camera and mission.
 pub(super) fn draw_map_view(
     f: &mut Frame<'_>,
-    app: &mut crate::tui::app::App,
+    app: &crate::tui::app::App,
     snap: &super::Snapshot<'_>,
     track: &TrackCache,
     area: Rect,
@@ -371,7 +371,6 @@ pub(super) fn draw_map_view(
         current_seq,
         track: points,
     };
-    app.map.camera.shown = app.map.camera.center_for(&scene);
     draw_map(f, &scene, &app.map.camera, area);
 }
 
