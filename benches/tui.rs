@@ -35,7 +35,7 @@ use vtol_gcs::links::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
 use vtol_gcs::tui::exec::ClientControl;
-use vtol_gcs::tui::view::{self, RouterCounters, SeriesCache, Snapshot};
+use vtol_gcs::tui::view::{self, RenderState, RouterCounters, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{Frame, LinkId, LinkUrl};
 
@@ -130,7 +130,7 @@ fn draw_cost(
 ) -> (f64, usize) {
     let bytes = Arc::new(Mutex::new(0usize));
     let mut term = terminal_sized(CountingSink(Arc::clone(&bytes)), size);
-    let mut cache = SeriesCache::default();
+    let mut render = RenderState::default();
     let cpu0 = thread_cpu_ns();
     for i in 0..frames {
         let snap = Snapshot {
@@ -142,7 +142,8 @@ fn draw_cost(
             tlog: None,
             serving: Vec::new(),
         };
-        term.draw(|f| view::draw(f, app, &snap, &mut cache))
+        vtol_gcs::tui::observe(app, &snap);
+        term.draw(|f| view::draw(f, app, &mut render, &snap))
             .expect("draw");
     }
     let cpu = (thread_cpu_ns() - cpu0) as f64 / frames as f64 / 1000.0;

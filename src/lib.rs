@@ -22,3 +22,4 @@ pub mod tlog;
 pub mod tracker;
 pub mod trust;
 pub mod tui;
+pub mod words;

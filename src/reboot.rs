@@ -84,6 +84,38 @@ impl ParamFetches {
     }
 }
 
+/// What a vehicle's parameter table needs after the tracker moved on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refetch {
+    /// Nothing: the same vehicle, no new reboot.
+    Nothing,
+    /// The vehicle is heard for the first time, or is another one than before.
+    First,
+    /// The same vehicle rebooted since it was last looked at: its table may hold other values.
+    AfterReboot,
+}
+
+/// The reboots of the vehicle one client follows, as last looked at: tells a reboot to answer
+/// with a fresh table from a vehicle newly heard or switched to. The daemon's own client
+/// ([`watch`]) and the terminal UI follow their vehicle with it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RebootsSeen {
+    seen: Option<((SystemId, ComponentId), u32)>,
+}
+
+impl RebootsSeen {
+    /// Records that `key` has rebooted `reboots` times ([`crate::tracker::VehicleView::reboots`])
+    /// and says what its table needs.
+    pub fn update(&mut self, key: (SystemId, ComponentId), reboots: u32) -> Refetch {
+        let before = self.seen.replace((key, reboots));
+        match before {
+            Some((k, n)) if k == key && reboots > n => Refetch::AfterReboot,
+            Some((k, _)) if k == key => Refetch::Nothing,
+            _ => Refetch::First,
+        }
+    }
+}
+
 /// Watches the tracker for the client's vehicle. With `fetch_params`, downloads the table when
 /// the vehicle is first heard and again after every reboot; without it, only logs reboots.
 /// Runs until `cancel` fires or the tracker stops.
@@ -94,8 +126,7 @@ pub async fn watch(
     fetches: Arc<ParamFetches>,
     cancel: CancellationToken,
 ) {
-    // Reboots already acted on, per vehicle; `None` until the vehicle is first heard.
-    let mut seen: Option<((SystemId, ComponentId), u32)> = None;
+    let mut seen = RebootsSeen::default();
     loop {
         tokio::select! {
             () = cancel.cancelled() => return,
@@ -111,12 +142,9 @@ pub async fn watch(
         let Some((key, reboots, last)) = found else {
             continue;
         };
-        let rebooted = match seen {
-            None => false,
-            Some((k, n)) => k == key && reboots > n,
-        };
-        let first = seen.is_none_or(|(k, _)| k != key);
-        seen = Some((key, reboots));
+        let refetch = seen.update(key, reboots);
+        let rebooted = refetch == Refetch::AfterReboot;
+        let first = refetch == Refetch::First;
         if rebooted && let Some(r) = last {
             tracing::warn!(
                 "vehicle {}:{} rebooted (time_boot_ms {} -> {})",
@@ -158,5 +186,25 @@ pub async fn watch(
                 fetches.update(|f| f.error = Some(e.to_string()));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{RebootsSeen, Refetch};
+    use vtol_link::{ComponentId, SystemId};
+
+    #[test]
+    fn a_reboot_counts_only_for_the_vehicle_already_followed() {
+        let a = (SystemId(1), ComponentId(1));
+        let b = (SystemId(2), ComponentId(1));
+        let mut seen = RebootsSeen::default();
+        assert_eq!(seen.update(a, 0), Refetch::First);
+        assert_eq!(seen.update(a, 0), Refetch::Nothing);
+        assert_eq!(seen.update(a, 1), Refetch::AfterReboot);
+        assert_eq!(seen.update(a, 1), Refetch::Nothing);
+        // Another vehicle, even one that rebooted before, is new; so is the first one again.
+        assert_eq!(seen.update(b, 3), Refetch::First);
+        assert_eq!(seen.update(a, 2), Refetch::First);
     }
 }

@@ -41,7 +41,7 @@ pub fn line(
                 "sys {} {} {}",
                 v.system_id,
                 v.mode_name(),
-                if v.armed { "ARMED" } else { "disarmed" }
+                crate::words::armed(v.armed)
             );
             if let Some(a) = v.attitude {
                 let [r, p, y] = a.rpy_rad.map(|x| f64::from(x).to_degrees());
@@ -77,7 +77,7 @@ pub fn line(
         }
     }
     for (id, h) in state.links.iter().filter(|(_, h)| h.side == Side::Vehicle) {
-        let health = if h.is_lost(now) { "LOST" } else { "ok" };
+        let health = crate::words::link_health(h.is_lost(now));
         let _ = write!(
             s,
             " | vehicle {id} {health} {:.0} Hz loss {:.1}%",
@@ -124,15 +124,11 @@ pub fn vitals_part(v: &Vitals, state: vtol_link::dialect::MavState) -> String {
     let mut s = String::new();
     match (state, &v.reason) {
         (S::MAV_STATE_CRITICAL | S::MAV_STATE_EMERGENCY, Some(r)) => {
-            let name = if state == S::MAV_STATE_CRITICAL {
-                "CRITICAL"
-            } else {
-                "EMERGENCY"
-            };
-            let _ = write!(s, " | {name}: {r}");
+            let _ = write!(s, " | {}: {r}", crate::words::mav_state(state));
         }
-        (S::MAV_STATE_CRITICAL, None) => s.push_str(" | CRITICAL"),
-        (S::MAV_STATE_EMERGENCY, None) => s.push_str(" | EMERGENCY"),
+        (S::MAV_STATE_CRITICAL | S::MAV_STATE_EMERGENCY, None) => {
+            let _ = write!(s, " | {}", crate::words::mav_state(state));
+        }
         _ => {}
     }
     if let Some(fs) = &v.failsafe {

@@ -10,7 +10,7 @@ use ratatui::backend::TestBackend;
 use ratatui::style::Color;
 use vtol_gcs::tui::app::{App, Outcome, Request};
 use vtol_gcs::tui::draw_running;
-use vtol_gcs::tui::view::SeriesCache;
+use vtol_gcs::tui::view::RenderState;
 use vtol_gcs::tui::vitals::{Severity, vitals};
 
 mod ui_support;
@@ -61,12 +61,12 @@ async fn a_low_battery_shows_its_warning_and_the_vehicle_lands() {
 
     // The header at 80×24: the banner, and the battery in yellow.
     let mut terminal = Terminal::new(TestBackend::new(80, 24)).expect("backend");
-    let mut cache = SeriesCache::default();
+    let mut render = RenderState::default();
     draw_running(
         &mut terminal,
         &mut app,
         &running,
-        &mut cache,
+        &mut render,
         Instant::now(),
     )
     .expect("draw");

@@ -11,9 +11,8 @@ use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::KeyCode;
 use ui_support::recording::{Recording, app_with_params, heartbeat, key};
 use vtol_gcs::tui::app::View;
-use vtol_gcs::tui::view::map::{
-    ItemKind, LatLon, MapCamera, MapItem, MapScene, MapVehicle, draw_map,
-};
+use vtol_gcs::tui::map::{ItemKind, LatLon, MapCamera, MapItem, MapScene, MapVehicle};
+use vtol_gcs::tui::view::map::draw_map;
 use vtol_link::dialect::{self, MavMessage};
 
 const HOME: LatLon = (-353_632_610, 1_491_652_300);

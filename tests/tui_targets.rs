@@ -7,7 +7,7 @@ use ratatui::backend::TestBackend;
 use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::air::live_target;
 use vtol_gcs::tui::app::{App, Request};
-use vtol_gcs::tui::view::SeriesCache;
+use vtol_gcs::tui::view::RenderState;
 use vtol_gcs::tui::vitals::vitals;
 
 mod ui_support;
@@ -101,12 +101,12 @@ async fn the_flight_view_shows_the_vehicles_live_target_in_guided_and_qrtl() {
 /// The whole screen at 80×24 as the running UI draws it.
 fn draw(app: &mut App, running: &vtol_gcs::daemon::Running) -> String {
     let mut terminal = Terminal::new(TestBackend::new(80, 24)).expect("test backend");
-    let mut cache = SeriesCache::default();
+    let mut render = RenderState::default();
     vtol_gcs::tui::draw_running(
         &mut terminal,
         app,
         running,
-        &mut cache,
+        &mut render,
         vtol_gcs::tracker::now(),
     )
     .expect("draw");

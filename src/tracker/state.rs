@@ -119,7 +119,7 @@ impl VehicleView {
             "{} {} {} {:.0} Hz {:.1}%",
             self.system_id,
             self.mode_name(),
-            if self.armed { "ARMED" } else { "disarmed" },
+            crate::words::armed(self.armed),
             self.window.rate_hz(now),
             self.window.loss_pct(now)
         )

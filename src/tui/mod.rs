@@ -1,7 +1,10 @@
-//! The terminal ground station: ratatui over crossterm. [`app`] holds the UI state and turns
-//! keys into [`app::Request`]s (pure), [`view`] draws a [`view::Snapshot`] (pure), and [`run`]
-//! is the thin shell: terminal set-up and restore, input on its own thread, redraws capped at
-//! 30 fps and only when something changed, requests handed to a [`Control`] (the client).
+//! The terminal ground station: ratatui over crossterm. [`app`] holds the UI state, turns keys
+//! into [`app::Request`]s and follows the tracker between frames ([`observe`]), all pure;
+//! [`view`] draws a [`view::Snapshot`] as the [`app::App`] shows it, reading the app and writing
+//! only its own [`view::RenderState`]; and [`run`] is the thin shell: terminal set-up and
+//! restore, input on its own thread, redraws capped at 30 fps and only when something changed,
+//! requests handed to a [`Control`] (the client) as tasks of one `JoinSet`, aborted on the way
+//! out.
 //!
 //! The terminal is restored on every way out: a normal return, an error, a panic (ratatui's
 //! hook), and SIGTERM/Ctrl-C (the caller's cancellation token ends the loop).
@@ -11,6 +14,7 @@ pub mod app;
 pub mod attitude;
 pub mod exec;
 pub mod fields;
+pub mod map;
 pub mod progress;
 pub mod view;
 pub mod vitals;
@@ -22,13 +26,16 @@ use std::time::{Duration, Instant};
 
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 use tokio::sync::mpsc;
+use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 use vtol_link::{ComponentId, SystemId};
 
 use crate::daemon::{OWN_TRAFFIC_PEER, Running, describe};
+use crate::reboot::{RebootsSeen, Refetch};
+use crate::tracker::VehicleState;
 use crate::trust::policy::EndpointPolicy;
 use app::{App, Outcome, Request};
-use view::{LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
+use view::{LinkRow, RenderState, RouterCounters, Snapshot, TlogInfo};
 
 /// Shortest time between two redraws driven by vehicle data (30 fps). Keys redraw at once.
 pub const FRAME_INTERVAL: Duration = Duration::from_millis(33);
@@ -56,7 +63,7 @@ pub trait Control: Clone + Send + Sync + 'static {
 /// listed). True when the client had to change vehicle.
 fn sync_selection<C: Control>(
     app: &mut App,
-    state: &crate::tracker::VehicleState,
+    state: &VehicleState,
     control: &C,
     sent: &mut Option<(SystemId, ComponentId)>,
 ) -> bool {
@@ -72,6 +79,23 @@ fn sync_selection<C: Control>(
     }
     *sent = Some(key);
     control.select_vehicle(key.0, key.1)
+}
+
+/// Whether the vehicle `app` shows comes over a replay link (a recorded log).
+#[must_use]
+pub fn is_replay(app: &App, state: &VehicleState, links: &[LinkRow]) -> bool {
+    app.vehicle(state).is_some_and(|v| {
+        links
+            .iter()
+            .any(|l| l.id == v.link && l.peer == crate::daemon::REPLAY_PEER)
+    })
+}
+
+/// Brings `app` up to date with what `snap` shows, before [`view::draw`] draws it: whether the
+/// shown vehicle is a replay, and what [`App::observe`] follows.
+pub fn observe(app: &mut App, snap: &Snapshot<'_>) {
+    app.observe(snap.state, snap.now);
+    app.replay = is_replay(app, snap.state, &snap.links);
 }
 
 /// Builds what one frame shows from the running daemon.
@@ -125,7 +149,8 @@ pub fn links_and_counters(running: &Running) -> (Vec<LinkRow>, RouterCounters, O
     (links, counters, tlog)
 }
 
-/// Draws one frame of the running daemon's state on any ratatui backend.
+/// One frame of the running daemon's state on any ratatui backend: the app observes it
+/// ([`observe`]), then the view draws it.
 ///
 /// # Errors
 /// The backend's write error.
@@ -133,7 +158,7 @@ pub fn draw_running<B: ratatui::backend::Backend>(
     terminal: &mut ratatui::Terminal<B>,
     app: &mut App,
     running: &Running,
-    cache: &mut SeriesCache,
+    render: &mut RenderState,
     now: Instant,
 ) -> Result<(), B::Error> {
     let state = running.state.borrow().clone();
@@ -156,7 +181,8 @@ pub fn draw_running<B: ratatui::backend::Backend>(
         tlog,
         serving,
     };
-    terminal.draw(|f| view::draw(f, app, &snap, cache))?;
+    observe(app, &snap);
+    terminal.draw(|f| view::draw(f, app, render, &snap))?;
     Ok(())
 }
 
@@ -200,10 +226,24 @@ pub async fn run<C: Control>(
     result
 }
 
+/// Carries out `request` with `control` as one of the loop's `tasks`; its outcomes come back
+/// on `out`.
+fn spawn_request<C: Control>(
+    tasks: &mut JoinSet<()>,
+    control: &C,
+    out: &mpsc::Sender<Outcome>,
+    request: Request,
+) {
+    let c = control.clone();
+    let out = out.clone();
+    tasks.spawn(async move { c.execute(request, out).await });
+}
+
 /// The UI's loop on any backend and any event source (the terminal's, or a benchmark's):
 /// keys become requests carried out by `control` as tasks, outcomes update the state, and the
 /// screen is redrawn at once after a key or an outcome, and at most every [`FRAME_INTERVAL`]
-/// for vehicle data. Returns on `q`, when `events` closes, or when `cancel` fires.
+/// for vehicle data; before each frame the app observes the state ([`observe`]). Returns on
+/// `q`, when `events` closes, or when `cancel` fires; the requests still running are aborted.
 ///
 /// # Errors
 /// The backend's write error.
@@ -215,8 +255,10 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
     cancel: CancellationToken,
 ) -> Result<(), B::Error> {
     let (out_tx, mut outcomes) = mpsc::channel(64);
+    // Every request's task; dropping the set (any way out of the loop) aborts those left.
+    let mut tasks = JoinSet::new();
     let mut app = App::default();
-    let mut cache = SeriesCache::default();
+    let mut render = RenderState::default();
     let mut state_rx = running.state.clone();
     let mut tick = tokio::time::interval(FRAME_INTERVAL);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
@@ -225,32 +267,28 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
     let mut last_draw = Instant::now()
         .checked_sub(IDLE_REDRAW)
         .unwrap_or_else(Instant::now);
-    // Reboots of each vehicle already answered with a fresh table.
-    let mut reboots_seen = std::collections::HashMap::new();
+    // The shown vehicle's reboots already answered with a fresh table.
+    let mut reboots = RebootsSeen::default();
     // The table names the outputs and holds HOVER_ALT: fetch it at start (and after a reboot).
-    {
-        let c = control.clone();
-        let out = out_tx.clone();
-        app.params.progress = Some(("download".into(), 0, 0));
-        tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
-    }
+    app.params.progress = Some(("download".into(), 0, 0));
+    spawn_request(&mut tasks, &control, &out_tx, Request::ParamsPull);
     loop {
         let mut now_draw = false;
         tokio::select! {
             () = cancel.cancelled() => return Ok(()),
+            // Finished requests leave the set (their outcomes came on `outcomes`).
+            Some(_) = tasks.join_next(), if !tasks.is_empty() => {}
             ev = events.recv() => {
                 let Some(ev) = ev else { return Ok(()) };
                 match ev {
                     Event::Key(k) if k.kind != KeyEventKind::Release => {
                         let state = running.state.borrow().clone();
                         let (links, _, _) = links_and_counters(running);
-                        app.replay = view::is_replay(&app, &state, &links);
+                        app.replay = is_replay(&app, &state, &links);
                         let reqs = app.on_key(k, &state, crate::tracker::now());
                         sync_selection(&mut app, &state, &control, &mut selected);
                         for req in reqs {
-                            let c = control.clone();
-                            let out = out_tx.clone();
-                            tokio::spawn(async move { c.execute(req, out).await });
+                            spawn_request(&mut tasks, &control, &out_tx, req);
                         }
                         if app.quit {
                             return Ok(());
@@ -272,36 +310,24 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                     return Ok(());
                 }
                 dirty = true;
-                let (changed, key, reboots) = {
+                let (changed, shown) = {
                     let state = state_rx.borrow_and_update();
                     let changed = sync_selection(&mut app, &state, &control, &mut selected);
-                    let v = app.vehicle(&state);
-                    (
-                        changed,
-                        v.map(|v| (v.system_id, v.component_id)),
-                        v.map_or(0, |v| v.reboots),
-                    )
+                    let shown = app
+                        .vehicle(&state)
+                        .map(|v| ((v.system_id, v.component_id), v.reboots));
+                    (changed, shown)
                 };
-                let seen = key.map(|k| reboots_seen.entry(k).or_insert(0));
+                let refetch = shown.map(|(key, n)| reboots.update(key, n));
                 if changed {
                     // The client was on another vehicle: its table is not this one's.
-                    if let Some(seen) = seen {
-                        *seen = reboots;
-                    }
                     for req in app.vehicle_changed() {
-                        let c = control.clone();
-                        let out = out_tx.clone();
-                        tokio::spawn(async move { c.execute(req, out).await });
+                        spawn_request(&mut tasks, &control, &out_tx, req);
                     }
-                } else if let Some(seen) = seen
-                    && reboots > *seen
-                {
+                } else if refetch == Some(Refetch::AfterReboot) {
                     // A vehicle that rebooted may hold other values now: fetch the table again.
-                    *seen = reboots;
-                    let c = control.clone();
-                    let out = out_tx.clone();
                     app.params.progress = Some(("download after reboot".into(), 0, 0));
-                    tokio::spawn(async move { c.execute(Request::ParamsPull, out).await });
+                    spawn_request(&mut tasks, &control, &out_tx, Request::ParamsPull);
                 }
             }
             _ = tick.tick() => {
@@ -316,7 +342,7 @@ pub async fn event_loop<B: ratatui::backend::Backend, C: Control>(
                 terminal,
                 &mut app,
                 running,
-                &mut cache,
+                &mut render,
                 crate::tracker::now(),
             )?;
             last_draw = Instant::now();

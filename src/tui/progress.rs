@@ -111,7 +111,7 @@ pub fn mission_line(
             return None;
         };
         let to = item.and_then(place)?;
-        let (e, n) = crate::tui::view::map::east_north_m((g.lat, g.lon), to);
+        let (e, n) = crate::tui::map::east_north_m((g.lat, g.lon), to);
         Some(e.hypot(n))
     });
     let speed_m_s = match last(state, v, VFR_HUD, now) {

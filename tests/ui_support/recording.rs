@@ -11,7 +11,7 @@ use vtol_gcs::links::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome};
 use vtol_gcs::tui::attitude::hover_to_wing;
-use vtol_gcs::tui::view::{self, LinkRow, RouterCounters, SeriesCache, Snapshot, TlogInfo};
+use vtol_gcs::tui::view::{self, LinkRow, RenderState, RouterCounters, Snapshot, TlogInfo};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{ComponentId, Frame, LinkId, LinkStatsSnapshot, SystemId};
 
@@ -274,13 +274,15 @@ impl Recording {
     }
 }
 
-/// One whole frame of `snap` drawn by `app` on a `size` terminal, as text.
+/// One whole frame of `snap` drawn by `app` on a `size` terminal, as text: the app observes the
+/// snapshot first, as the UI's event loop does before each frame.
 #[must_use]
 pub fn draw_snapshot(app: &mut App, snap: &Snapshot, size: (u16, u16)) -> String {
     let mut terminal = Terminal::new(TestBackend::new(size.0, size.1)).expect("test backend");
-    let mut cache = SeriesCache::default();
+    let mut render = RenderState::default();
+    vtol_gcs::tui::observe(app, snap);
     terminal
-        .draw(|f| view::draw(f, app, snap, &mut cache))
+        .draw(|f| view::draw(f, app, &mut render, snap))
         .expect("draw");
     format!("{}", terminal.backend())
 }

@@ -47,13 +47,7 @@ pub fn rank(v: &VehicleView, now: Instant) -> u8 {
 /// The state word a row shows and the search matches.
 #[must_use]
 pub fn state_word(v: &VehicleView, now: Instant) -> &'static str {
-    if v.is_lost(now) {
-        "LOST"
-    } else if v.armed {
-        "ARMED"
-    } else {
-        "disarmed"
-    }
+    crate::words::vehicle_state(v.is_lost(now), v.armed)
 }
 
 /// Whether `v` matches the search `filter`.
@@ -71,7 +65,7 @@ pub fn matches(v: &VehicleView, now: Instant, filter: &str) -> bool {
         "{} {} {}",
         state_word(v, now),
         v.mode_name(),
-        crate::tui::view::status_word(v.system_status)
+        crate::words::mav_state(v.system_status)
     )
     .to_ascii_uppercase();
     f.split_whitespace().all(|w| words.contains(w))

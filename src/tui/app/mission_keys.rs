@@ -10,6 +10,7 @@ use vtol_link::protocol::id::MISSION_CURRENT;
 use super::{App, Confirm, Level, Request};
 use crate::mission::Item;
 use crate::tracker::VehicleState;
+use crate::tui::map::PAN_CELLS;
 use crate::tui::vitals::vitals;
 
 /// The file a mission prompt offers first.
@@ -65,14 +66,14 @@ fn mission_current(app: &App, state: &VehicleState) -> Option<(u16, u16)> {
 }
 
 impl App {
-    /// The Map view's keys: the mission keys here, the camera's in [`crate::tui::view::map`].
+    /// The Map view's keys: the mission keys here, the camera's in [`App::on_camera_key`].
     pub(super) fn on_map_key(
         &mut self,
         key: KeyEvent,
         state: &VehicleState,
     ) -> Option<Vec<Request>> {
         let KeyCode::Char(c @ ('u' | 'w' | 'g' | 'n')) = key.code else {
-            return self.map.on_key(key.code);
+            return self.on_camera_key(key.code);
         };
         if self.replay {
             self.refuse_on_replay();
@@ -104,6 +105,27 @@ impl App {
             }
         }
         self.typing = true;
+        Some(Vec::new())
+    }
+
+    /// The Map view's camera keys: `+`/`-` zoom, arrows pan, `f` or `0` follow the vehicle
+    /// again, `r` downloads the mission again. `None` for a key it does not take.
+    fn on_camera_key(&mut self, code: KeyCode) -> Option<Vec<Request>> {
+        let c = &mut self.map.camera;
+        match code {
+            KeyCode::Char('+' | '=') => c.zoom_in(),
+            KeyCode::Char('-') => c.zoom_out(),
+            KeyCode::Up => c.pan(PAN_CELLS, 0.0),
+            KeyCode::Down => c.pan(-PAN_CELLS, 0.0),
+            KeyCode::Right => c.pan(0.0, PAN_CELLS),
+            KeyCode::Left => c.pan(0.0, -PAN_CELLS),
+            KeyCode::Char('f' | '0') => c.follow(),
+            KeyCode::Char('r') => {
+                self.map.requested = true;
+                return Some(vec![Request::MissionDownload]);
+            }
+            _ => return None,
+        }
         Some(Vec::new())
     }
 

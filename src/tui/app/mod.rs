@@ -17,6 +17,7 @@ pub mod fleet;
 mod guard;
 mod lists;
 pub mod mission_keys;
+mod observe;
 pub mod picker;
 
 /// Step of the QLOITER position target per arrow key, m.
@@ -359,7 +360,7 @@ pub struct App {
     /// The shown vehicle is a replayed log: no commands are offered.
     pub replay: bool,
     /// The Map view's camera and mission.
-    pub map: crate::tui::view::map::MapState,
+    pub map: crate::tui::map::MapState,
     /// The Map view's mission prompt, while typed.
     pub mission_prompt: Option<mission_keys::MissionPrompt>,
     /// The mission file last named (the prompts offer it).
@@ -391,21 +392,6 @@ impl Default for App {
             quit: false,
         }
     }
-}
-
-/// Horizontal speed under which a vehicle entering QLOITER holds where it was, m/s.
-const SETTLED_M_S: f32 = 1.0;
-
-/// Whether `v` hovers slowly: EXTENDED_SYS_STATE says hover (or is not sent) and it moves
-/// less than [`SETTLED_M_S`] across the ground.
-fn settled_hover(
-    state: &VehicleState,
-    v: &VehicleView,
-    p: &crate::tracker::state::LocalPosition,
-) -> bool {
-    let air = crate::tui::air::air(state, v, None, false);
-    let hovering = matches!(air.vtol, None | Some(crate::tui::air::Vtol::Mc));
-    hovering && p.vel_ned_m_s[0].hypot(p.vel_ned_m_s[1]) < SETTLED_M_S
 }
 
 impl App {
@@ -452,70 +438,6 @@ impl App {
         self.target_ned = None;
         self.last_mode = None;
         vec![Request::ParamsPull]
-    }
-
-    /// Follows the shown vehicle between frames: entering QLOITER, it holds where it was
-    /// entered (at `HOVER_ALT` when on the ground), so that is the target shown and the one the
-    /// arrows move; another mode drops the target.
-    pub fn observe(&mut self, state: &VehicleState) {
-        let Some(v) = self.vehicle(state) else {
-            return;
-        };
-        let mode = v.mode_name();
-        let entered = self.last_mode.as_deref() != Some(mode.as_str());
-        if entered {
-            self.target_ned = match (mode.as_str(), v.position) {
-                // Entered from a hover the vehicle holds where it was. Entered at speed (from
-                // forward flight, through a back transition) it holds where it stops, which
-                // the UI does not know: no setpoint rather than a wrong one.
-                ("QLOITER", Some(p)) if settled_hover(state, v, &p) => {
-                    let airborne = crate::tui::vitals::vitals(state, v).airborne;
-                    let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
-                    let [n, e, d] = p.pos_ned_m;
-                    Some([n, e, if airborne { d } else { -hover }])
-                }
-                ("QLOITER", None) => self.target_ned,
-                _ => None,
-            };
-        }
-        self.last_mode = Some(mode);
-        self.follow_param_values(state);
-    }
-
-    /// The vehicle's last word on a parameter wins: a PARAM_VALUE heard since the last frame
-    /// (an echo, a reset such as `SIM_PUSH_*` going back to 0, another client's write) sets the
-    /// table's value; a status it contradicts goes (a confirmation of another value, a local
-    /// error, a refusal once the value moved), a pending write it matches is left to its
-    /// outcome.
-    fn follow_param_values(&mut self, state: &VehicleState) {
-        let Some(v) = self.vehicle(state) else {
-            return;
-        };
-        let Some(s) = state.messages.get(&(v.system_id, v.component_id, 22)) else {
-            return;
-        };
-        if self.params.seen_values == Some(s.count) {
-            return;
-        }
-        self.params.seen_values = Some(s.count);
-        let Ok(vtol_link::dialect::MavMessage::PARAM_VALUE(pv)) = s.last.decode() else {
-            return;
-        };
-        let name = pv.param_id.to_str().unwrap_or("").to_owned();
-        let value = pv.param_value;
-        let Some(row) = self.params.table.iter_mut().find(|(n, _)| *n == name) else {
-            return;
-        };
-        let moved = row.1.to_bits() != value.to_bits();
-        row.1 = value;
-        let drop = match self.params.status.get(&name) {
-            Some(ParamStatus::Pending(_)) | None => false,
-            Some(ParamStatus::NotSent(_)) => true,
-            Some(ParamStatus::Confirmed | ParamStatus::Refused(_)) => moved,
-        };
-        if drop {
-            self.params.status.remove(&name);
-        }
     }
 
     /// Adds a line to the event log.
@@ -736,7 +658,7 @@ impl App {
             Outcome::GainsLoaded(Err(e)) => self.note(Level::Error, e),
             Outcome::Mission(Ok(items)) => {
                 let radius = self.param("WP_LOITER_RAD").unwrap_or(60.0);
-                self.map.items = crate::tui::view::map::items_from_mission(&items, radius);
+                self.map.items = crate::tui::map::items_from_mission(&items, radius);
                 let n = items.len().saturating_sub(1);
                 self.map.mission = Some(items);
                 self.note(

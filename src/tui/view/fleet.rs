@@ -9,9 +9,9 @@ use ratatui::widgets::{Block, Cell, Row, Table};
 use vtol_link::dialect::MavMessage;
 use vtol_link::protocol::id::SYS_STATUS;
 
-use super::{Snapshot, status_name};
+use super::Snapshot;
 use crate::tracker::VehicleView;
-use crate::tui::app::fleet::{listing, state_word};
+use crate::tui::app::fleet::state_word;
 use crate::tui::app::{App, View};
 
 fn battery(snap: &Snapshot<'_>, v: &VehicleView) -> String {
@@ -65,7 +65,7 @@ fn fleet_row(snap: &Snapshot<'_>, v: &VehicleView, shown: bool) -> Row<'static> 
         Cell::from(format!("{mark}{}", v.system_id.0)),
         Cell::from(state_word(v, now)).style(state_style),
         Cell::from(v.mode_name()).style(live),
-        Cell::from(status_name(v.system_status)).style(live),
+        Cell::from(crate::words::mav_state(v.system_status)).style(live),
         Cell::from(rate),
         Cell::from(loss),
         Cell::from(format!("{heard:.0} s")).style(if is_lost { state_style } else { Style::new() }),
@@ -73,9 +73,17 @@ fn fleet_row(snap: &Snapshot<'_>, v: &VehicleView, shown: bool) -> Row<'static> 
     ])
 }
 
-pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, area: Rect) {
+/// Draws the vehicles as the app last listed them, the cursor's row kept on screen by
+/// scrolling `first` (the first row shown) only as far as it needs.
+pub(super) fn draw_fleet(
+    f: &mut Frame<'_>,
+    app: &App,
+    snap: &Snapshot<'_>,
+    first: &mut usize,
+    area: Rect,
+) {
     let now = snap.now;
-    let listed = listing(snap.state, now, &app.fleet.filter);
+    let listed = &app.fleet.listed;
     let total = snap.state.vehicles.len();
     let lost = snap
         .state
@@ -97,16 +105,15 @@ pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, 
         .cursor
         .and_then(|c| listed.iter().position(|k| *k == c))
         .unwrap_or(0);
-    app.fleet.cursor = listed.get(at).copied();
     let visible = usize::from(area.height.saturating_sub(3)).max(1);
     // Scroll only as far as the cursor needs.
-    if at < app.fleet.first {
-        app.fleet.first = at;
-    } else if at >= app.fleet.first + visible {
-        app.fleet.first = at + 1 - visible;
+    if at < *first {
+        *first = at;
+    } else if at >= *first + visible {
+        *first = at + 1 - visible;
     }
-    app.fleet.first = app.fleet.first.min(listed.len().saturating_sub(visible));
-    let first = app.fleet.first;
+    *first = (*first).min(listed.len().saturating_sub(visible));
+    let first = *first;
     let rows: Vec<Row> = listed
         .iter()
         .enumerate()
@@ -152,7 +159,6 @@ pub(super) fn draw_fleet(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, 
     } else {
         block
     };
-    app.fleet.listed = listed;
     f.render_widget(
         Table::new(
             rows,

@@ -8,7 +8,7 @@ use ratatui::widgets::Paragraph;
 
 use vtol_link::dialect::MavState;
 
-use super::{Snapshot, level_style, status_name};
+use super::{Snapshot, level_style};
 use crate::links::Side;
 use crate::tracker::state::VehicleView;
 use crate::tui::air::air;
@@ -34,17 +34,17 @@ pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
                 Style::new().add_modifier(Modifier::BOLD),
             ));
             spans.push(Span::raw(" "));
-            spans.push(if v.armed {
-                Span::styled(
-                    "ARMED",
-                    Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
-                )
-            } else {
-                Span::styled("disarmed", Style::new().fg(Color::Green))
-            });
+            spans.push(Span::styled(
+                crate::words::armed(v.armed),
+                if v.armed {
+                    Style::new().fg(Color::Red).add_modifier(Modifier::BOLD)
+                } else {
+                    Style::new().fg(Color::Green)
+                },
+            ));
             spans.push(Span::raw(" "));
             spans.push(Span::styled(
-                status_name(v.system_status),
+                crate::words::mav_state(v.system_status),
                 status_style(v.system_status),
             ));
             if app.replay {

@@ -1,6 +1,8 @@
 //! Projection, camera and track tests of the Map view.
 
 use super::*;
+use crate::tui::map::{MapItem, MapState, MapVehicle, PAN_CELLS, ZOOMS_M, origin};
+use nalgebra::Vector3;
 
 const HOME: LatLon = (-353_632_610, 1_491_652_300);
 
@@ -52,10 +54,10 @@ fn the_camera_follows_until_panned_and_again_on_f() {
     let mut state = MapState::default();
     assert_eq!(state.camera.center_for(&scene), Some(at(10.0, 20.0)));
     // A pan before any frame was drawn has nowhere to start from.
-    state.on_key(ratatui::crossterm::event::KeyCode::Up);
+    state.camera.pan(PAN_CELLS, 0.0);
     assert!(state.camera.follow);
     state.camera.shown = state.camera.center_for(&scene);
-    state.on_key(ratatui::crossterm::event::KeyCode::Up);
+    state.camera.pan(PAN_CELLS, 0.0);
     assert!(!state.camera.follow);
     let c = state.camera.center_for(&scene).expect("a centre");
     let (e, n) = east_north_m(at(10.0, 20.0), c);
@@ -66,7 +68,7 @@ fn the_camera_follows_until_panned_and_again_on_f() {
         heading_deg: None,
     });
     assert_eq!(state.camera.center_for(&scene), Some(c));
-    state.on_key(ratatui::crossterm::event::KeyCode::Char('f'));
+    state.camera.follow();
     assert_eq!(state.camera.center_for(&scene), Some(at(50.0, 50.0)));
     // No vehicle: home, then the first placed item.
     scene.vehicle = None;

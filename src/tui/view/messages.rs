@@ -5,31 +5,28 @@ use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::Line;
 use ratatui::widgets::{Block, Paragraph, Row, Table};
-use vtol_link::{ComponentId, SystemId};
 
 use super::charts::{COLOURS, Series, chart};
-use super::{SeriesCache, Snapshot};
+use super::{RenderState, Snapshot};
 use crate::tui::app::{App, View};
 use crate::tui::fields;
 
+/// Draws the messages as the app last listed them, the selected one's fields and the charts.
 pub(super) fn draw_messages(
     f: &mut Frame<'_>,
-    app: &mut App,
+    app: &App,
     snap: &Snapshot<'_>,
-    cache: &mut SeriesCache,
+    render: &mut RenderState,
     area: Rect,
 ) {
     let now = snap.now;
-    let m = &mut app.messages;
-    let filter = m.filter.to_ascii_uppercase();
-    let listed: Vec<(SystemId, ComponentId, u32)> = snap
-        .state
-        .messages
+    let m = &app.messages;
+    // The rows still in the tracker's state (all of them, when the app listed this state).
+    let listed: Vec<_> = m
+        .listed
         .iter()
-        .filter(|(_, s)| filter.is_empty() || s.last.message_name().unwrap_or("").contains(&filter))
-        .map(|(k, _)| *k)
+        .filter_map(|k| Some((*k, snap.state.messages.get(k)?)))
         .collect();
-    m.selected = m.selected.min(listed.len().saturating_sub(1));
     let [top, charts_area] = if m.charts.is_empty() {
         [area, Rect::default()]
     } else {
@@ -38,7 +35,7 @@ pub(super) fn draw_messages(
     // The list as wide as its longest name needs, the fields the rest.
     let name_w = listed
         .iter()
-        .filter_map(|k| snap.state.messages[k].last.message_name())
+        .filter_map(|(_, s)| s.last.message_name())
         .map(str::len)
         .max()
         .unwrap_or(7)
@@ -53,8 +50,7 @@ pub(super) fn draw_messages(
         .enumerate()
         .skip(first)
         .take(visible)
-        .map(|(i, k)| {
-            let s = &snap.state.messages[k];
+        .map(|(i, (k, s))| {
             let name = s.last.message_name().unwrap_or("?");
             let style = if i == m.selected {
                 Style::new().add_modifier(Modifier::REVERSED)
@@ -91,17 +87,14 @@ pub(super) fn draw_messages(
         .block(Block::bordered().title(title)),
         list_area,
     );
-    let mut numeric = Vec::new();
     let mut lines = Vec::new();
-    if let Some(k) = listed.get(m.selected) {
-        let s = &snap.state.messages[k];
+    if let Some((_, s)) = listed.get(m.selected) {
         // Decoded as pymavlink does: a value the dialect does not define still shows the
         // message, with that field's wire number said below it.
         match s.last.decode_lenient() {
             Ok(vtol_link::frame::Lenient { msg, replaced }) => {
                 let fs = fields::fields(&msg);
                 let numeric_fields: Vec<_> = fs.iter().filter(|f| f.value.is_some()).collect();
-                m.field = m.field.min(numeric_fields.len().saturating_sub(1));
                 let visible = fields_area.height.saturating_sub(2) as usize;
                 let selected_path = numeric_fields.get(m.field).map(|f| f.path.clone());
                 // Paths in a column as wide as the longest; a value that does not fit beside
@@ -140,15 +133,12 @@ pub(super) fn draw_messages(
                         Style::new().fg(Color::Yellow),
                     ));
                 }
-                numeric = numeric_fields.into_iter().map(|f| f.path.clone()).collect();
                 let skip = sel_line.saturating_sub(visible.saturating_sub(1));
                 lines.drain(..skip.min(lines.len()));
             }
             Err(e) => lines.push(Line::raw(format!("cannot decode: {e}"))),
         }
     }
-    m.listed = listed;
-    m.listed_fields = numeric;
     let title = if m.in_fields {
         " Fields (Enter: chart it, n: new chart, ← back) "
     } else {
@@ -178,7 +168,7 @@ pub(super) fn draw_messages(
                     vtol_link::frame::message_name(k.message).unwrap_or("?"),
                     k.path
                 );
-                let pts = cache
+                let pts = render
                     .points(k, snap.history)
                     .iter()
                     .filter(|(t, _)| *t >= from)

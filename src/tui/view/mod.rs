@@ -1,5 +1,7 @@
-//! Drawing: one function per view over a [`Snapshot`] of everything shown. Pure apart from the
-//! chart cache, so whole frames render into ratatui's `TestBackend` for snapshot tests.
+//! Drawing: one function per view over a [`Snapshot`] of everything shown and the [`App`] as
+//! the event loop left it. Pure apart from the [`RenderState`] (chart series, the map's track,
+//! the fleet table's scroll), so whole frames render into ratatui's `TestBackend` for snapshot
+//! tests.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -8,7 +10,6 @@ use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::widgets::{Paragraph, Wrap};
-use vtol_link::dialect::MavState;
 
 use super::app::{App, Level, SeriesKey, View};
 use super::fields;
@@ -120,15 +121,19 @@ pub struct Snapshot<'a> {
     pub serving: Vec<String>,
 }
 
-/// Field series read incrementally from the history's raw frames (each frame decoded once).
+/// What drawing keeps from one frame to the next and nothing else reads: field series read
+/// incrementally from the history's raw frames (each frame decoded once), the shown vehicle's
+/// track for the Map view, and how far the Fleet view's table is scrolled.
 #[derive(Debug, Default)]
-pub struct SeriesCache {
+pub struct RenderState {
     series: BTreeMap<SeriesKey, (u64, Vec<(f64, f64)>)>,
     /// The shown vehicle's track for the Map view.
     track: map::TrackCache,
+    /// The Fleet view's first row on screen.
+    fleet_first: usize,
 }
 
-impl SeriesCache {
+impl RenderState {
     /// The points of `key` in the history, decoding only frames not seen before.
     fn points(&mut self, key: &SeriesKey, history: &History) -> &[(f64, f64)] {
         let entry = self
@@ -202,28 +207,9 @@ fn servo_names(app: &App) -> Vec<String> {
     servo_outputs(app).into_iter().map(|o| o.name).collect()
 }
 
-/// A MAV_STATE as the header shows it (`ACTIVE`, `CRITICAL` …).
-#[must_use]
-pub fn status_word(s: MavState) -> &'static str {
-    status_name(s)
-}
-
-fn status_name(s: MavState) -> &'static str {
-    match s {
-        MavState::MAV_STATE_UNINIT => "UNINIT",
-        MavState::MAV_STATE_BOOT => "BOOT",
-        MavState::MAV_STATE_CALIBRATING => "CALIBRATING",
-        MavState::MAV_STATE_STANDBY => "STANDBY",
-        MavState::MAV_STATE_ACTIVE => "ACTIVE",
-        MavState::MAV_STATE_CRITICAL => "CRITICAL",
-        MavState::MAV_STATE_EMERGENCY => "EMERGENCY",
-        MavState::MAV_STATE_POWEROFF => "POWEROFF",
-        MavState::MAV_STATE_FLIGHT_TERMINATION => "TERMINATION",
-    }
-}
-
-/// Draws the whole screen.
-pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut SeriesCache) {
+/// Draws the whole screen of `snap` as `app` shows it. Reads the app (the event loop brought it
+/// up to date with [`crate::tui::observe`]); writes only `render`.
+pub fn draw(f: &mut Frame<'_>, app: &App, render: &mut RenderState, snap: &Snapshot<'_>) {
     let area = f.area();
     if area.width < MIN_SIZE.0 || area.height < MIN_SIZE.1 {
         let text = format!(
@@ -238,9 +224,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         );
         return;
     }
-    app.observe(snap.state);
-    app.replay = is_replay(app, snap.state, &snap.links);
-    map::keep_track(app, snap, &mut cache.track);
+    map::keep_track(app, snap, &mut render.track);
     // The Fleet view is the list: the header does not repeat it there.
     let fleet = if snap.state.vehicles.len() > 1 && app.view != View::Fleet {
         vehicle_list_lines(app, snap, area.width)
@@ -271,10 +255,10 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
         View::Flight => draw_flight(f, app, snap, body),
         View::Charts => draw_charts(f, app, snap, body),
         View::Links => draw_links(f, snap, body),
-        View::Messages => draw_messages(f, app, snap, cache, body),
+        View::Messages => draw_messages(f, app, snap, render, body),
         View::Params => draw_params(f, app, body),
-        View::Fleet => draw_fleet(f, app, snap, body),
-        View::Map => map::draw_map_view(f, app, snap, &cache.track, body),
+        View::Fleet => draw_fleet(f, app, snap, &mut render.fleet_first, body),
+        View::Map => map::draw_map_view(f, app, snap, &render.track, body),
     }
     if let Some(p) = &app.mission_prompt {
         overlay::draw_mission_prompt(f, p, body);
@@ -289,16 +273,6 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App, snap: &Snapshot<'_>, cache: &mut S
     if app.help {
         draw_help(f, area);
     }
-}
-
-/// Whether the vehicle `app` shows comes over a replay link (a recorded log).
-#[must_use]
-pub fn is_replay(app: &App, state: &VehicleState, links: &[LinkRow]) -> bool {
-    app.vehicle(state).is_some_and(|v| {
-        links
-            .iter()
-            .any(|l| l.id == v.link && l.peer == crate::daemon::REPLAY_PEER)
-    })
 }
 
 /// Words of `text` in lines of at most `width` characters (a longer word is cut into pieces).
