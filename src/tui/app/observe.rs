@@ -5,8 +5,8 @@
 use std::time::Instant;
 
 use super::{App, ParamStatus, View};
+use crate::fields;
 use crate::tracker::{VehicleState, VehicleView};
-use crate::tui::fields;
 use crate::tui::map::{MapScene, scene_parts};
 
 /// Horizontal speed under which a vehicle entering QLOITER holds where it was, m/s.
@@ -55,7 +55,7 @@ impl App {
                 // forward flight, through a back transition) it holds where it stops, which
                 // the UI does not know: no setpoint rather than a wrong one.
                 ("QLOITER", Some(p)) if settled_hover(state, v, &p) => {
-                    let airborne = crate::tui::vitals::vitals(state, v).airborne;
+                    let airborne = crate::vitals::vitals(state, v).airborne;
                     let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
                     let [n, e, d] = p.pos_ned_m;
                     Some([n, e, if airborne { d } else { -hover }])
