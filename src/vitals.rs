@@ -8,6 +8,7 @@
 use vtol_link::dialect::{
     GpsFixType, MavBatteryChargeState, MavLandedState, MavMessage, MavState, MavSysStatusSensor,
 };
+use vtol_link::protocol::id;
 
 use crate::tracker::state::{VehicleState, VehicleView};
 
@@ -108,7 +109,7 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
             .and_then(|s| s.last.decode_lenient().ok().map(|l| l.msg))
     };
     let mut out = Vitals::default();
-    if let Some(MavMessage::SYS_STATUS(s)) = last(1) {
+    if let Some(MavMessage::SYS_STATUS(s)) = last(id::SYS_STATUS) {
         let used = s.onboard_control_sensors_present & s.onboard_control_sensors_enabled;
         out.unhealthy = SENSOR_NAMES
             .iter()
@@ -136,7 +137,7 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
             });
         }
     }
-    if let Some(MavMessage::BATTERY_STATUS(b)) = last(147) {
+    if let Some(MavMessage::BATTERY_STATUS(b)) = last(id::BATTERY_STATUS) {
         let cells: Vec<u16> = b
             .voltages
             .iter()
@@ -169,11 +170,11 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
             severity: severity.max(prev.map_or(Severity::Ok, |p| p.severity)),
         });
     }
-    if let Some(MavMessage::GPS_RAW_INT(g)) = last(24) {
+    if let Some(MavMessage::GPS_RAW_INT(g)) = last(id::GPS_RAW_INT) {
         let (name, sev) = fix_name(g.fix_type);
         out.gps = Some((name, g.satellites_visible, sev));
     }
-    if let (Some(MavMessage::HOME_POSITION(h)), Some(p)) = (last(242), v.position) {
+    if let (Some(MavMessage::HOME_POSITION(h)), Some(p)) = (last(id::HOME_POSITION), v.position) {
         let (dn, de) = (p.pos_ned_m[0] - h.x, p.pos_ned_m[1] - h.y);
         let bearing = de.atan2(dn).to_degrees().rem_euclid(360.0);
         // ArduPilot's home has no local position (NaN) until its EKF sets an origin.
@@ -181,7 +182,7 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
     }
     // Either says so: EXTENDED_SYS_STATE and the armed flag (HEARTBEAT) come at 1 Hz, slower
     // than the position, and a guard must not wait for them while the vehicle climbs.
-    let home_down = match last(242) {
+    let home_down = match last(id::HOME_POSITION) {
         Some(MavMessage::HOME_POSITION(h)) => h.z,
         _ => 0.0,
     };
@@ -189,11 +190,11 @@ pub fn vitals(state: &VehicleState, v: &VehicleView) -> Vitals {
         .position
         .is_some_and(|p| p.pos_ned_m[2] - home_down < -0.5);
     out.airborne = climbed
-        || matches!(last(245), Some(MavMessage::EXTENDED_SYS_STATE(e)) if !matches!(
+        || matches!(last(id::EXTENDED_SYS_STATE), Some(MavMessage::EXTENDED_SYS_STATE(e)) if !matches!(
             e.landed_state,
             MavLandedState::MAV_LANDED_STATE_ON_GROUND | MavLandedState::MAV_LANDED_STATE_UNDEFINED
         ));
-    if let Some(MavMessage::RC_CHANNELS(r)) = last(65) {
+    if let Some(MavMessage::RC_CHANNELS(r)) = last(id::RC_CHANNELS) {
         out.rc = Some(r.chancount >= 3 && r.chan3_raw != 0 && r.chan3_raw != u16::MAX);
     }
     if matches!(

@@ -4,6 +4,8 @@
 
 use std::time::Instant;
 
+use vtol_link::protocol::id::PARAM_VALUE;
+
 use super::{App, ParamStatus, View};
 use crate::fields;
 use crate::tracker::{VehicleState, VehicleView};
@@ -76,7 +78,10 @@ impl App {
         let Some(v) = self.vehicle(state) else {
             return;
         };
-        let Some(s) = state.messages.get(&(v.system_id, v.component_id, 22)) else {
+        let Some(s) = state
+            .messages
+            .get(&(v.system_id, v.component_id, PARAM_VALUE))
+        else {
             return;
         };
         if self.params.seen_values == Some(s.count) {

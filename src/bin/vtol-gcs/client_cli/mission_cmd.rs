@@ -234,17 +234,28 @@ async fn upload(c: &ClientHandle, items: &[Item], kind: Kind, path: &Path) -> Re
 
 /// The meaning of a command's first four parameters, where it is well known.
 fn param_names(command: u16) -> [&'static str; 4] {
-    match command {
-        16 => ["hold s", "accept m", "pass m", "yaw deg"],
-        19 => ["time s", "", "radius m", "xtrack"],
-        17 => ["", "", "radius m", "yaw deg"],
-        21 | 85 => ["abort alt m", "land mode", "", "yaw deg"],
-        22 | 84 => ["pitch deg", "transition", "", "yaw deg"],
-        177 => ["to item", "repeat", "", ""],
-        178 => ["speed type", "speed m/s", "throttle %", ""],
-        3000 => ["state", "", "", ""],
-        5001..=5002 => ["vertices", "", "", ""],
-        5003..=5004 => ["radius m", "", "", ""],
+    use num_traits::FromPrimitive;
+    use vtol_link::dialect::MavCmd as C;
+    match C::from_u16(command) {
+        Some(C::MAV_CMD_NAV_WAYPOINT) => ["hold s", "accept m", "pass m", "yaw deg"],
+        Some(C::MAV_CMD_NAV_LOITER_TIME) => ["time s", "", "radius m", "xtrack"],
+        Some(C::MAV_CMD_NAV_LOITER_UNLIM) => ["", "", "radius m", "yaw deg"],
+        Some(C::MAV_CMD_NAV_LAND | C::MAV_CMD_NAV_VTOL_LAND) => {
+            ["abort alt m", "land mode", "", "yaw deg"]
+        }
+        Some(C::MAV_CMD_NAV_TAKEOFF | C::MAV_CMD_NAV_VTOL_TAKEOFF) => {
+            ["pitch deg", "transition", "", "yaw deg"]
+        }
+        Some(C::MAV_CMD_DO_JUMP) => ["to item", "repeat", "", ""],
+        Some(C::MAV_CMD_DO_CHANGE_SPEED) => ["speed type", "speed m/s", "throttle %", ""],
+        Some(C::MAV_CMD_DO_VTOL_TRANSITION) => ["state", "", "", ""],
+        Some(
+            C::MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+            | C::MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+        ) => ["vertices", "", "", ""],
+        Some(C::MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION | C::MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION) => {
+            ["radius m", "", "", ""]
+        }
         _ => ["p1", "p2", "p3", "p4"],
     }
 }
