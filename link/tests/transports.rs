@@ -78,8 +78,11 @@ fn queue() -> (Events, mpsc::Receiver<LinkEvent>) {
     (Events::Queue(tx), rx)
 }
 
-/// Both kinds of owner, each with the queue the test reads.
-fn owners() -> [(&'static str, fn() -> (Events, mpsc::Receiver<LinkEvent>)); 2] {
+/// An owner of a link's events and the queue the test reads them from.
+type Owner = fn() -> (Events, mpsc::Receiver<LinkEvent>);
+
+/// Both kinds of owner, by name.
+fn owners() -> [(&'static str, Owner); 2] {
     [("queue", queue), ("inline", inline)]
 }
 
@@ -90,7 +93,7 @@ async fn udpin_serves_peers_in_order_and_expires_them() {
     }
 }
 
-async fn udpin_case(owner: &str, events: fn() -> (Events, mpsc::Receiver<LinkEvent>)) {
+async fn udpin_case(owner: &str, events: Owner) {
     let (events, mut ev) = events();
     let cancel = CancellationToken::new();
     let opts = LinkOptions {
@@ -187,7 +190,7 @@ async fn udpout_sends_runs_hears_replies_and_keeps_only_what_it_accepts() {
     }
 }
 
-async fn udpout_case(owner: &str, events: fn() -> (Events, mpsc::Receiver<LinkEvent>)) {
+async fn udpout_case(owner: &str, events: Owner) {
     let remote = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let port = remote.local_addr().unwrap().port();
     let (events, mut ev) = events();
