@@ -34,7 +34,7 @@ use vtol_gcs::config::Config;
 use vtol_gcs::links::Side;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::{App, Outcome, View};
-use vtol_gcs::tui::exec::ClientControl;
+use vtol_gcs::tui::client_control::ClientControl;
 use vtol_gcs::tui::view::{self, RenderState, RouterCounters, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
 use vtol_link::{Frame, LinkId, LinkUrl};

@@ -14,15 +14,16 @@ use tokio_util::sync::CancellationToken;
 use vtol_link::{Events, LinkOptions, LinkUrl, ZenohRole, spawn_endpoint, spawn_stream_link};
 
 use crate::client::ClientHandle;
+use crate::client::own_traffic;
 use crate::config::{Config, VehicleSource};
 use crate::links::{RouterHandle, Side};
 use crate::router::{InlineRouter, Router};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
+use crate::tracker;
 use crate::tracker::{SharedHistory, VehicleState};
 use crate::trust::policy::{EndpointPolicy, Trust};
 use crate::trust::signing::{DaemonSigning, SAVE_EVERY, default_state_file, system_clock};
-use crate::{gcs, tracker};
 
 /// Frames buffered for the tracker, which takes them on its tick or every
 /// [`tracker::TAP_RUN`] frames; a drop only loses a display update.
@@ -103,7 +104,7 @@ pub struct Running {
     /// The daemon's parameter downloads (`fetch_params`: at first contact and after reboots).
     pub param_fetches: std::sync::Arc<crate::reboot::ParamFetches>,
     /// The vehicle link as the stream fit measured it ([`crate::fit`]).
-    pub link_fit: watch::Receiver<Option<crate::fit::LinkFit>>,
+    pub link_fit: watch::Receiver<Option<crate::stream_fit::LinkFit>>,
 }
 
 /// Peer name of the daemon's own-traffic link (its client: heartbeat, commands, parameters):
@@ -182,7 +183,7 @@ pub async fn start(
             client.clone(),
             cancel.clone(),
         ));
-        tasks.spawn(crate::fit::run(
+        tasks.spawn(crate::stream_fit::run(
             state_rx.clone(),
             client.clone(),
             fit_tx,
@@ -362,7 +363,7 @@ fn attach_own_client(
     tasks: &mut JoinSet<()>,
 ) -> ClientHandle {
     let (gcs_end, router_end) = tokio::io::duplex(DUPLEX_BYTES);
-    let client = gcs::attach(
+    let client = own_traffic::attach(
         gcs_end,
         config.system_id,
         config.component_id,

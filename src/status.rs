@@ -10,7 +10,7 @@ use crate::links::{LinkInfo, Side};
 use crate::tracker::VehicleState;
 use crate::trust::policy::EndpointPolicy;
 use crate::trust::signing::SigningSnapshot;
-use crate::tui::vitals::{Severity, Vitals, vitals};
+use crate::vitals::{Severity, Vitals, vitals};
 
 /// Formats the status line for the first vehicle (or says none is heard yet).
 // Long: the status line's segments appended in the order the line shows them (vehicle, reboots,
@@ -158,7 +158,7 @@ pub fn vitals_part(v: &Vitals, state: vtol_link::dialect::MavState) -> String {
 /// once it was full, whether the streams run at fitted rates, and the radio's free transmit
 /// buffer when the link reports RADIO_STATUS. Empty when there is nothing to say.
 #[must_use]
-pub fn fit_part(fit: Option<&crate::fit::LinkFit>) -> String {
+pub fn fit_part(fit: Option<&crate::stream_fit::LinkFit>) -> String {
     let mut s = String::new();
     let Some(f) = fit else { return s };
     if let Some(c) = f.capacity {

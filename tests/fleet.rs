@@ -24,7 +24,7 @@ use vtol_gcs::links::{Side, SysidConflict};
 use vtol_gcs::tlog::TlogReader;
 use vtol_gcs::tracker::{History, VehicleState};
 use vtol_gcs::tui::app::App;
-use vtol_gcs::tui::exec::ClientControl;
+use vtol_gcs::tui::client_control::ClientControl;
 use vtol_gcs::tui::view::{self, RouterCounters, Snapshot};
 use vtol_link::dialect::{self, MavAutopilot, MavMessage, MavState};
 use vtol_link::{ComponentId, Frame, LinkId, LinkOptions, LinkUrl, SystemId, spawn_endpoint};

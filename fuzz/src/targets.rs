@@ -331,8 +331,8 @@ pub fn twin_endpoint(data: &[u8]) {
     }
 }
 
-/// The tracker reads vehicle frames of the types it tracks; the message inspector walks the
-/// `Debug` text of each decoded one (and the input itself as such a text).
+/// The tracker reads vehicle frames of the types it tracks; the message inspector lists the
+/// fields of each decoded one.
 pub fn tracker(data: &[u8]) {
     let mut state = VehicleState::default();
     let t0 = Instant::now();
@@ -353,15 +353,14 @@ pub fn tracker(data: &[u8]) {
     {
         let at = t0 + Duration::from_millis(i as u64 * 10);
         if let Some(msg) = state.apply(LinkId(1), Side::Vehicle, f, at) {
-            for field in vtol_gcs::tui::fields::fields(&msg) {
+            for field in vtol_gcs::fields::fields(&msg) {
                 assert!(!field.path.is_empty());
             }
         }
         if let Ok(msg) = f.decode() {
-            let _ = vtol_gcs::tui::fields::fields(&msg);
+            let _ = vtol_gcs::fields::fields(&msg);
         }
     }
-    let _ = vtol_gcs::tui::fields::fields_of_debug(&text(data));
 }
 
 /// Frames into a keyed receiver's verification: refused or accepted, never a panic; a frame

@@ -64,6 +64,8 @@ pub mod id {
         <apm::POSITION_TARGET_GLOBAL_INT_DATA as MessageData>::ID;
     /// RADIO_STATUS.
     pub const RADIO_STATUS: u32 = <apm::RADIO_STATUS_DATA as MessageData>::ID;
+    /// AHRS2: ArduPilot's secondary attitude estimate, always in the wing frame.
+    pub const AHRS2: u32 = <apm::AHRS2_DATA as MessageData>::ID;
     /// BATTERY_STATUS.
     pub const BATTERY_STATUS: u32 = <apm::BATTERY_STATUS_DATA as MessageData>::ID;
     /// AUTOPILOT_VERSION.

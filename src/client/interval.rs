@@ -17,9 +17,9 @@ use super::{ClientError, ClientHandle};
 use crate::tracker::VehicleState;
 
 /// HOME_POSITION's message id.
-pub const HOME_POSITION: u32 = 242;
+pub const HOME_POSITION: u32 = vtol_link::protocol::id::HOME_POSITION;
 /// EXTENDED_SYS_STATE's message id.
-pub const EXTENDED_SYS_STATE: u32 = 245;
+pub const EXTENDED_SYS_STATE: u32 = vtol_link::protocol::id::EXTENDED_SYS_STATE;
 /// How long after first contact EXTENDED_SYS_STATE may take to come unasked (ArduPilot
 /// streams it at 1 Hz or more when its stream rates include it).
 pub const STREAM_WAIT: Duration = Duration::from_secs(3);

@@ -15,6 +15,7 @@ pub mod command;
 pub mod interval;
 pub mod machine;
 pub mod mission;
+pub mod own_traffic;
 pub mod pace;
 pub mod param;
 pub mod probe;

@@ -8,7 +8,7 @@ use vtol_link::{ComponentId, Frame, LinkEvent, LinkOptions, LinkSender, SystemId
 
 use super::*;
 use crate::client::{ClientConfig, ClientHandle};
-use crate::fit::tests::radio_status;
+use crate::stream_fit::tests::radio_status;
 
 const MS: Duration = Duration::from_millis(1);
 

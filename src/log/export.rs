@@ -14,8 +14,8 @@ use vtol_link::text_file::Output;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::fields::{self, Fields};
 use super::{LogError, finish_read, open_tlog};
+use crate::fields::{self, Fields};
 
 /// What an export wrote and what it passed over.
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]

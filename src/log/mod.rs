@@ -7,7 +7,6 @@
 //! feeds through the `progress` callbacks (bytes consumed so far).
 
 pub mod export;
-pub mod fields;
 pub mod plot;
 pub mod replay;
 pub mod stats;

@@ -6,7 +6,7 @@ use vtol_link::dialect::{MavCmd, MavFrame};
 use super::{Kind, Located, command_name};
 
 /// MAV_CMD_NAV_VTOL_LAND.
-pub const NAV_VTOL_LAND: u16 = 85;
+pub const NAV_VTOL_LAND: u16 = vtol_link::dialect::MavCmd::MAV_CMD_NAV_VTOL_LAND as u16;
 /// ArduPlane's shortest last leg into a NAV_VTOL_LAND, m (its refusal:
 /// `VTOL land too short, min 30m`).
 pub const VTOL_LAND_MIN_LEG_M: f64 = 30.0;

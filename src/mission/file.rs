@@ -13,24 +13,22 @@
 //! (`.plan`, else QGC WPL).
 
 use serde_json::{Value, json};
+use vtol_link::dialect::{MavCmd, MavFrame};
 
 use super::{Item, Kind, Located, Origin};
 
 /// The first line of a QGC WPL file.
 pub const WPL_HEADER: &str = "QGC WPL 110";
 
-/// MAV_CMD_NAV_WAYPOINT.
-const NAV_WAYPOINT: u16 = 16;
-/// MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, _EXCLUSION, CIRCLE_INCLUSION, _EXCLUSION.
-const FENCE_POLY_IN: u16 = 5001;
-const FENCE_POLY_OUT: u16 = 5002;
-const FENCE_CIRCLE_IN: u16 = 5003;
-const FENCE_CIRCLE_OUT: u16 = 5004;
-/// MAV_CMD_NAV_RALLY_POINT.
-const RALLY_POINT: u16 = 5100;
-/// MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT.
-const GLOBAL: u8 = 0;
-const RELATIVE: u8 = 3;
+const NAV_WAYPOINT: u16 = MavCmd::MAV_CMD_NAV_WAYPOINT as u16;
+const FENCE_POLY_IN: u16 = MavCmd::MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION as u16;
+const FENCE_POLY_OUT: u16 = MavCmd::MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION as u16;
+const FENCE_CIRCLE_IN: u16 = MavCmd::MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION as u16;
+const FENCE_CIRCLE_OUT: u16 = MavCmd::MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION as u16;
+const RALLY_POINT: u16 = MavCmd::MAV_CMD_NAV_RALLY_POINT as u16;
+const GLOBAL: u8 = MavFrame::MAV_FRAME_GLOBAL as u8;
+const RELATIVE: u8 = MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT as u8;
+const TERRAIN: u8 = MavFrame::MAV_FRAME_GLOBAL_TERRAIN_ALT as u8;
 
 /// A file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -416,7 +414,7 @@ fn write_plan(items: &[Item], kind: Kind) -> String {
                 let mode = match i.frame {
                     RELATIVE => 1,
                     GLOBAL => 2,
-                    10 => 3,
+                    TERRAIN => 3,
                     _ => 0,
                 };
                 mission_items.push(json!({

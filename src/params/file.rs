@@ -181,20 +181,7 @@ fn split_line(f: Format, content: &str) -> Result<(&str, &str, MavParamType), St
 /// `MAV_PARAM_TYPE` from its number.
 #[must_use]
 pub fn param_type_from_number(n: u32) -> Option<MavParamType> {
-    use MavParamType as T;
-    Some(match n {
-        1 => T::MAV_PARAM_TYPE_UINT8,
-        2 => T::MAV_PARAM_TYPE_INT8,
-        3 => T::MAV_PARAM_TYPE_UINT16,
-        4 => T::MAV_PARAM_TYPE_INT16,
-        5 => T::MAV_PARAM_TYPE_UINT32,
-        6 => T::MAV_PARAM_TYPE_INT32,
-        7 => T::MAV_PARAM_TYPE_UINT64,
-        8 => T::MAV_PARAM_TYPE_INT64,
-        9 => T::MAV_PARAM_TYPE_REAL32,
-        10 => T::MAV_PARAM_TYPE_REAL64,
-        _ => return None,
-    })
+    num_traits::FromPrimitive::from_u32(n)
 }
 
 /// The shortest decimal that reads back to the same float32 (`-0` keeps its sign).

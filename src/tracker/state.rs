@@ -8,6 +8,7 @@ use foldhash::{HashMap, HashSet};
 use vtol_link::dialect::{
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, SERVO_OUTPUT_RAW_DATA,
 };
+use vtol_link::protocol::id::{ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT};
 use vtol_link::{ComponentId, Frame, LinkId, SystemId};
 
 use super::seq::Seen;
@@ -15,7 +16,7 @@ use super::window::{Stamp, Window};
 use crate::links::Side;
 
 /// ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT: the messages the view holds.
-const TRACKED: [u32; 4] = [30, 32, 36, 253];
+const TRACKED: [u32; 4] = [ATTITUDE, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, STATUSTEXT];
 
 /// How many status texts a vehicle keeps.
 pub const STATUS_TEXTS_KEPT: usize = 32;

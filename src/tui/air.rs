@@ -2,7 +2,7 @@
 //! kept for it: airspeed (VFR_HUD), angle of attack and sideslip (AOA_SSA, ardupilotmega 11020),
 //! the VTOL state (EXTENDED_SYS_STATE) with the progress of a transition, and the live position
 //! target (POSITION_TARGET_GLOBAL_INT as ArduPilot sends it, or POSITION_TARGET_LOCAL_NED) in
-//! the local NED frame. Pure, like [`super::vitals`]: the header and the Flight view read it.
+//! the local NED frame. Pure, like [`crate::vitals`]: the header and the Flight view read it.
 
 use std::time::{Duration, Instant};
 

@@ -37,14 +37,10 @@ use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use vtol_link::dialect::{MavAutopilot, MavMessage, MavType, MavVtolState};
-use vtol_link::protocol::id::{ATTITUDE, EXTENDED_SYS_STATE};
+use vtol_link::protocol::id::{AHRS2, ATTITUDE, ATTITUDE_QUATERNION, EXTENDED_SYS_STATE};
 
 use crate::tracker::state::{VehicleState, VehicleView};
 
-/// ATTITUDE_QUATERNION's message id.
-const ATTITUDE_QUATERNION: u32 = 31;
-/// AHRS2's message id: ArduPilot's secondary estimate, always in the wing frame.
-const AHRS2: u32 = 178;
 /// A quaternion this much older than the last ATTITUDE is no longer streamed.
 const QUATERNION_FRESH: Duration = Duration::from_secs(1);
 

@@ -7,6 +7,7 @@
 use firmware_sim::nav::globe::{GeoPoint, Origin};
 use nalgebra::Vector3;
 use vtol_link::dialect::MavMessage;
+use vtol_link::protocol::id;
 
 use crate::tracker::state::{VehicleState, VehicleView};
 
@@ -293,7 +294,7 @@ pub fn scene_parts(
             .get(&(v.system_id, v.component_id, id))
             .and_then(|m| m.last.decode_lenient().ok().map(|l| l.msg))
     };
-    let vehicle = match last(33) {
+    let vehicle = match last(id::GLOBAL_POSITION_INT) {
         Some(MavMessage::GLOBAL_POSITION_INT(g)) if (g.lat, g.lon) != (0, 0) => {
             let heading_deg = if g.hdg == u16::MAX {
                 v.attitude.map(|a| a.rpy_rad[2].to_degrees())
@@ -307,17 +308,17 @@ pub fn scene_parts(
         }
         _ => None,
     };
-    let home = match last(242) {
+    let home = match last(id::HOME_POSITION) {
         Some(MavMessage::HOME_POSITION(h)) => Some((h.latitude, h.longitude)),
         _ => None,
     };
-    let target = match last(87) {
+    let target = match last(id::POSITION_TARGET_GLOBAL_INT) {
         Some(MavMessage::POSITION_TARGET_GLOBAL_INT(t)) if (t.lat_int, t.lon_int) != (0, 0) => {
             Some((t.lat_int, t.lon_int))
         }
         _ => None,
     };
-    let current = match last(42) {
+    let current = match last(id::MISSION_CURRENT) {
         Some(MavMessage::MISSION_CURRENT(m)) => Some(m.seq),
         _ => None,
     };

@@ -12,12 +12,10 @@
 pub mod air;
 pub mod app;
 pub mod attitude;
-pub mod exec;
-pub mod fields;
+pub mod client_control;
 pub mod map;
 pub mod progress;
 pub mod view;
-pub mod vitals;
 
 use std::future::Future;
 use std::sync::Arc;

@@ -3,7 +3,7 @@ each way (`tc` tbf) with a queue of 2000 bytes. The twin's default streams (abou
 second) do not fit: the queue overflows and the daemon's status line shows the loss. A ground
 station that asks for stream rates that fit (SET_MESSAGE_INTERVAL, through the daemon) then
 loses nothing; and so does the daemon left to itself, which measures what the link carries once
-it is full, asks the twin for rates that fit (src/fit.rs) and shows the capacity it measured;
+it is full, asks the twin for rates that fit (src/stream_fit.rs) and shows the capacity it measured;
 and once the limit is lifted, steps the rates back up to the twin's defaults.
 """
 
@@ -84,12 +84,12 @@ def test_the_daemon_fits_the_stream_rates_to_the_radio_by_itself_and_shows_its_c
     g = radio.client()
     g.wait_vehicle_heartbeat(timeout=20)
     mark = radio.daemon.mark()
-    # The fit judges the loss of 2 s and then 3 s after it (src/fit.rs): a few seconds.
+    # The fit judges the loss of 2 s and then 3 s after it (src/stream_fit.rs): a few seconds.
     radio.status(r"streams fitted", timeout=60, since=mark)
     assert radio.bed.rate_limit_drops() > 0, "the radio's queue never overflowed: the test says nothing"
     # Then a status line whose 10 s loss window holds only fitted traffic. The fit may take a
     # second round (the first estimate too high); once the link has been clear for a while it
-    # probes upward (src/fit.rs), which may overflow the queue again, so the test waits for the
+    # probes upward (src/stream_fit.rs), which may overflow the queue again, so the test waits for the
     # settled figure rather than watching a fixed window after the first fit. An upper bound: on
     # a loaded 2-core machine a second round and the 10 s window emptying took more than 40 s.
     settled = radio.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.\d%.*streams fitted", timeout=90, since=mark)
@@ -148,7 +148,7 @@ def interval_us(g, msgid: int, timeout: float = 30.0) -> int:
 def test_a_radio_whose_rate_limit_is_lifted_gets_the_default_rates_back(tmp_path):
     """Fitted to the radio, then the radio's limit lifted: once the link has been clear for the
     hold (15 s), the daemon steps the streams back up a quarter of the way at a time and ends at
-    the vehicle's defaults (src/fit.rs)."""
+    the vehicle's defaults (src/stream_fit.rs)."""
     s = Scene(tmp_path)
     try:
         g = s.client()

@@ -16,7 +16,7 @@ use vtol_gcs::daemon::{self, Running};
 use vtol_gcs::tracker::VehicleState;
 use vtol_gcs::tui::Control;
 use vtol_gcs::tui::app::{App, Outcome, Request};
-use vtol_gcs::tui::exec::ClientControl;
+use vtol_gcs::tui::client_control::ClientControl;
 use vtol_link::dialect::MavState;
 
 /// Types `s` into `app`, one key a character, and returns the requests the keys make.

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use vtol_link::protocol::CONTROLLER_OUTPUT_NAMES;
+use vtol_link::protocol::{CONTROLLER_OUTPUT_NAMES, id};
 
 use super::{Altitude, AltitudeRef, FlightData, Points};
 use crate::log::{LogError, finish_read, open_tlog};
@@ -227,12 +227,14 @@ impl Scan {
 
 /// EXTENDED_SYS_STATE's `vtol_state` as a short label for the figures.
 fn vtol_state_name(v: u32) -> Option<&'static str> {
-    match v {
-        1 => Some("to FW"),
-        2 => Some("to MC"),
-        3 => Some("MC"),
-        4 => Some("FW"),
-        _ => None,
+    use num_traits::FromPrimitive;
+    use vtol_link::dialect::MavVtolState as S;
+    match S::from_u32(v)? {
+        S::MAV_VTOL_STATE_TRANSITION_TO_FW => Some("to FW"),
+        S::MAV_VTOL_STATE_TRANSITION_TO_MC => Some("to MC"),
+        S::MAV_VTOL_STATE_MC => Some("MC"),
+        S::MAV_VTOL_STATE_FW => Some("FW"),
+        S::MAV_VTOL_STATE_UNDEFINED => None,
     }
 }
 
@@ -243,9 +245,16 @@ fn load_tlog(path: &Path) -> Result<FlightData, LogError> {
     let mut start = None;
     // The figures show one vehicle: the first system that sends one of these messages.
     let mut vehicle: Option<u8> = None;
-    // ATTITUDE, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, SERVO_OUTPUT_RAW, VFR_HUD,
-    // POSITION_TARGET_LOCAL_NED, EXTENDED_SYS_STATE, NAMED_VALUE_FLOAT
-    const WANTED: [u32; 8] = [30, 33, 32, 36, 74, 85, 245, 251];
+    const WANTED: [u32; 8] = [
+        id::ATTITUDE,
+        id::GLOBAL_POSITION_INT,
+        id::LOCAL_POSITION_NED,
+        id::SERVO_OUTPUT_RAW,
+        id::VFR_HUD,
+        id::POSITION_TARGET_LOCAL_NED,
+        id::EXTENDED_SYS_STATE,
+        id::NAMED_VALUE_FLOAT,
+    ];
     for (stamp, frame) in reader.by_ref() {
         let start = *start.get_or_insert(stamp);
         if !WANTED.contains(&frame.message_id()) || directions.to_vehicle(stamp, &frame) {

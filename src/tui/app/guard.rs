@@ -7,7 +7,7 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent};
 
 use super::{App, Confirm, Level, Request};
 use crate::tracker::{VehicleState, VehicleView};
-use crate::tui::vitals::{Vitals, vitals};
+use crate::vitals::{Vitals, vitals};
 
 /// Modes whose throttle comes from the RC receiver: with no receiver they hold no altitude.
 /// The hover ones first, then ArduPlane's fixed-wing ones (the throttle stick is the throttle).

@@ -11,7 +11,7 @@ use super::{App, Confirm, Level, Request};
 use crate::mission::Item;
 use crate::tracker::VehicleState;
 use crate::tui::map::PAN_CELLS;
-use crate::tui::vitals::vitals;
+use crate::vitals::vitals;
 
 /// The file a mission prompt offers first.
 pub const DEFAULT_MISSION_FILE: &str = "mission.waypoints";

@@ -11,7 +11,7 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 use vtol_link::{ComponentId, SystemId};
 
 use crate::tracker::{VehicleState, VehicleView};
-use crate::tui::vitals::with_recovery;
+use crate::vitals::with_recovery;
 
 pub mod fleet;
 mod guard;

@@ -4,9 +4,11 @@
 
 use std::time::Instant;
 
+use vtol_link::protocol::id::PARAM_VALUE;
+
 use super::{App, ParamStatus, View};
+use crate::fields;
 use crate::tracker::{VehicleState, VehicleView};
-use crate::tui::fields;
 use crate::tui::map::{MapScene, scene_parts};
 
 /// Horizontal speed under which a vehicle entering QLOITER holds where it was, m/s.
@@ -55,7 +57,7 @@ impl App {
                 // forward flight, through a back transition) it holds where it stops, which
                 // the UI does not know: no setpoint rather than a wrong one.
                 ("QLOITER", Some(p)) if settled_hover(state, v, &p) => {
-                    let airborne = crate::tui::vitals::vitals(state, v).airborne;
+                    let airborne = crate::vitals::vitals(state, v).airborne;
                     let hover = self.params.value("HOVER_ALT").unwrap_or(1.0);
                     let [n, e, d] = p.pos_ned_m;
                     Some([n, e, if airborne { d } else { -hover }])
@@ -76,7 +78,10 @@ impl App {
         let Some(v) = self.vehicle(state) else {
             return;
         };
-        let Some(s) = state.messages.get(&(v.system_id, v.component_id, 22)) else {
+        let Some(s) = state
+            .messages
+            .get(&(v.system_id, v.component_id, PARAM_VALUE))
+        else {
             return;
         };
         if self.params.seen_values == Some(s.count) {

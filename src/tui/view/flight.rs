@@ -9,6 +9,8 @@ use ratatui::widgets::canvas::{Canvas, Line as CLine};
 use ratatui::widgets::{Block, Paragraph, Wrap};
 
 use super::{STALE_S, Snapshot, age_s, level_style, servo_names, severity_style};
+use vtol_link::protocol::id::{ATTITUDE, LOCAL_POSITION_NED};
+
 use crate::tracker::state::VehicleView;
 use crate::tui::app::App;
 
@@ -161,7 +163,7 @@ fn draw_horizon(
     area: Rect,
 ) {
     let stale_att = vehicle
-        .and_then(|v| age_s(snap, v, 30))
+        .and_then(|v| age_s(snap, v, ATTITUDE))
         .filter(|a| *a > STALE_S);
     let title = match att.and_then(|a| a.frame.label()) {
         Some(frame) => format!(" Horizon ({frame}) "),
@@ -261,8 +263,8 @@ fn numbers(
             d(a.rates_rad_s[i])
         )));
     }
-    let stale_att = age_s(snap, v, 30).filter(|a| *a > STALE_S);
-    let stale_pos = age_s(snap, v, 32).filter(|a| *a > STALE_S);
+    let stale_att = age_s(snap, v, ATTITUDE).filter(|a| *a > STALE_S);
+    let stale_pos = age_s(snap, v, LOCAL_POSITION_NED).filter(|a| *a > STALE_S);
     let stale = match (stale_att, stale_pos) {
         (Some(a), Some(p)) => Some(format!("STALE: attitude {a:.1} s, position {p:.1} s old")),
         (Some(a), None) => Some(format!("attitude stale: last {a:.1} s ago")),

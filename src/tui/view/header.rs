@@ -13,7 +13,7 @@ use crate::links::Side;
 use crate::tracker::state::VehicleView;
 use crate::tui::air::air;
 use crate::tui::app::{App, View};
-use crate::tui::vitals::{Severity, Vitals, vitals};
+use crate::vitals::{Severity, Vitals, vitals};
 
 pub(super) fn draw_header(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, area: Rect) {
     let now = snap.now;

@@ -13,6 +13,7 @@ use ratatui::text::{Line as TextLine, Span};
 use ratatui::widgets::canvas::{Canvas, Circle, Context, Line};
 use ratatui::widgets::{Block, Paragraph};
 use vtol_link::dialect::MavMessage;
+use vtol_link::protocol::id::GLOBAL_POSITION_INT;
 use vtol_link::{ComponentId, SystemId};
 
 use crate::tracker::history::History;
@@ -298,7 +299,10 @@ impl TrackCache {
                 ..Self::default()
             };
         }
-        if let Some(ring) = history.frames.get(&(system, component, 33)) {
+        if let Some(ring) = history
+            .frames
+            .get(&(system, component, GLOBAL_POSITION_INT))
+        {
             for tf in ring.since(self.next_index) {
                 self.next_index = tf.index + 1;
                 if let Ok(MavMessage::GLOBAL_POSITION_INT(g)) = tf.frame.decode() {

@@ -8,8 +8,8 @@ use ratatui::widgets::{Block, Paragraph, Row, Table};
 
 use super::charts::{COLOURS, Series, chart};
 use super::{RenderState, Snapshot};
+use crate::fields;
 use crate::tui::app::{App, View};
-use crate::tui::fields;
 
 /// Draws the messages as the app last listed them, the selected one's fields and the charts.
 pub(super) fn draw_messages(
@@ -123,7 +123,7 @@ pub(super) fn draw_messages(
                     }
                 }
                 for r in &replaced {
-                    let name = crate::log::fields::field_key(s.last.message_id(), r.field)
+                    let name = fields::field_key(s.last.message_id(), r.field)
                         .unwrap_or_else(|| format!("byte {}", r.field.offset));
                     lines.push(Line::styled(
                         format!(

@@ -12,7 +12,7 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::widgets::{Paragraph, Wrap};
 
 use super::app::{App, Level, SeriesKey, View};
-use super::fields;
+use crate::fields;
 use crate::links::Side;
 use crate::tracker::history::{History, TimedFrame};
 use crate::tracker::state::{VehicleState, VehicleView};
