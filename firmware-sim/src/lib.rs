@@ -16,7 +16,6 @@
 //!
 //! `tests/layers.rs` holds these rules.
 
-pub mod atomic_file;
 pub mod endpoint;
 pub mod model;
 pub mod nav;

@@ -411,7 +411,7 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
 }
 
 /// A mission file that cannot be used: unreadable, or a line that is not a mission item.
-pub type MissionFileError = crate::atomic_file::TextFileError;
+pub type MissionFileError = vtol_link::text_file::TextFileError;
 
 /// The header of the `QGC WPL 110` format.
 pub const WPL_HEADER: &str = "QGC WPL 110";
@@ -480,7 +480,7 @@ impl Mission {
     /// numbered 0, 1, 2… in order.
     ///
     /// # Errors
-    /// [`TextFileError::Line`](crate::atomic_file::TextFileError::Line) naming the first bad line.
+    /// [`TextFileError::Line`](vtol_link::text_file::TextFileError::Line) naming the first bad line.
     pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
         let err = |line: usize, reason: String| MissionFileError::line(path, line, reason);
         let mut lines = text.lines().enumerate();
@@ -565,16 +565,16 @@ impl Mission {
     /// # Errors
     /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, MissionFileError> {
-        let text = crate::atomic_file::read_text(path)?;
+        let text = vtol_link::text_file::read_text(path)?;
         Self::from_wpl_str(&text, path)
     }
 
     /// Writes the mission atomically (a temporary file in the same directory, flushed, renamed).
     ///
     /// # Errors
-    /// [`TextFileError::Io`](crate::atomic_file::TextFileError::Io).
+    /// [`TextFileError::Io`](vtol_link::text_file::TextFileError::Io).
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
-        crate::atomic_file::write_text(path, &self.to_wpl_string())
+        vtol_link::text_file::write_text(path, &self.to_wpl_string())
     }
 }
 

@@ -179,7 +179,7 @@ impl ServeConfig {
             if path.exists() && !path.is_dir() {
                 self.endpoint.params = Params::load(path)?;
             }
-            crate::atomic_file::check_writable(path).map_err(|source| {
+            vtol_link::text_file::check_writable(path).map_err(|source| {
                 ServeError::ParamFileNotWritable {
                     path: path.clone(),
                     source,
