@@ -73,6 +73,25 @@ fn paths_named<'a>(code: &'a str, prefix: &str) -> Vec<&'a str> {
     found
 }
 
+/// Inside the model, plant and sensors take their inputs from `signals` and never import the
+/// controller or the vehicle that drive them; the controller never imports the vehicle.
+#[test]
+fn the_model_has_no_circle() {
+    let mut v = Vec::new();
+    for room in ["model/plant", "model/sensors.rs", "model/signals.rs"] {
+        v.extend(violations(
+            room,
+            &[
+                "crate::model::control",
+                "crate::model::vehicle",
+                "crate::model::estimator",
+            ],
+        ));
+    }
+    v.extend(violations("model/control", &["crate::model::vehicle"]));
+    assert!(v.is_empty(), "{}", v.join("\n"));
+}
+
 #[test]
 fn the_navigator_sits_on_the_core_only() {
     let (rooms, link_modules) = NAV_MAY_IMPORT;

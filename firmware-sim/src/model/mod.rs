@@ -11,4 +11,5 @@ pub mod integrator;
 pub mod mode;
 pub mod plant;
 pub mod sensors;
+pub mod signals;
 pub mod vehicle;

@@ -40,6 +40,7 @@ use nalgebra::{Vector2, Vector3};
 use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::frames::{Euler, wrap_pi};
 use crate::model::mode::FlightMode;
+use crate::model::signals::{ActuatorCommand, CRASH_TILT_RAD, PilotInput, PwmOutputs};
 use position::{HoverHold, HoverHoldGains, HoverLaw};
 
 /// Full-stick tilt setpoint (φ_d, θ_d) in the attitude-hold modes, rad. Equal to c + d of the
@@ -261,7 +262,7 @@ impl Gains {
         if 2.0 * h.vel_p > h.att_bw_rad_s {
             return Err(GainError::CrossCheck("Q_P_VELXY_P <= HOV_ATT_BW / 2"));
         }
-        if h.angle_max_rad >= crate::model::vehicle::CRASH_TILT_RAD {
+        if h.angle_max_rad >= CRASH_TILT_RAD {
             return Err(GainError::CrossCheck("Q_ANGLE_MAX < crash tilt 60 deg"));
         }
         Ok(())
@@ -306,19 +307,6 @@ pub enum GainError {
     },
 }
 
-/// Pilot commands from the RC receiver (or MAVLink manual input), already normalised.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PilotInput {
-    /// Collective throttle, 0..1 (used in QSTABILIZE).
-    pub throttle: f64,
-    /// Roll stick, −1..1 → φ setpoint.
-    pub roll: f64,
-    /// Pitch stick, −1..1 → θ setpoint.
-    pub pitch: f64,
-    /// Yaw stick, −1..1 → ψ rate setpoint.
-    pub yaw: f64,
-}
-
 /// What the controller sees each control tick (paper frame, z up).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ControlInput {
@@ -343,23 +331,6 @@ pub struct ControlInput {
     /// Pilot sticks.
     pub pilot: PilotInput,
 }
-
-/// Physical actuator commands (before PWM).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct ActuatorCommand {
-    /// Rotor 1 (y = +l_r, spins about +z_B) and rotor 2 speeds, rad/s.
-    pub rotor_speed_rad_s: [f64; 2],
-    /// Elevator deflection δ_e, rad.
-    pub elevator_rad: f64,
-    /// Left aileron (behind rotor 2) deflection, rad.
-    pub aileron_left_rad: f64,
-    /// Right aileron (behind rotor 1) deflection, rad.
-    pub aileron_right_rad: f64,
-}
-
-/// PWM outputs in µs: SERVO1/2 = ESC of rotor 1/2, SERVO3/4 = left/right aileron,
-/// SERVO5 = elevator.
-pub type PwmOutputs = [u16; 5];
 
 /// Everything one control tick produces.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
