@@ -137,6 +137,17 @@ fn the_import_reader_sees_each_path() {
     assert_eq!(paths_named("vtol_link::{a, b}", "vtol_link::"), [""]);
 }
 
+/// `serve` starts the vehicle loop; the loop takes what they share (the radio) from `radio`,
+/// never from `serve`.
+#[test]
+fn the_vehicle_loop_never_imports_the_server() {
+    let v = violations(
+        "shell/vehicle_loop.rs",
+        &["crate::shell::serve", "super::serve"],
+    );
+    assert!(v.is_empty(), "{}", v.join("\n"));
+}
+
 #[test]
 fn the_endpoint_never_reaches_the_shell() {
     let v = violations("endpoint", &["crate::shell", "tokio::", "Instant::now"]);
