@@ -13,8 +13,8 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{Criterion, criterion_group};
-use firmware_sim::model::control::ActuatorCommand;
 use firmware_sim::model::plant::{self, PlantInput, PlantState};
+use firmware_sim::model::signals::ActuatorCommand;
 use firmware_sim::model::vehicle::InitialState;
 use firmware_sim::{Airframe, Euler, FlightMode, ModelMode, Vehicle, VehicleConfig};
 use nalgebra::Vector3;

@@ -5,18 +5,18 @@
 //!
 //! The crate is built in layers; each reaches only the layers above it in this list:
 //!
-//! - [`model`]: the pure core (airframe, plant, sensors, estimator, controller, the vehicle that
-//!   steps them). No I/O, no clock, no tokio, no MAVLink transport.
+//! - [`model`]: the pure core (airframe, plant, sensors, estimator, controller, the signals
+//!   between them, the vehicle that steps them). No I/O, no clock, no tokio, no MAVLink
+//!   transport.
 //! - [`nav`]: the onboard navigator and configuration (geodesy, missions, navigation, the
-//!   parameter table).
+//!   parameter table); it imports only the model and vtol-link's text files.
 //! - [`endpoint`]: the MAVLink vehicle: what the twin says and answers, as a pure state machine fed
 //!   frames and the simulation time.
 //! - [`shell`]: the processes around it: sockets, clocks, fleets, the test harness, signing
-//!   state, tlogs, the offline `simulate` runner.
+//!   state, tlogs, the radio, the offline `simulate` runner.
 //!
 //! `tests/layers.rs` holds these rules.
 
-pub mod atomic_file;
 pub mod endpoint;
 pub mod model;
 pub mod nav;

@@ -4,7 +4,9 @@ and MAVProxy (test_mavproxy.py, test_daemon_mavproxy.py).
 A `ManagedProcess` is spawned with its arguments in a work directory, with stderr to a file and
 stdout piped. Its start is "announced": it prints one line per port-0 endpoint (matched by
 `ENDPOINT_RE`, giving the real address) and maybe other start lines (`on_line`); `spawn` reads
-them until `started()` holds, with a deadline as the upper bound (never a sleep). Then a thread
+them until `started()` holds, with a deadline as the upper bound (never a sleep), with the
+vtol_twin plugin's start-line reader (`vtol_twin.startup`, which tests/run.sh installs into the
+venv). Then a thread
 drains stdout, keeping a bounded tail. `stop` signals it (SIGINT, like Ctrl-C) and
 `assert_clean_exit` checks exit code 0 and no panic in stderr.
 """
@@ -13,7 +15,6 @@ from __future__ import annotations
 
 import os
 import re
-import select
 import shutil
 import signal
 import subprocess
@@ -26,6 +27,7 @@ from typing import Callable, Generic, Iterator, TypeVar
 
 import pexpect
 import pytest
+from vtol_twin.startup import ExitedAtStart, StartTimeout, read_start_lines
 
 STDOUT_TAIL = 200  # stdout lines kept after the start (status lines, about 1 a second)
 
@@ -89,34 +91,24 @@ class ManagedProcess:
         return len(self.endpoints) >= self.expected_endpoints
 
     def _read_start(self, timeout: float) -> bytes:
-        """Reads stdout lines until started(); returns the bytes read past the last full line."""
-        deadline = time.monotonic() + timeout
-        buf = b""
-        fd = self.proc.stdout.fileno()
-        while not self.started():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise AssertionError(f"{self.KIND} did not print its start lines in {timeout} s "
-                                     f"({len(self.endpoints)}/{self.expected_endpoints} {self.ENDPOINT_WORD}s); "
-                                     f"args {self.args}\nstdout so far: {self.stdout_lines}\n{self.tail()}")
-            ready, _, _ = select.select([fd], [], [], min(left, 0.5))
-            if not ready:
-                continue
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                self.proc.wait(timeout=5)
-                raise AssertionError(f"{self.KIND} exited ({self.proc.returncode}) at start; args {self.args}\n"
-                                     f"stdout: {self.stdout_lines}\n{self.tail()}")
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                text = line.decode(errors="replace").strip()
-                self.stdout_lines.append(text)
-                if m := self.ENDPOINT_RE.match(text):
-                    self.endpoints.append((m["scheme"], m["addr"]))
-                else:
-                    self.on_line(text)
-        return buf
+        """Reads stdout lines until started() (the plugin's start-line reader); returns the bytes
+        read past the last full line."""
+        try:
+            return read_start_lines(self.proc, self._start_line, self.started, time.monotonic() + timeout)
+        except StartTimeout:
+            raise AssertionError(f"{self.KIND} did not print its start lines in {timeout} s "
+                                 f"({len(self.endpoints)}/{self.expected_endpoints} {self.ENDPOINT_WORD}s); "
+                                 f"args {self.args}\nstdout so far: {self.stdout_lines}\n{self.tail()}") from None
+        except ExitedAtStart as e:
+            raise AssertionError(f"{self.KIND} exited ({e.returncode}) at start; args {self.args}\n"
+                                 f"stdout: {self.stdout_lines}\n{self.tail()}") from None
+
+    def _start_line(self, text: str) -> None:
+        self.stdout_lines.append(text)
+        if m := self.ENDPOINT_RE.match(text):
+            self.endpoints.append((m["scheme"], m["addr"]))
+        else:
+            self.on_line(text)
 
     def _drain_stdout(self, rest: bytes) -> None:
         fd = self.proc.stdout.fileno()

@@ -11,7 +11,8 @@
 //! with a reason. Navigation commands (take-off, reposition, mission start, home) are
 //! `guided`'s.
 
-use mavlink::dialects::ardupilotmega as apm;
+use mavlink::dialects::ardupilotmega::{self as apm, MavCmd, MavResult, MavVtolState, PlaneMode};
+use num_traits::FromPrimitive as _;
 
 use vtol_link::{Frame, RawCommand, RawCommandKind};
 
@@ -19,67 +20,12 @@ use super::{Endpoint, LinkKey, streams};
 use crate::model::mode::FlightMode;
 use crate::model::vehicle::ArmError;
 
-/// `MAV_RESULT` values.
-pub mod result {
-    /// Done.
-    pub const ACCEPTED: u8 = 0;
-    /// Valid, not possible right now.
-    pub const TEMPORARILY_REJECTED: u8 = 1;
-    /// Invalid parameters or not allowed.
-    pub const DENIED: u8 = 2;
-    /// Not implemented.
-    pub const UNSUPPORTED: u8 = 3;
-    /// Tried and failed.
-    pub const FAILED: u8 = 4;
-}
-
-/// Command numbers the twin implements.
-pub mod cmd {
-    /// MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN.
-    pub const PREFLIGHT_REBOOT_SHUTDOWN: u16 = 246;
-    /// MAV_CMD_DO_SET_MODE.
-    pub const DO_SET_MODE: u16 = 176;
-    /// MAV_CMD_COMPONENT_ARM_DISARM.
-    pub const COMPONENT_ARM_DISARM: u16 = 400;
-    /// MAV_CMD_GET_MESSAGE_INTERVAL.
-    pub const GET_MESSAGE_INTERVAL: u16 = 510;
-    /// MAV_CMD_SET_MESSAGE_INTERVAL.
-    pub const SET_MESSAGE_INTERVAL: u16 = 511;
-    /// MAV_CMD_REQUEST_MESSAGE.
-    pub const REQUEST_MESSAGE: u16 = 512;
-    /// MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES.
-    pub const REQUEST_AUTOPILOT_CAPABILITIES: u16 = 520;
-    /// MAV_CMD_DO_VTOL_TRANSITION.
-    pub const DO_VTOL_TRANSITION: u16 = 3000;
-    /// MAV_CMD_NAV_RETURN_TO_LAUNCH.
-    pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
-    /// MAV_CMD_NAV_TAKEOFF.
-    pub const NAV_TAKEOFF: u16 = 22;
-    /// MAV_CMD_NAV_VTOL_TAKEOFF.
-    pub const NAV_VTOL_TAKEOFF: u16 = 84;
-    /// MAV_CMD_DO_SET_HOME.
-    pub const DO_SET_HOME: u16 = 179;
-    /// MAV_CMD_DO_REPOSITION.
-    pub const DO_REPOSITION: u16 = 192;
-    /// MAV_CMD_DO_SET_MISSION_CURRENT.
-    pub const DO_SET_MISSION_CURRENT: u16 = 224;
-    /// MAV_CMD_MISSION_START.
-    pub const MISSION_START: u16 = 300;
-    /// MAV_CMD_GET_HOME_POSITION.
-    pub const GET_HOME_POSITION: u16 = 410;
-    /// MAV_CMD_DO_CHANGE_SPEED.
-    pub const DO_CHANGE_SPEED: u16 = 178;
-    /// MAV_CMD_NAV_LAND: ArduPlane does not take it as a command (UNSUPPORTED).
-    pub const NAV_LAND: u16 = 21;
-    /// MAV_CMD_NAV_VTOL_LAND: likewise.
-    pub const NAV_VTOL_LAND: u16 = 85;
-}
-
 /// ArduPlane's RTL mode number, flown as QRTL.
-pub const RTL_MODE: u32 = 11;
+pub const RTL_MODE: u32 = PlaneMode::PLANE_MODE_RTL as u32;
 
 /// SET_MODE's message id, which its COMMAND_ACK carries as `command` (ArduPilot).
-const SET_MODE_ID: u16 = 11;
+#[allow(deprecated)]
+const SET_MODE_ID: u16 = <apm::SET_MODE_DATA as mavlink::MessageData>::ID as u16;
 
 /// The force-arm magic number (ArduPilot, common.xml).
 pub const FORCE_MAGIC: f32 = 21196.0;
@@ -159,7 +105,7 @@ pub struct CommandMemory {
 #[derive(Debug, Clone, Copy)]
 struct Remembered {
     params: [u32; 7],
-    result: u8,
+    result: MavResult,
     at_us: u64,
 }
 
@@ -206,7 +152,9 @@ impl Endpoint {
                 }
                 self.heartbeat_on_mode_change(mode_before);
                 // The ACK goes out first, then the autopilot restarts.
-                if c.command == cmd::PREFLIGHT_REBOOT_SHUTDOWN && r == result::ACCEPTED {
+                if c.command == MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN as u16
+                    && r == MavResult::MAV_RESULT_ACCEPTED
+                {
                     let p1 = c.params[0].round();
                     if p1 == 1.0 {
                         self.reboot();
@@ -227,36 +175,51 @@ impl Endpoint {
         }
     }
 
-    fn ack(&mut self, link: LinkKey, frame: &Frame, command: u16, result: u8) {
+    fn ack(&mut self, link: LinkKey, frame: &Frame, command: u16, result: MavResult) {
         let to = frame.sender();
-        self.send_ack(link, command, result, to);
+        self.send_ack(link, command, result as u8, to);
     }
 
     /// Runs a command. Messages that must follow the ACK go to `after` (ArduPilot ACKs a
     /// REQUEST_MESSAGE first and sends the message after).
     // Long: one arm per MAV_CMD the twin answers, most a line or two that call the command's own
-    // handler; the dispatch table reads best in one place.
-    fn execute(&mut self, link: LinkKey, c: &Command, after: &mut Vec<apm::MavMessage>) -> u8 {
+    // handler; the dispatch table reads best in one place. GET_MESSAGE_INTERVAL,
+    // REQUEST_AUTOPILOT_CAPABILITIES and GET_HOME_POSITION are deprecated but still sent.
+    #[allow(deprecated)]
+    fn execute(
+        &mut self,
+        link: LinkKey,
+        c: &Command,
+        after: &mut Vec<apm::MavMessage>,
+    ) -> MavResult {
+        use MavCmd as C;
         let p = c.params;
-        match c.command {
-            cmd::COMPONENT_ARM_DISARM => self.cmd_arm_disarm(link, p[0], p[1]),
-            cmd::DO_SET_MODE => {
+        let Some(command) = MavCmd::from_u16(c.command) else {
+            return MavResult::MAV_RESULT_UNSUPPORTED;
+        };
+        match command {
+            C::MAV_CMD_COMPONENT_ARM_DISARM => self.cmd_arm_disarm(link, p[0], p[1]),
+            C::MAV_CMD_DO_SET_MODE => {
                 // Only CUSTOM_MODE_ENABLED matters; SAFETY_ARMED in p1 is ignored (common.xml).
                 if (p[0] as u32) & 1 == 0 {
-                    return result::DENIED;
+                    return MavResult::MAV_RESULT_DENIED;
                 }
                 self.apply_custom_mode(link, p[1] as u32)
             }
-            cmd::SET_MESSAGE_INTERVAL => {
+            C::MAV_CMD_SET_MESSAGE_INTERVAL => {
                 let now = self.stream_now_us;
                 let msgid = p[0] as u32;
                 let ok = self
                     .links
                     .get_mut(&link)
                     .is_some_and(|l| l.schedule.set_interval(msgid, f64::from(p[1]), now));
-                if ok { result::ACCEPTED } else { result::DENIED }
+                if ok {
+                    MavResult::MAV_RESULT_ACCEPTED
+                } else {
+                    MavResult::MAV_RESULT_DENIED
+                }
             }
-            cmd::GET_MESSAGE_INTERVAL => {
+            C::MAV_CMD_GET_MESSAGE_INTERVAL => {
                 let msgid = p[0] as u32;
                 let interval = self
                     .links
@@ -272,72 +235,72 @@ impl Endpoint {
                         message_id: msgid as u16,
                     },
                 ));
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
-            cmd::REQUEST_MESSAGE => {
+            C::MAV_CMD_REQUEST_MESSAGE => {
                 let msgid = p[0] as u32;
                 if !streams::can_produce(msgid) {
-                    return result::FAILED;
+                    return MavResult::MAV_RESULT_FAILED;
                 }
                 let errors = self.stats.bad_frames.min(u64::from(u16::MAX)) as u16;
                 let msgs = self.build_messages(msgid, errors);
                 if msgs.is_empty() {
-                    result::FAILED
+                    MavResult::MAV_RESULT_FAILED
                 } else {
                     after.extend(msgs);
-                    result::ACCEPTED
+                    MavResult::MAV_RESULT_ACCEPTED
                 }
             }
-            cmd::REQUEST_AUTOPILOT_CAPABILITIES => {
+            C::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES => {
                 after.push(super::identity::autopilot_version(self.sysid));
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
-            cmd::DO_VTOL_TRANSITION => self.cmd_vtol_transition(link, p[0]),
-            cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF => self.cmd_takeoff(link, p[6]),
-            cmd::DO_REPOSITION => self.cmd_reposition(link, c),
-            cmd::NAV_RETURN_TO_LAUNCH => self.apply_custom_mode(link, RTL_MODE),
-            cmd::MISSION_START => self.cmd_mission_start(link, p[0]),
-            cmd::DO_SET_MISSION_CURRENT => self.set_mission_current(link, p[0]),
-            cmd::GET_HOME_POSITION => {
+            C::MAV_CMD_DO_VTOL_TRANSITION => self.cmd_vtol_transition(link, p[0]),
+            C::MAV_CMD_NAV_TAKEOFF | C::MAV_CMD_NAV_VTOL_TAKEOFF => self.cmd_takeoff(link, p[6]),
+            C::MAV_CMD_DO_REPOSITION => self.cmd_reposition(link, c),
+            C::MAV_CMD_NAV_RETURN_TO_LAUNCH => self.apply_custom_mode(link, RTL_MODE),
+            C::MAV_CMD_MISSION_START => self.cmd_mission_start(link, p[0]),
+            C::MAV_CMD_DO_SET_MISSION_CURRENT => self.set_mission_current(link, p[0]),
+            C::MAV_CMD_GET_HOME_POSITION => {
                 after.push(self.home_position());
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
-            cmd::DO_SET_HOME => self.cmd_set_home(link, c),
+            C::MAV_CMD_DO_SET_HOME => self.cmd_set_home(link, c),
             // Speed type (air, ground, climb, descent) and a speed, −1 (or −2) = unchanged, as
             // ArduPlane checks them. The twin's position loop sets its own horizontal speed, so
             // an accepted change has nothing to act on.
-            cmd::DO_CHANGE_SPEED => {
+            C::MAV_CMD_DO_CHANGE_SPEED => {
                 let ok_type = (0.0..=3.0).contains(&p[0]) && p[0].fract() == 0.0;
                 let ok_speed = p[1] > 0.0 || p[1] == -1.0 || p[1] == -2.0;
                 if ok_type && ok_speed && p[1].is_finite() {
-                    result::ACCEPTED
+                    MavResult::MAV_RESULT_ACCEPTED
                 } else {
-                    result::FAILED
+                    MavResult::MAV_RESULT_FAILED
                 }
             }
             // Landing is a mode (QLAND, QRTL) or a mission item on ArduPlane, not a command.
-            cmd::NAV_LAND | cmd::NAV_VTOL_LAND => result::UNSUPPORTED,
-            cmd::PREFLIGHT_REBOOT_SHUTDOWN => match p[0].round() {
+            C::MAV_CMD_NAV_LAND | C::MAV_CMD_NAV_VTOL_LAND => MavResult::MAV_RESULT_UNSUPPORTED,
+            C::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN => match p[0].round() {
                 // Reboot the autopilot: only on the ground, disarmed, as ArduPilot does.
-                1.0 if self.vehicle.telemetry().armed => result::DENIED,
-                1.0 => result::ACCEPTED,
-                0.0 => result::ACCEPTED,
+                1.0 if self.vehicle.telemetry().armed => MavResult::MAV_RESULT_DENIED,
+                1.0 => MavResult::MAV_RESULT_ACCEPTED,
+                0.0 => MavResult::MAV_RESULT_ACCEPTED,
                 // Shutdown or bootloader: there is no hardware to power off.
-                _ => result::UNSUPPORTED,
+                _ => MavResult::MAV_RESULT_UNSUPPORTED,
             },
-            _ => result::UNSUPPORTED,
+            _ => MavResult::MAV_RESULT_UNSUPPORTED,
         }
     }
 
     /// MAV_CMD_DO_VTOL_TRANSITION, where ArduPlane takes it: in AUTO, in the air. `to` is the
     /// MAV_VTOL_STATE asked for (3 MC, 4 FW); asking for the phase the vehicle is in or going
     /// to succeeds and changes nothing.
-    fn cmd_vtol_transition(&mut self, link: LinkKey, to: f32) -> u8 {
+    fn cmd_vtol_transition(&mut self, link: LinkKey, to: f32) -> MavResult {
         use crate::model::mode::VtolState;
-        let forward = match to as u32 {
-            3 => false,
-            4 => true,
-            _ => return result::DENIED,
+        let forward = match MavVtolState::from_u32(to as u32) {
+            Some(MavVtolState::MAV_VTOL_STATE_MC) => false,
+            Some(MavVtolState::MAV_VTOL_STATE_FW) => true,
+            _ => return MavResult::MAV_RESULT_DENIED,
         };
         let t = self.vehicle.telemetry();
         if t.mode == FlightMode::Auto {
@@ -351,7 +314,7 @@ impl Endpoint {
             matches!(t.vtol_state, VtolState::Mc | VtolState::TransitionToMc)
         };
         if already {
-            return result::ACCEPTED;
+            return MavResult::MAV_RESULT_ACCEPTED;
         }
         if t.mode != FlightMode::Auto {
             self.say(
@@ -359,7 +322,7 @@ impl Endpoint {
                 apm::MavSeverity::MAV_SEVERITY_WARNING,
                 "VTOL transition: only in AUTO",
             );
-            return result::DENIED;
+            return MavResult::MAV_RESULT_DENIED;
         }
         let started = if forward {
             self.vehicle.start_forward_transition()
@@ -367,45 +330,45 @@ impl Endpoint {
             self.vehicle.start_back_transition()
         };
         if started {
-            result::ACCEPTED
+            MavResult::MAV_RESULT_ACCEPTED
         } else {
             self.say(
                 link,
                 apm::MavSeverity::MAV_SEVERITY_WARNING,
                 "VTOL transition: not flying",
             );
-            result::DENIED
+            MavResult::MAV_RESULT_DENIED
         }
     }
 
-    fn cmd_arm_disarm(&mut self, link: LinkKey, p1: f32, p2: f32) -> u8 {
+    fn cmd_arm_disarm(&mut self, link: LinkKey, p1: f32, p2: f32) -> MavResult {
         let force = p2 == FORCE_MAGIC;
         let outcome = if p1 == 1.0 {
             if self.vehicle.telemetry().armed {
-                return result::ACCEPTED;
+                return MavResult::MAV_RESULT_ACCEPTED;
             }
             match self.mission_prearm() {
                 Some(why) if !force && self.vehicle.pre_arm_check().is_ok() => {
                     // ArduPilot's arming command says "Arm:", its periodic report "PreArm:".
                     let text = format!("Arm: {why}");
                     self.say(link, apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
-                    return result::FAILED;
+                    return MavResult::MAV_RESULT_FAILED;
                 }
                 _ => self.vehicle.arm(force),
             }
         } else if p1 == 0.0 {
             if !self.vehicle.telemetry().armed {
-                return result::ACCEPTED;
+                return MavResult::MAV_RESULT_ACCEPTED;
             }
             self.vehicle.disarm(force)
         } else {
-            return result::DENIED;
+            return MavResult::MAV_RESULT_DENIED;
         };
         match outcome {
             Ok(()) => {
                 // Announce now so the text precedes the next heartbeat showing the change.
                 self.report_vehicle_events();
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
             Err(e) => {
                 let text = match e {
@@ -414,7 +377,7 @@ impl Endpoint {
                     ArmError::Mode(_) => format!("Arm: {e}"),
                 };
                 self.say(link, apm::MavSeverity::MAV_SEVERITY_CRITICAL, &text);
-                result::FAILED
+                MavResult::MAV_RESULT_FAILED
             }
         }
     }
@@ -431,7 +394,7 @@ impl Endpoint {
         }
     }
 
-    pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> u8 {
+    pub(super) fn apply_custom_mode(&mut self, link: LinkKey, custom_mode: u32) -> MavResult {
         let wanted = if custom_mode == RTL_MODE {
             self.rtl_or_qrtl().custom_mode()
         } else {
@@ -443,12 +406,12 @@ impl Endpoint {
                 // The navigator takes over at once, so an autonomous mode never flies a
                 // stale guidance for a navigation period.
                 self.navigate();
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
             None => {
                 let text = format!("Mode {custom_mode} not available");
                 self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &text);
-                result::FAILED
+                MavResult::MAV_RESULT_FAILED
             }
         }
     }
@@ -469,7 +432,7 @@ impl Endpoint {
         {
             self.apply_custom_mode(link, m.custom_mode)
         } else {
-            result::DENIED
+            MavResult::MAV_RESULT_DENIED
         };
         self.ack(link, frame, SET_MODE_ID, r);
         self.heartbeat_on_mode_change(mode_before);

@@ -9,7 +9,8 @@ use super::test_support::{
 };
 use super::*;
 use crate::model::mode::{FlightMode, VtolState};
-use crate::nav::mission::{MissionItem, cmd as mcmd};
+use crate::nav::mission::MissionItem;
+use apm::MavCmd;
 
 const GCS: LinkKey = LinkKey(1);
 
@@ -88,11 +89,16 @@ fn rectangle_mission() -> Vec<MissionItem> {
         home,
         takeoff,
         transition_to_fw(),
-        item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, 0.0, 20.0),
-        item(mcmd::NAV_WAYPOINT, -RECT_LONG_M, RECT_SHORT_M, 20.0),
-        item(mcmd::NAV_WAYPOINT, 0.0, RECT_SHORT_M, 20.0),
-        item(mcmd::NAV_WAYPOINT, 0.0, 0.0, 20.0),
-        item(mcmd::NAV_VTOL_LAND, -60.0, 50.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, -RECT_LONG_M, 0.0, 20.0),
+        item(
+            MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+            -RECT_LONG_M,
+            RECT_SHORT_M,
+            20.0,
+        ),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, RECT_SHORT_M, 20.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 20.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, -60.0, 50.0, 0.0),
     ]
 }
 
@@ -242,7 +248,7 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
     let mut ep = endpoint();
     // RTL lands vertically at home (not ArduPlane's default, which circles home).
     ep.handle(GCS, &v2(&param_set("Q_RTL_MODE", 1.0)));
-    let mut loiter = item(mcmd::NAV_LOITER_TIME, -100.0, 0.0, 20.0);
+    let mut loiter = item(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16, -100.0, 0.0, 20.0);
     loiter.params[0] = 20.0;
     let [home, takeoff] = home_and_vtol_takeoff(20.0);
     upload(
@@ -252,7 +258,7 @@ fn a_loiter_on_the_wing_then_rtl_flies_home_as_a_plane_and_lands_vertically() {
             takeoff,
             transition_to_fw(),
             loiter,
-            item(mcmd::NAV_WAYPOINT, -200.0, 100.0, 20.0),
+            item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, -200.0, 100.0, 20.0),
         ],
     );
     ep.handle(GCS, &set_mode(FlightMode::Auto));
@@ -313,7 +319,11 @@ fn with_the_default_q_rtl_mode_rtl_circles_home_on_the_wing() {
     let [home, takeoff] = home_and_vtol_takeoff(20.0);
     upload(
         &mut ep,
-        &[home, takeoff, item(mcmd::NAV_WAYPOINT, -150.0, 0.0, 20.0)],
+        &[
+            home,
+            takeoff,
+            item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, -150.0, 0.0, 20.0),
+        ],
     );
     ep.handle(GCS, &set_mode(FlightMode::Auto));
     let mut t = 0u64;

@@ -17,11 +17,10 @@
 //! vehicle's state forbids it now, DENIED for a target outside the flight envelope
 //! (`NAV_RADIUS_MAX`, `NAV_ALT_MAX`) or an unusable value.
 
-use mavlink::dialects::ardupilotmega as apm;
+use mavlink::dialects::ardupilotmega::{self as apm, MavCmd, MavFrame, MavResult};
 use nalgebra::Vector3;
 
 use super::commands::Command;
-use super::commands::result;
 use super::{Endpoint, LinkKey, position};
 use crate::model::frames::paper_to_ned;
 use crate::model::mode::FlightMode;
@@ -181,24 +180,24 @@ impl Endpoint {
     }
 
     /// ACK result of a navigator refusal, with its reason to the requester.
-    fn refusal(&mut self, link: LinkKey, r: Result<(), Refused>) -> u8 {
+    fn refusal(&mut self, link: LinkKey, r: Result<(), Refused>) -> MavResult {
         match r {
             Ok(()) => {
                 self.navigate();
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
             Err(e) => {
                 self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &e.to_string());
                 match e {
-                    Refused::NotNow(_) => result::FAILED,
-                    Refused::Invalid(_) => result::DENIED,
+                    Refused::NotNow(_) => MavResult::MAV_RESULT_FAILED,
+                    Refused::Invalid(_) => MavResult::MAV_RESULT_DENIED,
                 }
             }
         }
     }
 
     /// NAV_TAKEOFF / NAV_VTOL_TAKEOFF: `param7` metres up, in GUIDED.
-    pub(super) fn cmd_takeoff(&mut self, link: LinkKey, alt_m: f32) -> u8 {
+    pub(super) fn cmd_takeoff(&mut self, link: LinkKey, alt_m: f32) -> MavResult {
         let r = self.run_nav(|nav, inp, ev| nav.takeoff(f64::from(alt_m), inp, ev));
         self.refusal(link, r)
     }
@@ -234,7 +233,7 @@ impl Endpoint {
     }
 
     /// DO_REPOSITION (192).
-    pub(super) fn cmd_reposition(&mut self, link: LinkKey, c: &Command) -> u8 {
+    pub(super) fn cmd_reposition(&mut self, link: LinkKey, c: &Command) -> MavResult {
         let p = c.params;
         let t = *self.vehicle.telemetry();
         // Bit 0 of param2 (MAV_DO_REPOSITION_FLAGS_CHANGE_MODE): switch to GUIDED first.
@@ -256,7 +255,7 @@ impl Endpoint {
                 }
             };
             self.global_target(
-                frame::GLOBAL_RELATIVE_ALT,
+                MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT as u8,
                 deg(p[4]),
                 deg(p[5]),
                 f64::from(p[6]),
@@ -337,14 +336,14 @@ impl Endpoint {
     }
 
     /// MISSION_START (300): AUTO from item `param1` (1 when 0).
-    pub(super) fn cmd_mission_start(&mut self, link: LinkKey, first: f32) -> u8 {
+    pub(super) fn cmd_mission_start(&mut self, link: LinkKey, first: f32) -> MavResult {
         if self.mission.count() <= 1 {
             self.say(
                 link,
                 apm::MavSeverity::MAV_SEVERITY_WARNING,
                 "Mission start: no mission",
             );
-            return result::FAILED;
+            return MavResult::MAV_RESULT_FAILED;
         }
         let seq = if first.is_finite() && first >= 1.0 {
             first as u16
@@ -353,15 +352,15 @@ impl Endpoint {
         };
         if let Err(why) = self.run_nav(|nav, inp, ev| nav.set_current(seq, inp, ev)) {
             self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &why);
-            return result::DENIED;
+            return MavResult::MAV_RESULT_DENIED;
         }
         self.apply_custom_mode(link, FlightMode::Auto.custom_mode())
     }
 
     /// DO_SET_MISSION_CURRENT (224) and MISSION_SET_CURRENT (41): the next item.
-    pub(super) fn set_mission_current(&mut self, link: LinkKey, seq: f32) -> u8 {
+    pub(super) fn set_mission_current(&mut self, link: LinkKey, seq: f32) -> MavResult {
         if !(seq.is_finite() && (0.0..65535.0).contains(&seq)) {
-            return result::DENIED;
+            return MavResult::MAV_RESULT_DENIED;
         }
         let r = self.run_nav(|nav, inp, ev| nav.set_current(seq as u16, inp, ev));
         match r {
@@ -369,11 +368,11 @@ impl Endpoint {
                 self.navigate();
                 let m = self.mission_current();
                 self.send(link, &m);
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
             Err(why) => {
                 self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &why);
-                result::DENIED
+                MavResult::MAV_RESULT_DENIED
             }
         }
     }
@@ -395,8 +394,8 @@ impl Endpoint {
             x: p.lat_e7,
             y: p.lon_e7,
             z: p.alt_amsl_m as f32,
-            command: crate::nav::mission::cmd::NAV_WAYPOINT,
-            frame: frame::GLOBAL,
+            command: MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+            frame: MavFrame::MAV_FRAME_GLOBAL as u8,
             autocontinue: 1,
             ..Default::default()
         }
@@ -414,18 +413,18 @@ impl Endpoint {
 
     /// DO_SET_HOME (179): here (`param1` = 1) or the given point (altitude AMSL), inside the
     /// flying area.
-    pub(super) fn cmd_set_home(&mut self, link: LinkKey, c: &Command) -> u8 {
+    pub(super) fn cmd_set_home(&mut self, link: LinkKey, c: &Command) -> MavResult {
         let p = c.params;
         if p[0] == 1.0 {
             let here = self.pos_ned();
             self.set_home(here);
-            return result::ACCEPTED;
+            return MavResult::MAV_RESULT_ACCEPTED;
         }
         let (frame_no, lat, lon) = if c.is_int {
             (c.frame, c.x, c.y)
         } else {
             (
-                frame::GLOBAL,
+                MavFrame::MAV_FRAME_GLOBAL as u8,
                 deg_to_e7(f64::from(p[4])),
                 deg_to_e7(f64::from(p[5])),
             )
@@ -435,7 +434,8 @@ impl Endpoint {
             ..self.limits()
         };
         let target = if frame::is_global(frame_no) && valid_lat_lon(lat, lon) && p[6].is_finite() {
-            let ned = origin_home.local_ned(frame::GLOBAL, lat, lon, f64::from(p[6]));
+            let ned =
+                origin_home.local_ned(MavFrame::MAV_FRAME_GLOBAL as u8, lat, lon, f64::from(p[6]));
             origin_home
                 .check("Home", &Vector3::new(ned.x, ned.y, 0.0))
                 .map(|()| ned)
@@ -446,11 +446,11 @@ impl Endpoint {
         match target {
             Ok(ned) => {
                 self.set_home(ned);
-                result::ACCEPTED
+                MavResult::MAV_RESULT_ACCEPTED
             }
             Err(why) => {
                 self.say(link, apm::MavSeverity::MAV_SEVERITY_WARNING, &why);
-                result::DENIED
+                MavResult::MAV_RESULT_DENIED
             }
         }
     }

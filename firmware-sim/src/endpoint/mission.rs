@@ -39,10 +39,10 @@ pub const MISSION_ITEM_ID: u32 = vtol_link::protocol::id::MISSION_ITEM;
 /// MISSION_ITEM_INT.
 pub const MISSION_ITEM_INT_ID: u32 = vtol_link::protocol::id::MISSION_ITEM_INT;
 
-/// `MAV_MISSION_TYPE_MISSION`.
-const TYPE_MISSION: u8 = 0;
-/// `MAV_MISSION_TYPE_ALL`.
-const TYPE_ALL: u8 = 255;
+/// `MAV_MISSION_TYPE_MISSION`, as the raw byte the item messages carry.
+const TYPE_MISSION: u8 = apm::MavMissionType::MAV_MISSION_TYPE_MISSION as u8;
+/// `MAV_MISSION_TYPE_ALL`, likewise.
+const TYPE_ALL: u8 = apm::MavMissionType::MAV_MISSION_TYPE_ALL as u8;
 /// `current` of a MISSION_ITEM that is ArduPilot's guided waypoint, not part of an upload.
 const GUIDED_WAYPOINT: u8 = 2;
 
@@ -153,14 +153,10 @@ pub fn item_payload(seq: u16, item: &MissionItem, target: (u8, u8), int: bool) -
     p
 }
 
+/// The mission type a raw byte names; a number the dialect lacks is answered as the mission.
 fn mission_type(t: u8) -> apm::MavMissionType {
-    use apm::MavMissionType as T;
-    match t {
-        1 => T::MAV_MISSION_TYPE_FENCE,
-        2 => T::MAV_MISSION_TYPE_RALLY,
-        255 => T::MAV_MISSION_TYPE_ALL,
-        _ => T::MAV_MISSION_TYPE_MISSION,
-    }
+    use num_traits::FromPrimitive as _;
+    apm::MavMissionType::from_u8(t).unwrap_or(apm::MavMissionType::MAV_MISSION_TYPE_MISSION)
 }
 
 impl Endpoint {

@@ -7,7 +7,8 @@ use super::mission::{MISSION_ITEM_ID, MISSION_ITEM_INT_ID, item_payload, raw_ite
 use super::test_support::{each, from_gcs, home_and_vtol_takeoff, item, raw_command, run_until};
 use super::*;
 use crate::model::mode::FlightMode;
-use crate::nav::mission::{MissionItem, cmd as mcmd, frame};
+use crate::nav::mission::MissionItem;
+use apm::{MavCmd, MavFrame, MavResult};
 
 const GCS: LinkKey = LinkKey(1);
 const OTHER: LinkKey = LinkKey(2);
@@ -125,15 +126,15 @@ fn item_frame(seq: u16, it: &MissionItem) -> Frame {
 }
 
 fn flight_plan() -> Vec<MissionItem> {
-    let mut loiter = item(mcmd::NAV_LOITER_TIME, 3.0, 2.0, 2.0);
+    let mut loiter = item(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16, 3.0, 2.0, 2.0);
     loiter.params[0] = 1.0;
     let [home, takeoff] = home_and_vtol_takeoff(2.0);
     vec![
         home,
         takeoff,
-        item(mcmd::NAV_WAYPOINT, 3.0, 0.0, 2.5),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 3.0, 0.0, 2.5),
         loiter,
-        item(mcmd::NAV_VTOL_LAND, 0.0, 2.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, 0.0, 2.0, 0.0),
     ]
 }
 
@@ -263,7 +264,7 @@ fn a_refused_item_leaves_the_stored_mission_unchanged() {
     assert_eq!(ep.mission(), &before);
     // Outside the envelope: a 64-character reason, in two chunks of one text.
     let mut far = flight_plan();
-    far[2] = item(mcmd::NAV_WAYPOINT, 111.0, 0.0, 2.0);
+    far[2] = item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 111.0, 0.0, 2.0);
     let out = upload(&mut ep, &far);
     assert_eq!(
         mission_acks(&out),
@@ -372,7 +373,7 @@ fn legacy_set_mode_rtl_and_arming_refusals() {
     // Arming in QLAND is refused with the reason.
     set_mode(&mut ep, FlightMode::QLand);
     let out = ep.handle(GCS, &command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
-    assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+    assert_eq!(acks(&out), vec![(400, MavResult::MAV_RESULT_FAILED as u8)]);
     assert_eq!(
         texts(&out)[0].text.to_str().unwrap(),
         "Arm: mode QLAND cannot take off"
@@ -393,7 +394,7 @@ fn legacy_set_mode_rtl_and_arming_refusals() {
     assert_eq!(ep.vehicle().telemetry().mode, FlightMode::QRtl);
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&legacy(0)))),
-        vec![(11, commands::result::FAILED)]
+        vec![(11, MavResult::MAV_RESULT_FAILED as u8)]
     );
     let out = ep.handle(GCS, &command(20, [0.0; 7]));
     assert_eq!(acks(&out), vec![(20, 0)]);
@@ -455,6 +456,7 @@ fn telemetry_on_the_globe_and_a_healthy_fence() {
 // Long: one flight told in order (arm, take off, reposition, a refusal, AUTO, land); each step
 // starts from where the previous one left the vehicle.
 #[test]
+#[allow(deprecated)] // MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, as ground stations still send it
 fn guided_take_off_reposition_and_auto_mission() {
     let mut ep = endpoint_in_a_small_envelope();
     // The reposition held in a hover (Q_GUIDED_MODE 1; ArduPlane's default circles it on the
@@ -471,7 +473,7 @@ fn guided_take_off_reposition_and_auto_mission() {
     assert_eq!(acks(&set_mode(&mut ep, FlightMode::Guided)), vec![(176, 0)]);
     // Take-off before arming: FAILED, with the reason.
     let out = ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]));
-    assert_eq!(acks(&out), vec![(22, commands::result::FAILED)]);
+    assert_eq!(acks(&out), vec![(22, MavResult::MAV_RESULT_FAILED as u8)]);
     assert_eq!(
         texts(&out)[0].text.to_str().unwrap(),
         "Takeoff: must be armed"
@@ -482,7 +484,7 @@ fn guided_take_off_reposition_and_auto_mission() {
     );
     // 60 m is above NAV_ALT_MAX: DENIED.
     let out = ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 60.0]));
-    assert_eq!(acks(&out), vec![(22, commands::result::DENIED)]);
+    assert_eq!(acks(&out), vec![(22, MavResult::MAV_RESULT_DENIED as u8)]);
     assert_eq!(
         acks(&ep.handle(GCS, &command(22, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]))),
         vec![(22, 0)]
@@ -497,7 +499,7 @@ fn guided_take_off_reposition_and_auto_mission() {
         GCS,
         &command_int(
             192,
-            frame::GLOBAL_RELATIVE_ALT_INT,
+            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT as u8,
             [-1.0, 1.0, 0.0, 0.0],
             p.lat_e7,
             p.lon_e7,
@@ -511,14 +513,14 @@ fn guided_take_off_reposition_and_auto_mission() {
         GCS,
         &command_int(
             192,
-            frame::GLOBAL_RELATIVE_ALT_INT,
+            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT as u8,
             [-1.0, 0.0, 0.0, 0.0],
             far.lat_e7,
             far.lon_e7,
             2.0,
         ),
     );
-    assert_eq!(acks(&out), vec![(192, commands::result::DENIED)]);
+    assert_eq!(acks(&out), vec![(192, MavResult::MAV_RESULT_DENIED as u8)]);
     let t = texts(&out);
     let whole: String = t
         .iter()
@@ -575,7 +577,7 @@ fn home_slot_is_readable_with_no_mission() {
         (home.seq, home.item.x, home.item.y),
         (0, want.lat_e7, want.lon_e7)
     );
-    assert_eq!(home.item.frame, frame::GLOBAL);
+    assert_eq!(home.item.frame, MavFrame::MAV_FRAME_GLOBAL as u8);
     assert!((f64::from(home.item.z) - want.alt_amsl_m).abs() < 0.01);
     // Past it: still INVALID_SEQUENCE.
     assert_eq!(
@@ -586,8 +588,8 @@ fn home_slot_is_readable_with_no_mission() {
 
 /// A MISSION_ITEM (floats, as DroneKit's `simple_goto` sends it) with `current` = 2.
 fn guided_waypoint(north_m: f64, alt: f32) -> Frame {
-    let mut it = item(mcmd::NAV_WAYPOINT, north_m, 0.0, alt);
-    it.frame = frame::GLOBAL_RELATIVE_ALT;
+    let mut it = item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, north_m, 0.0, alt);
+    it.frame = MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT as u8;
     it.current = 2;
     let p = item_payload(0, &it, (0, 0), false);
     from_gcs(4, MISSION_ITEM_ID, &p)
@@ -684,7 +686,10 @@ fn auto_with_no_mission_reaches_nothing() {
     let mut out = run_until(&mut ep, 4_000_000);
     // MISSION_START with no mission: FAILED, said why.
     let start = ep.handle(GCS, &command(300, [0.0; 7]));
-    assert_eq!(acks(&start), vec![(300, commands::result::FAILED)]);
+    assert_eq!(
+        acks(&start),
+        vec![(300, MavResult::MAV_RESULT_FAILED as u8)]
+    );
     out.extend(set_mode(&mut ep, FlightMode::Auto));
     out.extend(run_until(&mut ep, 20_000_000));
     assert!(
@@ -715,8 +720,13 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
         let plan = [
             home,
             takeoff,
-            item(mcmd::NAV_WAYPOINT, 100.0, 0.0, 20.0),
-            item(mcmd::NAV_VTOL_LAND, 100.0 - leg_m, 0.0, 0.0),
+            item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 100.0, 0.0, 20.0),
+            item(
+                MavCmd::MAV_CMD_NAV_VTOL_LAND as u16,
+                100.0 - leg_m,
+                0.0,
+                0.0,
+            ),
         ];
         upload(&mut ep, &plan);
         let out = run_until(&mut ep, 3_000_000);
@@ -729,7 +739,7 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
         if arms {
             assert_eq!(acks(&out), vec![(400, 0)]);
         } else {
-            assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+            assert_eq!(acks(&out), vec![(400, MavResult::MAV_RESULT_FAILED as u8)]);
             assert_eq!(
                 texts(&out)[0].text.to_str().unwrap(),
                 "Arm: VTOL land too short, min 9m"
@@ -745,8 +755,8 @@ fn a_vtol_landing_too_short_after_its_waypoint_stops_arming() {
     let plan = [
         home,
         takeoff,
-        item(mcmd::NAV_WAYPOINT, 100.0, 0.0, 20.0),
-        item(mcmd::NAV_VTOL_LAND, 70.1, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 100.0, 0.0, 20.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, 70.1, 0.0, 0.0),
     ];
     upload(&mut ep, &plan);
     let out = run_until(&mut ep, 3_000_000);

@@ -13,6 +13,7 @@ pub(super) const GCS_SYSID: u8 = 255;
 pub(super) const GCS_COMPID: u8 = 190;
 
 /// A mission item at a point `north_m`, `east_m` from the origin, `alt` m above home.
+#[allow(deprecated)] // MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, as ground stations still send it
 pub(super) fn item(
     command: u16,
     north_m: f64,
@@ -27,7 +28,7 @@ pub(super) fn item(
         y: p.lon_e7,
         z: alt,
         command,
-        frame: crate::nav::mission::frame::GLOBAL_RELATIVE_ALT_INT,
+        frame: apm::MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT as u8,
         current: 0,
         autocontinue: 1,
     }
@@ -35,26 +36,26 @@ pub(super) fn item(
 
 /// The start of a VTOL mission: home (item 0) and a VTOL take-off to `alt` m where it stands.
 pub(super) fn home_and_vtol_takeoff(alt: f32) -> [crate::nav::mission::MissionItem; 2] {
-    use crate::nav::mission::cmd;
+    use apm::MavCmd;
     [
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
         crate::nav::mission::MissionItem {
             x: 0,
             y: 0,
-            ..item(cmd::NAV_VTOL_TAKEOFF, 0.0, 0.0, alt)
+            ..item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 0.0, alt)
         },
     ]
 }
 
 /// A DO_VTOL_TRANSITION item to forward flight (MAV_VTOL_STATE_FW).
 pub(super) fn transition_to_fw() -> crate::nav::mission::MissionItem {
-    use crate::nav::mission::{cmd, frame};
+    use apm::{MavCmd, MavFrame};
     crate::nav::mission::MissionItem {
         x: 0,
         y: 0,
-        frame: frame::MISSION,
+        frame: MavFrame::MAV_FRAME_MISSION as u8,
         params: [4.0, 0.0, 0.0, f32::NAN],
-        ..item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 0.0)
+        ..item(MavCmd::MAV_CMD_DO_VTOL_TRANSITION as u16, 0.0, 0.0, 0.0)
     }
 }
 

@@ -1,6 +1,7 @@
 //! State-machine tests of the endpoint: frames in, frames out, no sockets and no sleeping.
 
 use super::test_support::*;
+use apm::MavResult;
 
 #[test]
 fn heartbeat_fields_and_not_armed_by_default() {
@@ -38,7 +39,10 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
     payload[30] = 1;
     let frame = from_gcs(0, vtol_link::protocol::id::COMMAND_LONG, &payload);
     let out = ep.handle(GCS, &frame);
-    assert_eq!(acks(&out), vec![(65000, commands::result::UNSUPPORTED)]);
+    assert_eq!(
+        acks(&out),
+        vec![(65000, MavResult::MAV_RESULT_UNSUPPORTED as u8)]
+    );
     // A known but unimplemented command too.
     let out = ep.handle(
         GCS,
@@ -48,7 +52,10 @@ fn unknown_command_id_gets_unsupported_via_raw_path() {
             0,
         )),
     );
-    assert_eq!(acks(&out), vec![(183, commands::result::UNSUPPORTED)]);
+    assert_eq!(
+        acks(&out),
+        vec![(183, MavResult::MAV_RESULT_UNSUPPORTED as u8)]
+    );
     // Addressed to another system: no ACK at all.
     payload[30] = 42;
     let frame = from_gcs(0, vtol_link::protocol::id::COMMAND_LONG, &payload);
@@ -66,7 +73,7 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
         0,
     );
     let out = ep.handle(GCS, &v2(&arm));
-    assert_eq!(acks(&out), vec![(400, commands::result::FAILED)]);
+    assert_eq!(acks(&out), vec![(400, MavResult::MAV_RESULT_FAILED as u8)]);
     assert!(
         texts(&decode(&out)).iter().any(|t| t.starts_with("PreArm")),
         "{:?}",
@@ -75,7 +82,10 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
 
     run_until(&mut ep, 2_000_000);
     let out = ep.handle(GCS, &v2(&arm));
-    assert_eq!(acks(&out), vec![(400, commands::result::ACCEPTED)]);
+    assert_eq!(
+        acks(&out),
+        vec![(400, MavResult::MAV_RESULT_ACCEPTED as u8)]
+    );
     let out = run_until(&mut ep, 3_000_000);
     let hb = heartbeat_of(&decode(&out));
     assert!(
@@ -92,7 +102,7 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
     );
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&bad))),
-        vec![(400, commands::result::DENIED)]
+        vec![(400, MavResult::MAV_RESULT_DENIED as u8)]
     );
 
     // Mode change, then its retransmission with confirmation 1: same ACK, no second action.
@@ -123,7 +133,7 @@ fn arm_acks_and_sets_bit_128_and_retry_is_not_acted_twice() {
     // Unknown mode number.
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&mode(3.0, 0)))),
-        vec![(176, commands::result::FAILED)]
+        vec![(176, MavResult::MAV_RESULT_FAILED as u8)]
     );
 }
 
@@ -168,7 +178,7 @@ fn set_message_interval_changes_the_rate() {
     );
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&set))),
-        vec![(511, commands::result::DENIED)]
+        vec![(511, MavResult::MAV_RESULT_DENIED as u8)]
     );
 }
 
@@ -203,7 +213,7 @@ fn request_message_autopilot_version_follows_the_ack() {
     );
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&bad))),
-        vec![(512, commands::result::FAILED)]
+        vec![(512, MavResult::MAV_RESULT_FAILED as u8)]
     );
 }
 
@@ -221,7 +231,7 @@ fn v1_input_is_accepted_and_answered_in_v2() {
             0,
         )),
     );
-    assert_eq!(acks(&out), vec![(3000, commands::result::DENIED)]);
+    assert_eq!(acks(&out), vec![(3000, MavResult::MAV_RESULT_DENIED as u8)]);
 }
 
 #[test]
@@ -565,7 +575,7 @@ fn qloiter_armed_on_the_ground_without_sticks_stays_landed_and_disarms() {
     );
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&set_mode))),
-        vec![(176, commands::result::ACCEPTED)]
+        vec![(176, MavResult::MAV_RESULT_ACCEPTED as u8)]
     );
     run_until(&mut ep, 2_500_000);
     let arm = |p1: f32| {
@@ -577,7 +587,7 @@ fn qloiter_armed_on_the_ground_without_sticks_stays_landed_and_disarms() {
     };
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&arm(1.0)))),
-        vec![(400, commands::result::ACCEPTED)]
+        vec![(400, MavResult::MAV_RESULT_ACCEPTED as u8)]
     );
     run_until(&mut ep, 12_500_000);
     let t = ep.vehicle().telemetry();
@@ -586,7 +596,7 @@ fn qloiter_armed_on_the_ground_without_sticks_stays_landed_and_disarms() {
     assert!(t.pos_m.z.abs() < 0.01, "{:?}", t.pos_m);
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&arm(0.0)))),
-        vec![(400, commands::result::ACCEPTED)]
+        vec![(400, MavResult::MAV_RESULT_ACCEPTED as u8)]
     );
     assert!(!ep.vehicle().telemetry().armed);
 
@@ -606,7 +616,7 @@ fn qloiter_armed_on_the_ground_without_sticks_stays_landed_and_disarms() {
     };
     assert_eq!(
         acks(&ep.handle(GCS, &v2(&arm(1.0)))),
-        vec![(400, commands::result::ACCEPTED)]
+        vec![(400, MavResult::MAV_RESULT_ACCEPTED as u8)]
     );
     let _ = ep.handle(GCS, &throttle(1500));
     run_until(&mut ep, 15_000_000);

@@ -5,6 +5,8 @@
 //! (`navigation`): each control tick they fly one [`Guidance`]. The fixed-wing modes (FBWA,
 //! CRUISE) fly the forward-flight law (`control::forward`) after a tailsitter transition.
 
+use mavlink::dialects::ardupilotmega::PlaneMode;
+
 /// A flight mode of the twin (ArduPlane custom_mode numbers).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum FlightMode {
@@ -75,21 +77,27 @@ impl FlightMode {
         Self::QRtl,
     ];
 
+    /// The ArduPlane mode, as the dialect's `PLANE_MODE` names it.
+    #[must_use]
+    pub const fn plane_mode(self) -> PlaneMode {
+        match self {
+            Self::QStabilize => PlaneMode::PLANE_MODE_QSTABILIZE,
+            Self::QHover => PlaneMode::PLANE_MODE_QHOVER,
+            Self::QLoiter => PlaneMode::PLANE_MODE_QLOITER,
+            Self::QLand => PlaneMode::PLANE_MODE_QLAND,
+            Self::Guided => PlaneMode::PLANE_MODE_GUIDED,
+            Self::Auto => PlaneMode::PLANE_MODE_AUTO,
+            Self::QRtl => PlaneMode::PLANE_MODE_QRTL,
+            Self::Rtl => PlaneMode::PLANE_MODE_RTL,
+            Self::Fbwa => PlaneMode::PLANE_MODE_FLY_BY_WIRE_A,
+            Self::Cruise => PlaneMode::PLANE_MODE_CRUISE,
+        }
+    }
+
     /// The ArduPlane `custom_mode` number.
     #[must_use]
     pub const fn custom_mode(self) -> u32 {
-        match self {
-            Self::QStabilize => 17,
-            Self::QHover => 18,
-            Self::QLoiter => 19,
-            Self::QLand => 20,
-            Self::Guided => 15,
-            Self::Auto => 10,
-            Self::QRtl => 21,
-            Self::Rtl => 11,
-            Self::Fbwa => 5,
-            Self::Cruise => 7,
-        }
+        self.plane_mode() as u32
     }
 
     /// The mode for an ArduPlane `custom_mode` number, if the twin has it.

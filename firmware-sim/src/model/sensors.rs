@@ -15,7 +15,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::model::control::PilotInput;
+use crate::model::signals::PilotInput;
 
 /// ADXRS150 full scale, °/s (the output saturates beyond it).
 pub const GYRO_RANGE_DEG_S: f64 = 150.0;

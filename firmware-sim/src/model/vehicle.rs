@@ -21,9 +21,7 @@
 use nalgebra::Vector3;
 
 use crate::model::airframe::{Airframe, ModelMode};
-use crate::model::control::{
-    ActuatorCommand, ControlInput, ControlOutput, Controller, GainError, Gains, PilotInput,
-};
+use crate::model::control::{ControlInput, ControlOutput, Controller, GainError, Gains};
 use crate::model::estimator::Estimator;
 use crate::model::frames::Euler;
 use crate::model::integrator::rk4_step;
@@ -33,6 +31,7 @@ use crate::model::plant::battery::{Battery, BatteryConfig};
 use crate::model::plant::rigid_body::{EulerTrig, RigidBody};
 use crate::model::plant::{self, PlantInput, PlantState, aero, ground, surface_airflow};
 use crate::model::sensors::{self, Sensors};
+use crate::model::signals::{ActuatorCommand, CRASH_TILT_RAD, PilotInput};
 
 mod arming;
 mod forward_flight;
@@ -49,8 +48,6 @@ use wind::Wind;
 pub const PHYSICS_DT_S: f64 = 0.001;
 /// The default physics step in µs (the simulation clock counts whole steps).
 pub const PHYSICS_DT_US: u64 = 1000;
-/// Tilt beyond which the vehicle is considered tipped over (crash), rad.
-pub const CRASH_TILT_RAD: f64 = std::f64::consts::FRAC_PI_3;
 /// cos([`CRASH_TILT_RAD`]), compared with cos θ cos φ every step.
 const CRASH_COS_TILT: f64 = 0.5;
 /// Sink rate at touchdown above which the landing is a crash, m/s.

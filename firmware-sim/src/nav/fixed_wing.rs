@@ -2,12 +2,13 @@
 //! fly a waypoint, an approach or a loiter on the wing, and the guidance for each (L1 for the
 //! bank, the height and the trim airspeed for the energy controller). Frames: local NED.
 
+use mavlink::dialects::ardupilotmega::MavCmd;
 use nalgebra::{Vector2, Vector3};
 
 use crate::model::mode::{ForwardGuidance, Guidance, VtolState};
 use crate::nav::globe::{GeoPoint, Origin, horizontal_distance_m};
 use crate::nav::l1::{self, L1Params};
-use crate::nav::mission::{Mission, MissionItem, cmd};
+use crate::nav::mission::{Mission, MissionItem};
 
 /// A fixed-wing approach to a VTOL landing starts the back transition this far from the
 /// landing point, m: the slowing stage and the pull-up take about 50 m from the trim airspeed;
@@ -91,11 +92,18 @@ pub fn vtol_land_too_short(
         .skip(1)
         .zip(items.iter().skip(2))
         .find_map(|(prev, it)| {
-            let land = matches!(it.command, cmd::NAV_LAND | cmd::NAV_VTOL_LAND);
+            let land = matches!(
+                it.cmd(),
+                Some(MavCmd::MAV_CMD_NAV_LAND | MavCmd::MAV_CMD_NAV_VTOL_LAND)
+            );
             // A point of latitude and longitude 0 is "here": ArduPilot's distance to it is the
             // distance to 0°, 0°, never short.
             let placed = |i: &MissionItem| i.x != 0 || i.y != 0;
-            if !(land && prev.command == cmd::NAV_WAYPOINT && placed(prev) && placed(it)) {
+            if !(land
+                && prev.command == MavCmd::MAV_CMD_NAV_WAYPOINT as u16
+                && placed(prev)
+                && placed(it))
+            {
                 return None;
             }
             let at = |i: &MissionItem| {
@@ -210,8 +218,8 @@ mod tests {
 #[cfg(test)]
 mod mission_check_tests {
     use super::*;
-    use crate::nav::mission::frame;
     use crate::nav::mission::test_items::{item, limits};
+    use mavlink::dialects::ardupilotmega::MavFrame;
 
     fn at(command: u16, north_m: f64) -> MissionItem {
         let p = limits().origin.to_global(&Vector3::new(north_m, 0.0, 0.0));
@@ -225,10 +233,10 @@ mod mission_check_tests {
         let o = limits().origin;
         let mission = |leg_m: f64| {
             Mission::new(vec![
-                at(cmd::NAV_WAYPOINT, 0.0),
-                at(cmd::NAV_VTOL_TAKEOFF, 0.0),
-                at(cmd::NAV_WAYPOINT, 100.0),
-                at(cmd::NAV_VTOL_LAND, 100.0 - leg_m),
+                at(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0),
+                at(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0),
+                at(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 100.0),
+                at(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, 100.0 - leg_m),
             ])
         };
         assert_eq!(
@@ -248,11 +256,11 @@ mod mission_check_tests {
         );
         // NAV_LAND counts too; a DO item between them, or a landing "here", does not.
         let mut m = mission(20.0).items().to_vec();
-        m[3].command = cmd::NAV_LAND;
+        m[3].command = MavCmd::MAV_CMD_NAV_LAND as u16;
         assert!(vtol_land_too_short(&Mission::new(m.clone()), &o, 12.0, 2.0).is_some());
         let mut with_do = m.clone();
-        let mut tr = at(cmd::DO_VTOL_TRANSITION, 0.0);
-        (tr.x, tr.y, tr.frame, tr.params[0]) = (0, 0, frame::MISSION, 3.0);
+        let mut tr = at(MavCmd::MAV_CMD_DO_VTOL_TRANSITION as u16, 0.0);
+        (tr.x, tr.y, tr.frame, tr.params[0]) = (0, 0, MavFrame::MAV_FRAME_MISSION as u8, 3.0);
         with_do.insert(3, tr);
         assert_eq!(
             vtol_land_too_short(&Mission::new(with_do), &o, 12.0, 2.0),

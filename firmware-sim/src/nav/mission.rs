@@ -24,8 +24,9 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use mavlink::dialects::ardupilotmega::MavMissionResult;
+use mavlink::dialects::ardupilotmega::{MavCmd, MavMissionResult, MavVtolState};
 use nalgebra::{Vector2, Vector3};
+use num_traits::FromPrimitive as _;
 
 use crate::nav::globe::{GeoPoint, Origin, valid_lat_lon};
 
@@ -33,72 +34,53 @@ use crate::nav::globe::{GeoPoint, Origin, valid_lat_lon};
 /// order); an upload announcing more is refused with `MAV_MISSION_NO_SPACE`.
 pub const MAX_ITEMS: u16 = 1000;
 
-/// `MAV_CMD` numbers of the items the twin flies.
-pub mod cmd {
-    /// MAV_CMD_NAV_WAYPOINT: fly to a point, hold `param1` seconds.
-    pub const NAV_WAYPOINT: u16 = 16;
-    /// MAV_CMD_NAV_LOITER_TIME: fly to a point, hold `param1` seconds.
-    pub const NAV_LOITER_TIME: u16 = 19;
-    /// MAV_CMD_NAV_RETURN_TO_LAUNCH: fly home and land.
-    pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
-    /// MAV_CMD_NAV_LAND: flown as NAV_VTOL_LAND.
-    pub const NAV_LAND: u16 = 21;
-    /// MAV_CMD_NAV_TAKEOFF: flown as NAV_VTOL_TAKEOFF.
-    pub const NAV_TAKEOFF: u16 = 22;
-    /// MAV_CMD_NAV_VTOL_TAKEOFF: climb straight up to the altitude.
-    pub const NAV_VTOL_TAKEOFF: u16 = 84;
-    /// MAV_CMD_NAV_VTOL_LAND: fly to the point (or stay) and land.
-    pub const NAV_VTOL_LAND: u16 = 85;
-    /// MAV_CMD_DO_VTOL_TRANSITION: `param1` the MAV_VTOL_STATE to go to (3 MC, 4 FW).
-    pub const DO_VTOL_TRANSITION: u16 = 3000;
-}
-
-/// `MAV_VTOL_STATE` numbers a transition goes to.
-pub mod mav_vtol_state {
-    /// Multicopter (hover).
-    pub const MC: u8 = 3;
-    /// Fixed wing.
-    pub const FW: u8 = 4;
-}
-
-/// `MAV_FRAME` numbers.
+/// The `MAV_FRAME` classes the twin tells apart, by the dialect's [`MavFrame`]. Items keep the
+/// frame number as sent (a number the dialect lacks is stored and returned too).
+// The `_INT` frames and the BODY_*NED ones are deprecated in common.xml but still sent.
+#[allow(deprecated)]
 pub mod frame {
-    /// Global, altitude above mean sea level (degrees as floats in MISSION_ITEM).
-    pub const GLOBAL: u8 = 0;
-    /// Local NED.
-    pub const LOCAL_NED: u8 = 1;
-    /// No position (the item's parameters say everything).
-    pub const MISSION: u8 = 2;
-    /// Global, altitude above home.
-    pub const GLOBAL_RELATIVE_ALT: u8 = 3;
-    /// Local ENU.
-    pub const LOCAL_ENU: u8 = 4;
-    /// Global, altitude AMSL (1e-7 degree integers).
-    pub const GLOBAL_INT: u8 = 5;
-    /// Global, altitude above home (1e-7 degree integers).
-    pub const GLOBAL_RELATIVE_ALT_INT: u8 = 6;
-    /// Local offset from the vehicle.
-    pub const LOCAL_OFFSET_NED: u8 = 7;
+    use mavlink::dialects::ardupilotmega::MavFrame as F;
+    use num_traits::FromPrimitive as _;
 
     /// Latitude/longitude frames.
     #[must_use]
-    pub const fn is_global(f: u8) -> bool {
+    pub fn is_global(f: u8) -> bool {
         matches!(
-            f,
-            GLOBAL | GLOBAL_RELATIVE_ALT | GLOBAL_INT | GLOBAL_RELATIVE_ALT_INT
+            F::from_u8(f),
+            Some(
+                F::MAV_FRAME_GLOBAL
+                    | F::MAV_FRAME_GLOBAL_RELATIVE_ALT
+                    | F::MAV_FRAME_GLOBAL_INT
+                    | F::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+            )
         )
     }
 
     /// Frames whose altitude is relative to home.
     #[must_use]
-    pub const fn is_relative(f: u8) -> bool {
-        matches!(f, GLOBAL_RELATIVE_ALT | GLOBAL_RELATIVE_ALT_INT)
+    pub fn is_relative(f: u8) -> bool {
+        matches!(
+            F::from_u8(f),
+            Some(F::MAV_FRAME_GLOBAL_RELATIVE_ALT | F::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+        )
     }
 
-    /// Local metric frames (x, y travel as metres × 1e4 in the integer messages).
+    /// Local metric frames (x, y travel as metres × 1e4 in the integer messages). Frame 22, past
+    /// the dialect's last, is counted local as it always was.
     #[must_use]
-    pub const fn is_local(f: u8) -> bool {
-        matches!(f, LOCAL_NED | LOCAL_ENU | LOCAL_OFFSET_NED) || matches!(f, 8 | 9 | 20..=22)
+    pub fn is_local(f: u8) -> bool {
+        matches!(
+            F::from_u8(f),
+            Some(
+                F::MAV_FRAME_LOCAL_NED
+                    | F::MAV_FRAME_LOCAL_ENU
+                    | F::MAV_FRAME_LOCAL_OFFSET_NED
+                    | F::MAV_FRAME_BODY_NED
+                    | F::MAV_FRAME_BODY_OFFSET_NED
+                    | F::MAV_FRAME_LOCAL_FRD
+                    | F::MAV_FRAME_LOCAL_FLU
+            )
+        ) || f == 22
     }
 }
 
@@ -279,25 +261,32 @@ pub struct ItemTarget {
 
 /// The name a ground station shows for a command, for refusal sentences.
 fn command_name(c: u16) -> String {
-    use num_traits::FromPrimitive as _;
-    mavlink::dialects::ardupilotmega::MavCmd::from_u16(c).map_or_else(
+    MavCmd::from_u16(c).map_or_else(
         || format!("command {c}"),
         |m| format!("{m:?}").trim_start_matches("MAV_CMD_").to_owned(),
     )
 }
 
 impl MissionItem {
+    /// The item's command as the dialect names it; `None` for a number the dialect lacks.
+    #[must_use]
+    pub fn cmd(&self) -> Option<MavCmd> {
+        MavCmd::from_u16(self.command)
+    }
+
     /// Whether the item moves the vehicle to a position it names.
     #[must_use]
-    pub const fn has_position(&self) -> bool {
+    pub fn has_position(&self) -> bool {
         matches!(
-            self.command,
-            cmd::NAV_WAYPOINT
-                | cmd::NAV_LOITER_TIME
-                | cmd::NAV_LAND
-                | cmd::NAV_VTOL_LAND
-                | cmd::NAV_TAKEOFF
-                | cmd::NAV_VTOL_TAKEOFF
+            self.cmd(),
+            Some(
+                MavCmd::MAV_CMD_NAV_WAYPOINT
+                    | MavCmd::MAV_CMD_NAV_LOITER_TIME
+                    | MavCmd::MAV_CMD_NAV_LAND
+                    | MavCmd::MAV_CMD_NAV_VTOL_LAND
+                    | MavCmd::MAV_CMD_NAV_TAKEOFF
+                    | MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF
+            )
         )
     }
 
@@ -320,29 +309,29 @@ impl MissionItem {
 /// `MAV_MISSION_UNSUPPORTED_FRAME`, `MAV_MISSION_INVALID_PARAM*` for a bad value or a point
 /// outside the envelope.
 pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), Refusal> {
+    use MavCmd as C;
     use MavMissionResult as R;
     let c = item.command;
-    let supported = matches!(
-        c,
-        cmd::NAV_WAYPOINT
-            | cmd::NAV_LOITER_TIME
-            | cmd::NAV_RETURN_TO_LAUNCH
-            | cmd::NAV_LAND
-            | cmd::NAV_TAKEOFF
-            | cmd::NAV_VTOL_TAKEOFF
-            | cmd::NAV_VTOL_LAND
-            | cmd::DO_VTOL_TRANSITION
-    );
-    if !supported {
+    let Some(
+        command @ (C::MAV_CMD_NAV_WAYPOINT
+        | C::MAV_CMD_NAV_LOITER_TIME
+        | C::MAV_CMD_NAV_RETURN_TO_LAUNCH
+        | C::MAV_CMD_NAV_LAND
+        | C::MAV_CMD_NAV_TAKEOFF
+        | C::MAV_CMD_NAV_VTOL_TAKEOFF
+        | C::MAV_CMD_NAV_VTOL_LAND
+        | C::MAV_CMD_DO_VTOL_TRANSITION),
+    ) = item.cmd()
+    else {
         return Err(Refusal::new(
             R::MAV_MISSION_UNSUPPORTED,
             format!("Mission item {seq}: {} is not supported", command_name(c)),
         ));
-    }
+    };
     let to = item.params[0];
-    if c == cmd::DO_VTOL_TRANSITION
-        && to != f32::from(mav_vtol_state::MC)
-        && to != f32::from(mav_vtol_state::FW)
+    if command == C::MAV_CMD_DO_VTOL_TRANSITION
+        && to != f32::from(MavVtolState::MAV_VTOL_STATE_MC as u8)
+        && to != f32::from(MavVtolState::MAV_VTOL_STATE_FW as u8)
     {
         return Err(Refusal::new(
             R::MAV_MISSION_INVALID_PARAM1,
@@ -359,13 +348,17 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
         ));
     }
     let hold = item.params[0];
-    if matches!(c, cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME) && !(0.0..=3600.0).contains(&hold) {
+    if matches!(
+        command,
+        C::MAV_CMD_NAV_WAYPOINT | C::MAV_CMD_NAV_LOITER_TIME
+    ) && !(0.0..=3600.0).contains(&hold)
+    {
         return Err(Refusal::new(
             R::MAV_MISSION_INVALID_PARAM1,
             format!("Mission item {seq}: hold time {hold} s outside 0..3600"),
         ));
     }
-    if c == cmd::NAV_WAYPOINT && item.params[1] < 0.0 {
+    if command == C::MAV_CMD_NAV_WAYPOINT && item.params[1] < 0.0 {
         return Err(Refusal::new(
             R::MAV_MISSION_INVALID_PARAM2,
             format!("Mission item {seq}: negative acceptance radius"),
@@ -389,8 +382,11 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
         t.xy_ned_m.map_or(limits.home_ned_m.y, |v| v.y),
         t.z_ned_m,
     );
-    let takeoff = matches!(c, cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF);
-    let land = matches!(c, cmd::NAV_LAND | cmd::NAV_VTOL_LAND);
+    let takeoff = matches!(
+        command,
+        C::MAV_CMD_NAV_TAKEOFF | C::MAV_CMD_NAV_VTOL_TAKEOFF
+    );
+    let land = matches!(command, C::MAV_CMD_NAV_LAND | C::MAV_CMD_NAV_VTOL_LAND);
     // A landing's altitude is not flown (it descends to the ground); check only its position.
     let checked = if land {
         Vector3::new(ned.x, ned.y, limits.home_ned_m.z)
@@ -415,7 +411,7 @@ pub fn check_item(seq: u16, item: &MissionItem, limits: &Limits) -> Result<(), R
 }
 
 /// A mission file that cannot be used: unreadable, or a line that is not a mission item.
-pub type MissionFileError = crate::atomic_file::TextFileError;
+pub type MissionFileError = vtol_link::text_file::TextFileError;
 
 /// The header of the `QGC WPL 110` format.
 pub const WPL_HEADER: &str = "QGC WPL 110";
@@ -484,7 +480,7 @@ impl Mission {
     /// numbered 0, 1, 2… in order.
     ///
     /// # Errors
-    /// [`TextFileError::Line`](crate::atomic_file::TextFileError::Line) naming the first bad line.
+    /// [`TextFileError::Line`](vtol_link::text_file::TextFileError::Line) naming the first bad line.
     pub fn from_wpl_str(text: &str, path: &Path) -> Result<Self, MissionFileError> {
         let err = |line: usize, reason: String| MissionFileError::line(path, line, reason);
         let mut lines = text.lines().enumerate();
@@ -569,16 +565,16 @@ impl Mission {
     /// # Errors
     /// I/O errors and everything [`Mission::from_wpl_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, MissionFileError> {
-        let text = crate::atomic_file::read_text(path)?;
+        let text = vtol_link::text_file::read_text(path)?;
         Self::from_wpl_str(&text, path)
     }
 
     /// Writes the mission atomically (a temporary file in the same directory, flushed, renamed).
     ///
     /// # Errors
-    /// [`TextFileError::Io`](crate::atomic_file::TextFileError::Io).
+    /// [`TextFileError::Io`](vtol_link::text_file::TextFileError::Io).
     pub fn save(&self, path: &Path) -> Result<(), MissionFileError> {
-        crate::atomic_file::write_text(path, &self.to_wpl_string())
+        vtol_link::text_file::write_text(path, &self.to_wpl_string())
     }
 }
 
@@ -598,8 +594,10 @@ pub fn file_beside(param_file: &Path) -> PathBuf {
 
 /// What the mission's and the navigator's tests build missions from.
 #[cfg(test)]
+#[allow(deprecated)]
 pub(crate) mod test_items {
     use super::*;
+    use mavlink::dialects::ardupilotmega::MavFrame;
 
     /// A 100 m radius and 50 m ceiling around home at the origin, near Canberra.
     pub fn limits() -> Limits {
@@ -619,7 +617,7 @@ pub(crate) mod test_items {
             y,
             z: alt,
             command,
-            frame: frame::GLOBAL_RELATIVE_ALT_INT,
+            frame: MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT as u8,
             current: 0,
             autocontinue: 1,
         }
@@ -627,9 +625,11 @@ pub(crate) mod test_items {
 }
 
 #[cfg(test)]
+#[allow(deprecated)]
 mod tests {
     use super::test_items::limits;
     use super::*;
+    use mavlink::dialects::ardupilotmega::MavFrame;
 
     fn wp(command: u16, lat_e7: i32, lon_e7: i32, alt: f32) -> MissionItem {
         test_items::item(command, [0.0, 0.0, 0.0, f32::NAN], lat_e7, lon_e7, alt)
@@ -640,18 +640,18 @@ mod tests {
         let l = limits();
         let (lat, lon) = (-353_632_610 + 450, 1_491_652_300);
         for c in [
-            cmd::NAV_WAYPOINT,
-            cmd::NAV_LOITER_TIME,
-            cmd::NAV_VTOL_TAKEOFF,
-            cmd::NAV_VTOL_LAND,
-            cmd::NAV_TAKEOFF,
-            cmd::NAV_LAND,
+            MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+            MavCmd::MAV_CMD_NAV_LOITER_TIME as u16,
+            MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16,
+            MavCmd::MAV_CMD_NAV_VTOL_LAND as u16,
+            MavCmd::MAV_CMD_NAV_TAKEOFF as u16,
+            MavCmd::MAV_CMD_NAV_LAND as u16,
         ] {
             check_item(1, &wp(c, lat, lon, 3.0), &l).unwrap();
         }
         let rtl = MissionItem {
-            command: cmd::NAV_RETURN_TO_LAUNCH,
-            frame: frame::MISSION,
+            command: MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH as u16,
+            frame: MavFrame::MAV_FRAME_MISSION as u8,
             ..wp(0, 0, 0, 0.0)
         };
         check_item(4, &rtl, &l).unwrap();
@@ -662,8 +662,8 @@ mod tests {
         let e = check_item(2, &wp(65000, lat, lon, 3.0), &l).unwrap_err();
         assert_eq!(e.reason, "Mission item 2: command 65000 is not supported");
         let local = MissionItem {
-            frame: frame::LOCAL_NED,
-            ..wp(cmd::NAV_WAYPOINT, 10, 10, 3.0)
+            frame: MavFrame::MAV_FRAME_LOCAL_NED as u8,
+            ..wp(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 10, 10, 3.0)
         };
         assert_eq!(
             check_item(1, &local, &l).unwrap_err().result,
@@ -675,18 +675,23 @@ mod tests {
     fn envelope_and_values() {
         let l = limits();
         // 0.001 degree of latitude is 111 m: beyond the 100 m radius.
-        let far = wp(cmd::NAV_WAYPOINT, -353_632_610 + 10_000, 1_491_652_300, 3.0);
+        let far = wp(
+            MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+            -353_632_610 + 10_000,
+            1_491_652_300,
+            3.0,
+        );
         let e = check_item(1, &far, &l).unwrap_err();
         assert_eq!(e.result, MavMissionResult::MAV_MISSION_INVALID_PARAM5_X);
         assert!(e.reason.contains("NAV_RADIUS_MAX"), "{}", e.reason);
-        let high = wp(cmd::NAV_WAYPOINT, 0, 0, 60.0);
+        let high = wp(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0, 0, 60.0);
         let e = check_item(1, &high, &l).unwrap_err();
         assert_eq!(e.result, MavMissionResult::MAV_MISSION_INVALID_PARAM7);
-        let nan = wp(cmd::NAV_WAYPOINT, 0, 0, f32::NAN);
+        let nan = wp(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0, 0, f32::NAN);
         assert!(check_item(1, &nan, &l).is_err());
-        let ground_takeoff = wp(cmd::NAV_VTOL_TAKEOFF, 0, 0, 0.0);
+        let ground_takeoff = wp(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0, 0, 0.0);
         assert!(check_item(1, &ground_takeoff, &l).is_err());
-        let mut neg_hold = wp(cmd::NAV_LOITER_TIME, 0, 0, 2.0);
+        let mut neg_hold = wp(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16, 0, 0, 2.0);
         neg_hold.params[0] = -1.0;
         assert_eq!(
             check_item(1, &neg_hold, &l).unwrap_err().result,
@@ -694,8 +699,8 @@ mod tests {
         );
         // AMSL altitude: 587 m is 3 m above the 584 m ground.
         let amsl = MissionItem {
-            frame: frame::GLOBAL_INT,
-            ..wp(cmd::NAV_WAYPOINT, 0, 0, 587.0)
+            frame: MavFrame::MAV_FRAME_GLOBAL_INT as u8,
+            ..wp(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0, 0, 587.0)
         };
         check_item(1, &amsl, &l).unwrap();
         assert!((amsl.target(&l).z_ned_m + 3.0).abs() < 1e-9);
@@ -706,12 +711,22 @@ mod tests {
     fn wpl_round_trip_is_exact() {
         let mut items = vec![
             MissionItem {
-                frame: frame::GLOBAL,
-                ..wp(cmd::NAV_WAYPOINT, -353_632_610, 1_491_652_300, 584.0)
+                frame: MavFrame::MAV_FRAME_GLOBAL as u8,
+                ..wp(
+                    MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+                    -353_632_610,
+                    1_491_652_300,
+                    584.0,
+                )
             },
-            wp(cmd::NAV_VTOL_TAKEOFF, 0, 0, 2.5),
-            wp(cmd::NAV_WAYPOINT, -353_632_161, 1_491_651_234, 3.333_333_3),
-            wp(cmd::NAV_LOITER_TIME, 5, -7, 0.1),
+            wp(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0, 0, 2.5),
+            wp(
+                MavCmd::MAV_CMD_NAV_WAYPOINT as u16,
+                -353_632_161,
+                1_491_651_234,
+                3.333_333_3,
+            ),
+            wp(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16, 5, -7, 0.1),
         ];
         items[2].params = [1.5, 0.25, f32::MIN_POSITIVE, -0.0];
         items[3].current = 1;
@@ -751,7 +766,7 @@ mod tests {
         let parm = dir.path().join("twin.parm");
         let path = file_beside(&parm);
         assert_eq!(path, dir.path().join("twin.waypoints"));
-        let m = Mission::new(vec![wp(cmd::NAV_WAYPOINT, 1, 2, 3.0)]);
+        let m = Mission::new(vec![wp(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 1, 2, 3.0)]);
         m.save(&path).unwrap();
         assert_eq!(Mission::load(&path).unwrap(), m);
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
@@ -764,10 +779,19 @@ mod tests {
 
     #[test]
     fn float_xy_conversions() {
-        assert_eq!(xy_from_float(frame::GLOBAL, -35.363_261), -353_632_610);
-        assert_eq!(xy_from_float(frame::LOCAL_NED, 1.5), 15_000);
-        assert_eq!(xy_from_float(frame::MISSION, 3.0), 3);
-        assert_eq!(xy_from_float(frame::GLOBAL, f64::NAN), 0);
-        assert!((xy_to_float(frame::GLOBAL, -353_632_610) + 35.363_261).abs() < 1e-12);
+        assert_eq!(
+            xy_from_float(MavFrame::MAV_FRAME_GLOBAL as u8, -35.363_261),
+            -353_632_610
+        );
+        assert_eq!(
+            xy_from_float(MavFrame::MAV_FRAME_LOCAL_NED as u8, 1.5),
+            15_000
+        );
+        assert_eq!(xy_from_float(MavFrame::MAV_FRAME_MISSION as u8, 3.0), 3);
+        assert_eq!(xy_from_float(MavFrame::MAV_FRAME_GLOBAL as u8, f64::NAN), 0);
+        assert!(
+            (xy_to_float(MavFrame::MAV_FRAME_GLOBAL as u8, -353_632_610) + 35.363_261).abs()
+                < 1e-12
+        );
     }
 }

@@ -28,13 +28,14 @@
 //! altitude law (37) would. Horizontal moves are steps: the nested saturations bound the tilt,
 //! and so the speed, by design.
 
+use mavlink::dialects::ardupilotmega::{MavCmd, MavVtolState};
 use nalgebra::{Vector2, Vector3};
 
 use crate::model::frames::ned_to_paper;
 use crate::model::mode::{FlightMode, Guidance, VtolState};
 use crate::nav::fixed_wing::{self, FixedWingInput};
 use crate::nav::globe::horizontal_distance_m;
-use crate::nav::mission::{Limits, Mission, cmd, mav_vtol_state};
+use crate::nav::mission::{Limits, Mission, MissionItem};
 
 /// Navigation period, µs of sim time (50 Hz).
 pub const NAV_PERIOD_US: u64 = 20_000;
@@ -367,16 +368,16 @@ impl Navigator {
         let here = inp.pos_ned_m;
         let t = item.target(inp.limits);
         let xy = t.xy_ned_m.unwrap_or_else(|| here.xy());
-        self.leg = match item.command {
-            cmd::NAV_TAKEOFF | cmd::NAV_VTOL_TAKEOFF => Leg::Takeoff {
+        self.leg = match item.cmd() {
+            Some(MavCmd::MAV_CMD_NAV_TAKEOFF | MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF) => Leg::Takeoff {
                 xy: here.xy(),
                 z: t.z_ned_m,
             },
-            cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME => {
+            Some(MavCmd::MAV_CMD_NAV_WAYPOINT | MavCmd::MAV_CMD_NAV_LOITER_TIME) => {
                 self.to_the_wing(inp, events);
                 Leg::Goto { xy, z: t.z_ned_m }
             }
-            cmd::NAV_LAND | cmd::NAV_VTOL_LAND => {
+            Some(MavCmd::MAV_CMD_NAV_LAND | MavCmd::MAV_CMD_NAV_VTOL_LAND) => {
                 if inp.landed {
                     landing_here(&here)
                 } else {
@@ -396,14 +397,14 @@ impl Navigator {
                     Leg::LandAt { xy, z: here.z }
                 }
             }
-            cmd::DO_VTOL_TRANSITION => {
-                let forward = item.params[0] as u8 == mav_vtol_state::FW;
+            Some(MavCmd::MAV_CMD_DO_VTOL_TRANSITION) => {
+                let forward = item.params[0] as u8 == MavVtolState::MAV_VTOL_STATE_FW as u8;
                 self.vtol_mode = !forward;
                 events.push(NavEvent::Transition(forward));
                 self.item_done(inp, events, "Transition");
                 return;
             }
-            cmd::NAV_RETURN_TO_LAUNCH => {
+            Some(MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH) => {
                 if inp.landed {
                     landing_here(&here)
                 } else {
@@ -546,8 +547,8 @@ impl Navigator {
         match self.leg {
             Leg::Cruise { from, xy, z } => {
                 let close = horizontal_distance_m(&here, &Vector3::new(xy.x, xy.y, 0.0));
-                let loiter =
-                    inp.mission.get(self.current).map(|i| i.command) == Some(cmd::NAV_LOITER_TIME);
+                let loiter = inp.mission.get(self.current).map(|i| i.command)
+                    == Some(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16);
                 if inp.mode == FlightMode::Guided {
                     // A GUIDED target on the wing is circled once reached (ArduPlane's guided
                     // loiter at WP_LOITER_RAD).
@@ -601,8 +602,12 @@ impl Navigator {
     /// AUTO: the landing the current item asked for is over (touchdown or disarm).
     fn landing_done(&mut self, inp: &NavInput<'_>, events: &mut Vec<NavEvent>) {
         let landing_item = matches!(
-            inp.mission.get(self.current).map(|i| i.command),
-            Some(cmd::NAV_LAND | cmd::NAV_VTOL_LAND | cmd::NAV_RETURN_TO_LAUNCH)
+            inp.mission.get(self.current).and_then(MissionItem::cmd),
+            Some(
+                MavCmd::MAV_CMD_NAV_LAND
+                    | MavCmd::MAV_CMD_NAV_VTOL_LAND
+                    | MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH
+            )
         );
         if matches!(self.leg, Leg::Landing { .. })
             && inp.mode == FlightMode::Auto
@@ -631,7 +636,7 @@ impl Navigator {
             return default;
         }
         match inp.mission.get(self.current) {
-            Some(i) if i.command == cmd::NAV_WAYPOINT && i.params[1] > 0.0 => {
+            Some(i) if i.command == MavCmd::MAV_CMD_NAV_WAYPOINT as u16 && i.params[1] > 0.0 => {
                 f64::from(i.params[1])
             }
             _ => default,
@@ -640,7 +645,10 @@ impl Navigator {
 
     fn item_hold_s(&self, inp: &NavInput<'_>) -> f64 {
         match inp.mission.get(self.current) {
-            Some(i) if matches!(i.command, cmd::NAV_WAYPOINT | cmd::NAV_LOITER_TIME) => {
+            Some(i)
+                if i.command == MavCmd::MAV_CMD_NAV_WAYPOINT as u16
+                    || i.command == MavCmd::MAV_CMD_NAV_LOITER_TIME as u16 =>
+            {
                 f64::from(i.params[0]).clamp(0.0, 3600.0)
             }
             _ => 0.0,

@@ -3,6 +3,7 @@
 use super::*;
 use crate::nav::mission::MissionItem;
 use crate::nav::mission::test_items::{self, limits};
+use mavlink::dialects::ardupilotmega::MavFrame;
 
 struct World {
     nav: Navigator,
@@ -161,11 +162,11 @@ fn guided_takeoff_climbs_at_the_climb_rate_then_holds() {
 #[test]
 fn auto_flies_each_item_then_qrtl_lands_home() {
     let m = Mission::new(vec![
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0), // home slot
-        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
-        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
-        item(cmd::NAV_LOITER_TIME, 8.0, 2.0, 2.0),
-        item(cmd::NAV_WAYPOINT, 6.0, 2.5, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0), // home slot
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 4.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_LOITER_TIME as u16, 8.0, 2.0, 2.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 6.0, 2.5, 0.0),
     ]);
     let mut w = World::new(m);
     w.mode = FlightMode::Auto;
@@ -196,10 +197,10 @@ fn auto_flies_each_item_then_qrtl_lands_home() {
 #[test]
 fn landing_items_and_current_item() {
     let m = Mission::new(vec![
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 2.0, 0.0),
-        item(cmd::NAV_WAYPOINT, 3.0, 2.0, 0.0),
-        item(cmd::NAV_VTOL_LAND, 5.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 2.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 3.0, 2.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, 5.0, 0.0, 0.0),
     ]);
     let mut w = World::new(m);
     assert!(w.call(|n, i, e| n.set_current(9, i, e)).is_err());
@@ -255,9 +256,9 @@ fn transitions(w: &World) -> Vec<bool> {
 #[test]
 fn auto_goes_to_the_wing_for_the_waypoints_after_a_vtol_take_off() {
     let m = Mission::new(vec![
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
-        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 4.0, 3.0, 0.0),
     ]);
     let mut w = World::new(m);
     w.mode = FlightMode::Auto;
@@ -275,9 +276,9 @@ fn auto_goes_to_the_wing_for_the_waypoints_after_a_vtol_take_off() {
 #[test]
 fn with_vtol_auto_the_waypoints_stay_in_a_hover() {
     let m = Mission::new(vec![
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
-        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 4.0, 3.0, 0.0),
     ]);
     let mut w = World::new(m);
     w.vtol_auto = true;
@@ -302,14 +303,14 @@ fn with_vtol_auto_the_waypoints_stay_in_a_hover() {
 /// hover, with no transition asked for; entering AUTO again clears it.
 #[test]
 fn a_transition_to_mc_item_keeps_the_waypoints_in_a_hover() {
-    let mut to_mc = item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 3.0);
-    to_mc.frame = crate::nav::mission::frame::MISSION;
+    let mut to_mc = item(MavCmd::MAV_CMD_DO_VTOL_TRANSITION as u16, 0.0, 0.0, 3.0);
+    to_mc.frame = MavFrame::MAV_FRAME_MISSION as u8;
     let m = Mission::new(vec![
-        item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-        item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 3.0, 0.0),
         to_mc,
-        item(cmd::NAV_WAYPOINT, 4.0, 3.0, 10.0),
-        item(cmd::NAV_WAYPOINT, 8.0, 3.0, 0.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 4.0, 3.0, 10.0),
+        item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 8.0, 3.0, 0.0),
     ]);
     let mut w = World::new(m);
     w.mode = FlightMode::Auto;
@@ -337,13 +338,13 @@ fn a_transition_to_mc_item_keeps_the_waypoints_in_a_hover() {
 #[test]
 fn a_far_vtol_landing_is_approached_on_the_wing() {
     for (north, wing) in [(20.0, true), (16.0, false)] {
-        let mut to_mc = item(cmd::DO_VTOL_TRANSITION, 0.0, 0.0, 3.0);
-        to_mc.frame = crate::nav::mission::frame::MISSION;
+        let mut to_mc = item(MavCmd::MAV_CMD_DO_VTOL_TRANSITION as u16, 0.0, 0.0, 3.0);
+        to_mc.frame = MavFrame::MAV_FRAME_MISSION as u8;
         let m = Mission::new(vec![
-            item(cmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
-            item(cmd::NAV_VTOL_TAKEOFF, 0.0, 3.0, 0.0),
+            item(MavCmd::MAV_CMD_NAV_WAYPOINT as u16, 0.0, 0.0, 0.0),
+            item(MavCmd::MAV_CMD_NAV_VTOL_TAKEOFF as u16, 0.0, 3.0, 0.0),
             to_mc,
-            item(cmd::NAV_VTOL_LAND, north, 0.0, 0.0),
+            item(MavCmd::MAV_CMD_NAV_VTOL_LAND as u16, north, 0.0, 0.0),
         ]);
         let mut w = World::new(m);
         w.mode = FlightMode::Auto;

@@ -29,11 +29,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use crate::atomic_file::TextFileError;
 use crate::model::control::forward_gains::ForwardGains;
 use crate::model::control::position::{HoverHoldGains, HoverLaw};
 use crate::model::control::tecs::TecsLimits;
 use crate::model::control::{GainError, Gains, SaturationLevels};
+use vtol_link::text_file::TextFileError;
 
 /// How a parameter is stored and sent (`MAV_PARAM_TYPE`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -600,7 +600,7 @@ impl Params {
     /// # Errors
     /// I/O errors and everything [`Params::from_parm_str`] refuses.
     pub fn load(path: &Path) -> Result<Self, ParamFileError> {
-        let text = crate::atomic_file::read_text(path)?;
+        let text = vtol_link::text_file::read_text(path)?;
         Self::from_parm_str(&text, path)
     }
 
@@ -610,7 +610,7 @@ impl Params {
     /// # Errors
     /// [`ParamFileError::File`].
     pub fn save(&self, path: &Path) -> Result<(), ParamFileError> {
-        Ok(crate::atomic_file::write_text(
+        Ok(vtol_link::text_file::write_text(
             path,
             &self.to_parm_string(),
         )?)

@@ -4,6 +4,7 @@
 pub mod clock;
 pub mod fleet;
 pub mod harness;
+pub mod radio;
 pub mod serve;
 pub mod signing;
 pub mod sik;

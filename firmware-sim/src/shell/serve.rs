@@ -79,9 +79,11 @@ use crate::nav::mission;
 use crate::nav::params::{ParamFileError, Params};
 use crate::shell::clock::{ClockMode, SimClock};
 use crate::shell::harness::Harness;
+pub use crate::shell::radio::Impairment;
+use crate::shell::radio::Radio;
 use crate::shell::signing::TwinSigning;
 use crate::shell::tlog::{TlogError, TlogSink};
-use crate::shell::vehicle_loop::{Radio, Shell};
+use crate::shell::vehicle_loop::Shell;
 
 pub use crate::shell::signing::signing_file_beside;
 
@@ -123,30 +125,6 @@ pub struct ServeConfig {
     pub signing: Option<SigningKey>,
 }
 
-/// A lossy, slow radio between the twin and its links, in each direction.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Impairment {
-    /// Fraction of frames dropped, 0..1.
-    pub loss: f64,
-    /// Delay of every frame.
-    pub latency: std::time::Duration,
-    /// Seed of the loss draws.
-    pub seed: u64,
-    /// A SiK radio at this baud on each link, reporting RADIO_STATUS ([`crate::shell::sik`]).
-    pub radio_baud: Option<u32>,
-}
-
-impl Default for Impairment {
-    fn default() -> Self {
-        Self {
-            loss: 0.0,
-            latency: std::time::Duration::ZERO,
-            seed: 1,
-            radio_baud: None,
-        }
-    }
-}
-
 impl Default for ServeConfig {
     fn default() -> Self {
         Self {
@@ -179,7 +157,7 @@ impl ServeConfig {
             if path.exists() && !path.is_dir() {
                 self.endpoint.params = Params::load(path)?;
             }
-            crate::atomic_file::check_writable(path).map_err(|source| {
+            vtol_link::text_file::check_writable(path).map_err(|source| {
                 ServeError::ParamFileNotWritable {
                     path: path.clone(),
                     source,

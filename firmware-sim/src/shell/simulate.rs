@@ -16,7 +16,8 @@ use nalgebra::Vector3;
 use crate::model::airframe::ModelMode;
 use crate::model::frames::{Euler, body_rates_to_frd};
 use crate::model::mode::FlightMode;
-use crate::model::vehicle::{CRASH_TILT_RAD, InitialState, Telemetry, Vehicle, VehicleConfig};
+use crate::model::signals::CRASH_TILT_RAD;
+use crate::model::vehicle::{InitialState, Telemetry, Vehicle, VehicleConfig};
 use crate::nav::params::{ParamError, Params};
 
 /// The CSV header (paper frame, SI; τ̃ in rad/s², Γc in N·m, PWM in µs).

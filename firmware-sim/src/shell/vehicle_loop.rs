@@ -1,6 +1,6 @@
 //! The twin's vehicle loop ([`Shell`]): link events and harness calls as they come, the clock's
 //! batches that advance the endpoint, the radio's impairment, replies before telemetry, the
-//! tlog. [`super::serve::Twin`] starts it.
+//! tlog. The radio is `radio`'s; [`super::serve::Twin`] starts the loop.
 
 use std::collections::{HashMap, HashSet};
 
@@ -12,7 +12,7 @@ use vtol_link::{Frame, LinkEvent, LinkId, LinkSender};
 use crate::endpoint::{Endpoint, LinkKey, Outbound};
 use crate::shell::clock::{BATCH, SimClock};
 use crate::shell::harness::{Call, Reply, Request};
-use crate::shell::serve::Impairment;
+use crate::shell::radio::{Radio, Way};
 use crate::shell::signing::{Admit, SetupOutcome, TwinSigning};
 use crate::shell::tlog::TlogSink;
 
@@ -356,66 +356,6 @@ impl Shell {
         } else {
             entry.replies_lost += 1;
         }
-    }
-}
-
-/// Which way a frame goes through the simulated radio.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Way {
-    In,
-    Out,
-}
-
-/// The simulated radio: seeded loss, then a fixed delay (a FIFO, since every frame waits the
-/// same time).
-pub(crate) struct Radio {
-    imp: Impairment,
-    rng: rand_chacha::ChaCha8Rng,
-    delayed: std::collections::VecDeque<(Instant, Way, LinkId, Frame, bool)>,
-    /// A SiK radio's buffer and reports, with `--radio-baud`.
-    pub(crate) sik: Option<crate::shell::sik::Sik>,
-}
-
-impl Radio {
-    pub(crate) fn new(imp: Impairment) -> Self {
-        use rand::SeedableRng as _;
-        Self {
-            imp,
-            rng: rand_chacha::ChaCha8Rng::seed_from_u64(imp.seed),
-            delayed: std::collections::VecDeque::new(),
-            sik: imp.radio_baud.map(crate::shell::sik::Sik::new),
-        }
-    }
-
-    /// The frame if it goes through now; `None` if lost or delayed (`telemetry` travels with a
-    /// delayed frame).
-    fn pass(&mut self, way: Way, id: LinkId, frame: Frame, telemetry: bool) -> Option<Frame> {
-        use rand::Rng as _;
-        if self.imp.loss > 0.0 && self.rng.random_bool(self.imp.loss) {
-            return None;
-        }
-        if self.imp.latency.is_zero() {
-            return Some(frame);
-        }
-        let due = Instant::now() + self.imp.latency;
-        self.delayed.push_back((due, way, id, frame, telemetry));
-        None
-    }
-
-    async fn next_due(&self) {
-        match self.delayed.front() {
-            Some((due, ..)) => tokio::time::sleep_until(*due).await,
-            None => std::future::pending().await,
-        }
-    }
-
-    fn pop_due(&mut self, now: Instant) -> Option<(Way, LinkId, Frame, bool)> {
-        if self.delayed.front()?.0 > now {
-            return None;
-        }
-        self.delayed
-            .pop_front()
-            .map(|(_, w, id, f, t)| (w, id, f, t))
     }
 }
 

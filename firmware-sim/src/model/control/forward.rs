@@ -13,14 +13,15 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::ControlOutput;
 use super::altitude::altitude_accel_m_s2;
 use super::forward_gains::ForwardGains;
 use super::mixer::{self, MIN_WASH_SQ_M2_S2};
 use super::tecs::{Tecs, TecsInput};
-use super::{ActuatorCommand, ControlOutput};
 use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::frames::Euler;
 use crate::model::plant::{aero, surface_airflow};
+use crate::model::signals::ActuatorCommand;
 
 /// The law's fixed tuning: what no parameter sets, kept together as ArduPilot keeps a
 /// controller's tuning in one parameter group.

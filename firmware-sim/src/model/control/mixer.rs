@@ -13,8 +13,8 @@
 
 use nalgebra::Vector3;
 
-use super::{ActuatorCommand, PwmOutputs};
 use crate::model::airframe::{Airframe, ModelMode};
+use crate::model::signals::{ActuatorCommand, PwmOutputs};
 
 /// Below this prop-wash (υ1² + υ2², m²/s²) the surfaces have no authority: they are left
 /// neutral rather than commanded to a huge deflection (rotors stopped, e.g. on the ground).

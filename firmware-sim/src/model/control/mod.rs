@@ -5,12 +5,14 @@
 //! The controller is a plain struct: no I/O, no clock, no allocation. The vehicle feeds it an
 //! estimate and a setpoint and gets actuator commands back.
 //!
-//! One tick ([`Controller::update`]):
+//! One tick ([`Controller::update`]), each step a method named for it:
 //! 1. sanitise the input (NaN → 0, everything clamped to generous physical ranges) so that every
-//!    output is finite for any input;
+//!    output is finite for any input (`Tick::sanitise`), then mode entry (`enter_mode`);
 //! 2. η̇ = W_n⁻¹ Ω ([I17]); the three virtual inputs Γ̃ = (τ̃ψ, τ̃θ, τ̃φ) [I5] from the chains
-//!    (`chains`), the attitude-hold laws (pilot modes) and the yaw law (`yaw`);
-//! 3. f_z from (37) [I6] (`altitude`) or the pilot throttle, f_x from (43) in `paper` mode;
+//!    (`chains`), the attitude-hold laws (pilot modes) or the hover hold (`tilt_torques`), and
+//!    the yaw law (`yaw`, `yaw_torque`);
+//! 3. f_z from (37) [I6] (`altitude`) or the pilot throttle, f_x from (43) in `paper` mode
+//!    (`thrust`);
 //! 4. Γc from the input change (33) solved with the mixer's rotor speeds [I19] (`input_change`);
 //! 5. actuator commands and PWM (`mixer`, §5).
 //!
@@ -40,6 +42,7 @@ use nalgebra::{Vector2, Vector3};
 use crate::model::airframe::{Airframe, ModelMode};
 use crate::model::frames::{Euler, wrap_pi};
 use crate::model::mode::FlightMode;
+use crate::model::signals::{ActuatorCommand, CRASH_TILT_RAD, PilotInput, PwmOutputs};
 use position::{HoverHold, HoverHoldGains, HoverLaw};
 
 /// Full-stick tilt setpoint (φ_d, θ_d) in the attitude-hold modes, rad. Equal to c + d of the
@@ -261,7 +264,7 @@ impl Gains {
         if 2.0 * h.vel_p > h.att_bw_rad_s {
             return Err(GainError::CrossCheck("Q_P_VELXY_P <= HOV_ATT_BW / 2"));
         }
-        if h.angle_max_rad >= crate::model::vehicle::CRASH_TILT_RAD {
+        if h.angle_max_rad >= CRASH_TILT_RAD {
             return Err(GainError::CrossCheck("Q_ANGLE_MAX < crash tilt 60 deg"));
         }
         Ok(())
@@ -306,19 +309,6 @@ pub enum GainError {
     },
 }
 
-/// Pilot commands from the RC receiver (or MAVLink manual input), already normalised.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PilotInput {
-    /// Collective throttle, 0..1 (used in QSTABILIZE).
-    pub throttle: f64,
-    /// Roll stick, −1..1 → φ setpoint.
-    pub roll: f64,
-    /// Pitch stick, −1..1 → θ setpoint.
-    pub pitch: f64,
-    /// Yaw stick, −1..1 → ψ rate setpoint.
-    pub yaw: f64,
-}
-
 /// What the controller sees each control tick (paper frame, z up).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ControlInput {
@@ -343,23 +333,6 @@ pub struct ControlInput {
     /// Pilot sticks.
     pub pilot: PilotInput,
 }
-
-/// Physical actuator commands (before PWM).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct ActuatorCommand {
-    /// Rotor 1 (y = +l_r, spins about +z_B) and rotor 2 speeds, rad/s.
-    pub rotor_speed_rad_s: [f64; 2],
-    /// Elevator deflection δ_e, rad.
-    pub elevator_rad: f64,
-    /// Left aileron (behind rotor 2) deflection, rad.
-    pub aileron_left_rad: f64,
-    /// Right aileron (behind rotor 1) deflection, rad.
-    pub aileron_right_rad: f64,
-}
-
-/// PWM outputs in µs: SERVO1/2 = ESC of rotor 1/2, SERVO3/4 = left/right aileron,
-/// SERVO5 = elevator.
-pub type PwmOutputs = [u16; 5];
 
 /// Everything one control tick produces.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -458,122 +431,137 @@ impl Controller {
     /// itself.
     #[must_use]
     pub fn update(&mut self, input: &ControlInput, gains: &Gains) -> ControlOutput {
-        let a = &self.airframe;
-        let (m, g) = (a.mass_kg, a.gravity_m_s2);
-        let model = self.model;
-        let mode = input.mode;
-
         // 1. Sanitise.
-        let euler = Euler::new(
-            wrap_pi(clean(input.euler.psi, 1e6)),
-            wrap_pi(clean(input.euler.theta, 1e6)),
-            wrap_pi(clean(input.euler.phi, 1e6)),
-        );
-        let kin = Euler {
-            theta: euler
-                .theta
-                .clamp(-KINEMATIC_THETA_LIMIT_RAD, KINEMATIC_THETA_LIMIT_RAD),
-            ..euler
-        };
-        let omega = clean_vec(&input.omega_body_rad_s, RATE_LIMIT_RAD_S);
-        let pos = clean_vec(&input.pos_m, POS_LIMIT_M);
-        let vel = clean_vec(&input.vel_m_s, VEL_LIMIT_M_S);
-        let setpoint = clean_vec(&input.setpoint_m, POS_LIMIT_M);
-        let dt = clean(input.dt_s, DT_LIMIT_S).max(0.0);
-        let rotor_start = input
-            .rotor_speed_rad_s
-            .map(|w| clean(w, ROTOR_SPEED_LIMIT_RAD_S).max(0.0));
-        let pilot = PilotInput {
-            throttle: clean(input.pilot.throttle, 1.0).max(0.0),
-            roll: clean(input.pilot.roll, 1.0),
-            pitch: clean(input.pilot.pitch, 1.0),
-            yaw: clean(input.pilot.yaw, 1.0),
-        };
-        let yaw_setpoint = wrap_pi(clean(input.yaw_setpoint_rad, 1e6));
-
-        // Mode entry.
-        if self.prev_mode != Some(mode) {
-            self.yaw_offset_rad = 0.0;
-            self.land_hold_xy_m = (mode == FlightMode::QLand).then(|| pos.xy());
-        }
-        self.prev_mode = Some(mode);
-
+        let t = Tick::sanitise(input);
+        self.enter_mode(&t);
         // 2. Euler rates (ψ̇, θ̇, φ̇) = W_n⁻¹ Ω.
-        let eta_dot = kin.rates_from_body(&omega);
-        let (psi_dot, theta_dot, phi_dot) = (eta_dot[0], eta_dot[1], eta_dot[2]);
-
+        let eta_dot = t.kin.rates_from_body(&t.omega);
         // The autonomous modes fly QLOITER's law to the setpoint their navigator chose (the
         // vehicle passes the law itself as the mode; this branch keeps a direct caller safe).
         // `physical` mode flies its position modes on the hover hold (`position`).
-        let pilot_attitude = mode.pilot_flies_attitude();
-        let hold_flies =
-            model == ModelMode::Physical && gains.hover.law == HoverLaw::Cascade && !pilot_attitude;
-        let (tau_theta, tau_phi) = if pilot_attitude {
-            (
+        let pilot_attitude = t.mode.pilot_flies_attitude();
+        let hold_flies = self.model == ModelMode::Physical
+            && gains.hover.law == HoverLaw::Cascade
+            && !pilot_attitude;
+        let (tau_theta, tau_phi) =
+            self.tilt_torques(&t, &eta_dot, gains, pilot_attitude, hold_flies);
+        let tau_psi = self.yaw_torque(&t, eta_dot[0], gains, pilot_attitude, hold_flies);
+        let tau_tilde = Vector3::new(tau_psi, tau_theta, tau_phi);
+        // 3. Thrust.
+        let (fz, fx) = self.thrust(&t, gains);
+        // 4. Input change (33) with the rotor-speed loop [I19].
+        let torque = self.input_change(&t, &eta_dot, &tau_tilde, fz);
+        // 5. Mixer and PWM (§5).
+        let actuators = mixer::mix(&self.airframe, self.model, fz, &torque);
+        let pwm_us = mixer::pwm_us_dithered(&self.airframe, &actuators, &mut self.pwm_residual_us);
+        ControlOutput {
+            tau_tilde,
+            torque_body_nm: torque,
+            fz_n: fz,
+            fx_n: fx,
+            actuators,
+            pwm_us,
+        }
+    }
+
+    /// Mode entry: the yaw-stick offset cleared, QLAND's hold point captured.
+    fn enter_mode(&mut self, t: &Tick) {
+        let mode = t.mode;
+        if self.prev_mode != Some(mode) {
+            self.yaw_offset_rad = 0.0;
+            self.land_hold_xy_m = (mode == FlightMode::QLand).then(|| t.pos.xy());
+        }
+        self.prev_mode = Some(mode);
+    }
+
+    /// The tilt virtual inputs (τ̃θ, τ̃φ): the attitude hold under the pilot, else the hover
+    /// hold (`physical`) or the nested saturation chains towards the position target.
+    fn tilt_torques(
+        &mut self,
+        t: &Tick,
+        eta_dot: &Vector3<f64>,
+        gains: &Gains,
+        pilot_attitude: bool,
+        hold_flies: bool,
+    ) -> (f64, f64) {
+        let (model, g) = (self.model, self.airframe.gravity_m_s2);
+        let (euler, pos, vel) = (&t.euler, &t.pos, &t.vel);
+        let (theta_dot, phi_dot) = (eta_dot[1], eta_dot[2]);
+        if pilot_attitude {
+            return (
                 chains::attitude_hold_tau(
                     &gains.longitudinal,
                     ATTITUDE_BANDWIDTH_RAD_S,
                     euler.theta,
-                    PILOT_TILT_MAX_RAD * pilot.pitch,
+                    PILOT_TILT_MAX_RAD * t.pilot.pitch,
                     theta_dot,
                 ),
                 chains::attitude_hold_tau(
                     &gains.lateral,
                     ATTITUDE_BANDWIDTH_RAD_S,
                     euler.phi,
-                    PILOT_TILT_MAX_RAD * pilot.roll,
+                    PILOT_TILT_MAX_RAD * t.pilot.roll,
                     phi_dot,
                 ),
-            )
-        } else {
-            let target = match (mode, self.land_hold_xy_m) {
-                (FlightMode::QLand, Some(hold)) => hold,
-                _ => setpoint.xy(),
-            };
-            if hold_flies {
-                let sp = self.hold.tilt_setpoint(
-                    &gains.hover,
-                    target,
-                    pos.xy(),
-                    vel.xy(),
-                    euler.psi,
-                    g,
-                    dt,
-                );
-                self.hold.attitude_tau(
-                    &gains.hover,
-                    sp,
-                    euler.theta,
-                    theta_dot,
-                    euler.phi,
-                    phi_dot,
-                    dt,
-                )
-            } else {
-                let mut err = pos.xy() - target;
-                let mut v = vel.xy();
-                if model != ModelMode::Paper {
-                    err = chains::to_heading_frame(euler.psi, err);
-                    v = chains::to_heading_frame(euler.psi, v);
-                }
-                (
-                    chains::longitudinal_tau(
-                        &gains.longitudinal,
-                        model,
-                        g,
-                        err.x,
-                        v.x,
-                        euler.theta,
-                        theta_dot,
-                    ),
-                    chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
-                )
-            }
+            );
+        }
+        let target = match (t.mode, self.land_hold_xy_m) {
+            (FlightMode::QLand, Some(hold)) => hold,
+            _ => t.setpoint.xy(),
         };
+        if hold_flies {
+            let sp = self.hold.tilt_setpoint(
+                &gains.hover,
+                target,
+                pos.xy(),
+                vel.xy(),
+                euler.psi,
+                g,
+                t.dt,
+            );
+            return self.hold.attitude_tau(
+                &gains.hover,
+                sp,
+                euler.theta,
+                theta_dot,
+                euler.phi,
+                phi_dot,
+                t.dt,
+            );
+        }
+        let mut err = pos.xy() - target;
+        let mut v = vel.xy();
+        if model != ModelMode::Paper {
+            err = chains::to_heading_frame(euler.psi, err);
+            v = chains::to_heading_frame(euler.psi, v);
+        }
+        (
+            chains::longitudinal_tau(
+                &gains.longitudinal,
+                model,
+                g,
+                err.x,
+                v.x,
+                euler.theta,
+                theta_dot,
+            ),
+            chains::lateral_tau(&gains.lateral, g, err.y, v.y, euler.phi, phi_dot),
+        )
+    }
 
-        // Yaw (45): the pilot modes integrate the stick into the heading target, on a leash.
+    /// The yaw virtual input τ̃ψ (45): the pilot modes integrate the stick into the heading
+    /// target, on a leash.
+    fn yaw_torque(
+        &mut self,
+        t: &Tick,
+        psi_dot: f64,
+        gains: &Gains,
+        pilot_attitude: bool,
+        hold_flies: bool,
+    ) -> f64 {
+        let (euler, dt, yaw_setpoint) = (&t.euler, t.dt, t.yaw_setpoint);
         let (psi_target, psi_rate_target) = if pilot_attitude {
-            let rate = PILOT_YAW_RATE_MAX_RAD_S * pilot.yaw;
+            let rate = PILOT_YAW_RATE_MAX_RAD_S * t.pilot.yaw;
             let offset = wrap_pi(self.yaw_offset_rad + rate * dt);
             let lead =
                 wrap_pi(yaw_setpoint + offset - euler.psi).clamp(-YAW_LEASH_RAD, YAW_LEASH_RAD);
@@ -584,7 +572,7 @@ impl Controller {
             (yaw_setpoint, 0.0)
         };
         self.yaw_target_rad = psi_target;
-        let tau_psi = if hold_flies {
+        if hold_flies {
             self.hold
                 .yaw_tau(&gains.hover, wrap_pi(euler.psi - psi_target), psi_dot, dt)
         } else {
@@ -596,10 +584,16 @@ impl Controller {
                 psi_target,
                 psi_rate_target,
             )
-        };
-        let tau_tilde = Vector3::new(tau_psi, tau_theta, tau_phi);
+        }
+    }
 
-        // 3. Thrust.
+    /// The thrust f_z (altitude law (37), QLAND's descent or the pilot's throttle) and the f_x
+    /// of (43) in `paper` mode, N.
+    fn thrust(&self, t: &Tick, gains: &Gains) -> (f64, f64) {
+        let a = &self.airframe;
+        let (m, g) = (a.mass_kg, a.gravity_m_s2);
+        let model = self.model;
+        let (euler, pos, vel) = (&t.euler, &t.pos, &t.vel);
         let fz_max = 2.0 * a.k_thrust_n_per_rad2_s2 * a.rotor_speed_max_rad_s.powi(2);
         // The paper's altitude law (37); in `physical` mode with the climb and descent speeds
         // bounded, so a far altitude is flown to at a speed rather than with an acceleration.
@@ -617,14 +611,14 @@ impl Controller {
                 gains.sink_max_m_s,
             ),
         };
-        let r_z = match mode {
+        let r_z = match t.mode {
             FlightMode::QLoiter
             | FlightMode::Guided
             | FlightMode::Auto
             | FlightMode::QRtl
             | FlightMode::Rtl
             | FlightMode::Fbwa
-            | FlightMode::Cruise => Some(hold_altitude(setpoint.z)),
+            | FlightMode::Cruise => Some(hold_altitude(t.setpoint.z)),
             FlightMode::QHover => Some(hold_altitude(gains.hover_alt_m)),
             FlightMode::QLand => Some(altitude::land_accel_m_s2(
                 gains.alt_kd,
@@ -636,7 +630,7 @@ impl Controller {
         let fz_raw = match r_z {
             Some(rz) => altitude::thrust_n(m, g, rz, euler.phi, euler.theta),
             // Throttle 0..1 spans the full thrust range: hover at mg / fz_max ≈ 0.46.
-            None => pilot.throttle * fz_max,
+            None => t.pilot.throttle * fz_max,
         };
         let fz = match model {
             ModelMode::Paper => fz_raw,
@@ -646,35 +640,88 @@ impl Controller {
             ModelMode::Paper => chains::paper_fx_n(m, g, euler.theta),
             ModelMode::Physical => 0.0,
         };
+        (fz, fx)
+    }
 
-        // 4. Input change (33) with the rotor-speed loop [I19].
+    /// The body torque Γc from the input change (33) with the rotor-speed loop [I19], less the
+    /// modelled aerodynamic moment in `physical` mode, N·m.
+    fn input_change(
+        &self,
+        t: &Tick,
+        eta_dot: &Vector3<f64>,
+        tau_tilde: &Vector3<f64>,
+        fz: f64,
+    ) -> Vector3<f64> {
+        let a = &self.airframe;
+        let model = self.model;
         let (mut torque, _) = input_change::solve_input_change(
             a,
             model,
-            &kin,
-            &omega,
-            &eta_dot,
-            &tau_tilde,
+            &t.kin,
+            &t.omega,
+            eta_dot,
+            tau_tilde,
             fz,
-            rotor_start,
+            t.rotor_start,
         );
         if model == ModelMode::Physical && CANCEL_AERO_MOMENT {
             // The airframe's aerodynamic moment is cancelled like Γg and Γq in (33), from the
             // model and the velocity the controller knows (the wind is unknown to it).
-            let v_body = kin.rotation_body_to_inertial().tr_mul(&vel);
-            torque -= crate::model::plant::aero::loads(a, &v_body, &rotor_start).torque_body_nm;
+            let v_body = t.kin.rotation_body_to_inertial().tr_mul(&t.vel);
+            torque -= crate::model::plant::aero::loads(a, &v_body, &t.rotor_start).torque_body_nm;
         }
+        torque
+    }
+}
 
-        // 5. Mixer and PWM (§5).
-        let actuators = mixer::mix(a, model, fz, &torque);
-        let pwm_us = mixer::pwm_us_dithered(a, &actuators, &mut self.pwm_residual_us);
-        ControlOutput {
-            tau_tilde,
-            torque_body_nm: torque,
-            fz_n: fz,
-            fx_n: fx,
-            actuators,
-            pwm_us,
+/// One tick's input, sanitised: NaN → 0 and everything clamped to generous physical ranges.
+struct Tick {
+    mode: FlightMode,
+    euler: Euler,
+    /// `euler` with θ kept off the kinematic singularity, for the rate and frame conversions.
+    kin: Euler,
+    omega: Vector3<f64>,
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    setpoint: Vector3<f64>,
+    dt: f64,
+    rotor_start: [f64; 2],
+    pilot: PilotInput,
+    yaw_setpoint: f64,
+}
+
+impl Tick {
+    fn sanitise(input: &ControlInput) -> Self {
+        let euler = Euler::new(
+            wrap_pi(clean(input.euler.psi, 1e6)),
+            wrap_pi(clean(input.euler.theta, 1e6)),
+            wrap_pi(clean(input.euler.phi, 1e6)),
+        );
+        let kin = Euler {
+            theta: euler
+                .theta
+                .clamp(-KINEMATIC_THETA_LIMIT_RAD, KINEMATIC_THETA_LIMIT_RAD),
+            ..euler
+        };
+        Self {
+            mode: input.mode,
+            euler,
+            kin,
+            omega: clean_vec(&input.omega_body_rad_s, RATE_LIMIT_RAD_S),
+            pos: clean_vec(&input.pos_m, POS_LIMIT_M),
+            vel: clean_vec(&input.vel_m_s, VEL_LIMIT_M_S),
+            setpoint: clean_vec(&input.setpoint_m, POS_LIMIT_M),
+            dt: clean(input.dt_s, DT_LIMIT_S).max(0.0),
+            rotor_start: input
+                .rotor_speed_rad_s
+                .map(|w| clean(w, ROTOR_SPEED_LIMIT_RAD_S).max(0.0)),
+            pilot: PilotInput {
+                throttle: clean(input.pilot.throttle, 1.0).max(0.0),
+                roll: clean(input.pilot.roll, 1.0),
+                pitch: clean(input.pilot.pitch, 1.0),
+                yaw: clean(input.pilot.yaw, 1.0),
+            },
+            yaw_setpoint: wrap_pi(clean(input.yaw_setpoint_rad, 1e6)),
         }
     }
 }

@@ -8,7 +8,7 @@
 //! command directly (instantaneous, unlimited).
 
 use crate::model::airframe::Airframe;
-use crate::model::control::{ActuatorCommand, PwmOutputs};
+use crate::model::signals::{ActuatorCommand, PwmOutputs};
 
 /// Minimum (idle, disarmed) ESC pulse, µs.
 pub const ESC_IDLE_US: u16 = 1000;

@@ -22,9 +22,9 @@ pub mod surfaces;
 use nalgebra::Vector3;
 
 use crate::model::airframe::{Airframe, ModelMode};
-use crate::model::control::ActuatorCommand;
 use crate::model::frames::Euler;
 use crate::model::integrator::OdeState;
+use crate::model::signals::ActuatorCommand;
 
 use rigid_body::{EulerTrig, RigidBody};
 

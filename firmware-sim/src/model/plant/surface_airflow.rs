@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 use super::Loads;
 use super::surfaces::{self, SurfaceLifts};
 use crate::model::airframe::Airframe;
-use crate::model::control::ActuatorCommand;
+use crate::model::signals::ActuatorCommand;
 
 /// The free stream's squared speed along the nose, m²/s²: the air-relative velocity's component
 /// along +z_B (flow from the nose back over the trailing-edge surfaces). Reversed flow (the

@@ -9,7 +9,7 @@
 use nalgebra::Vector3;
 
 use crate::model::airframe::Airframe;
-use crate::model::control::ActuatorCommand;
+use crate::model::signals::ActuatorCommand;
 
 /// Signed lifts of the three surfaces, N.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

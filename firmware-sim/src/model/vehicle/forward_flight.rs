@@ -9,7 +9,8 @@
 use super::Vehicle;
 use crate::model::airframe::ModelMode;
 use crate::model::control::forward::{ForwardCommand, ForwardInput, ForwardLaw, Longitudinal};
-use crate::model::control::{ControlInput, ControlOutput, PilotInput, forward_gains};
+use crate::model::control::{ControlInput, ControlOutput, forward_gains};
+use crate::model::signals::PilotInput;
 use nalgebra::{Vector2, Vector3};
 
 use crate::model::estimator_forward::ForwardAttitude;

@@ -3,11 +3,12 @@
 
 use nalgebra::Vector3;
 
-use crate::model::control::{ControlOutput, PwmOutputs};
+use crate::model::control::ControlOutput;
 use crate::model::frames::Euler;
 use crate::model::mode::{FlightMode, VtolState};
 use crate::model::plant::aero;
 use crate::model::plant::battery::BatteryState;
+use crate::model::signals::PwmOutputs;
 
 /// System state as the heartbeat reports it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import select
 import shutil
 import signal
 import socket
@@ -24,6 +23,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Optional, Union
+
+from .startup import ExitedAtStart, StartTimeout, read_start_lines
 
 # Lockstep (the default): sim time moves only on `advance`; "fast": as fast as the CPU allows;
 # a number: that many times real time.
@@ -264,32 +265,24 @@ class VtolTwin:
         return self
 
     def _read_start_lines(self, deadline: float) -> None:
-        fd = self.proc.stdout.fileno()
-        buf = b""
-        got_listen = got_control = False
-        while not (got_listen and got_control):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TwinError(f"firmware-sim printed no start lines in time; args {self.args}\n{self.stderr_tail()}")
-            ready, _, _ = select.select([fd], [], [], min(left, 0.5))
-            if not ready:
-                continue
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                self.proc.wait(timeout=5)
-                raise TwinError(f"firmware-sim exited ({self.proc.returncode}) at start; args {self.args}\n"
-                                f"{self.stderr_tail()}")
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                text = line.decode(errors="replace").strip()
-                if m := LISTEN_RE.match(text):
-                    self.mavlink_address = (m["host"].strip("[]"), int(m["port"]))
-                    self.url = f"tcp:{m['host']}:{m['port']}"
-                    got_listen = True
-                elif m := CONTROL_RE.match(text):
-                    self.control_address = (m["host"].strip("[]"), int(m["port"]))
-                    got_control = True
+        got: set[str] = set()
+
+        def on_line(text: str) -> None:
+            if m := LISTEN_RE.match(text):
+                self.mavlink_address = (m["host"].strip("[]"), int(m["port"]))
+                self.url = f"tcp:{m['host']}:{m['port']}"
+                got.add("listen")
+            elif m := CONTROL_RE.match(text):
+                self.control_address = (m["host"].strip("[]"), int(m["port"]))
+                got.add("control")
+
+        try:
+            read_start_lines(self.proc, on_line, lambda: got >= {"listen", "control"}, deadline)
+        except StartTimeout:
+            raise TwinError(f"firmware-sim printed no start lines in time; args {self.args}\n{self.stderr_tail()}") from None
+        except ExitedAtStart as e:
+            raise TwinError(f"firmware-sim exited ({e.returncode}) at start; args {self.args}\n"
+                            f"{self.stderr_tail()}") from None
 
     def _wait_heartbeat(self, deadline: float) -> None:
         with socket.create_connection(self.mavlink_address, timeout=max(0.1, deadline - time.monotonic())) as s:
