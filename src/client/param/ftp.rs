@@ -649,6 +649,14 @@ impl Machine for FtpPullMachine {
                     None => Vec::new(),
                 }
             }
+            // The burst's last answers, come after its pause ended it: chunks are kept, its end
+            // of file is left to the reads.
+            (Phase::Window, OP_ACK, OP_BURST) => {
+                self.chunks_received += 1;
+                let data = p[12..12 + size.min(CHUNK)].to_vec();
+                self.on_read(now, offset, Some(data))
+            }
+            (Phase::Window, OP_NAK, OP_BURST | OP_READ) if p[12] == ERR_EOF => Vec::new(),
             (Phase::Burst | Phase::Window, OP_NAK, OP_BURST | OP_READ) => {
                 self.fail(format!("{PARAM_FILE}: read refused (FTP error {})", p[12]))
             }

@@ -325,6 +325,41 @@ fn an_open_whose_answer_was_lost_is_reset_and_opened_again() {
 }
 
 #[test]
+fn a_burst_answer_that_comes_after_its_pause_is_kept_and_its_end_of_file_is_no_refusal() {
+    let t = table(100);
+    let file = pack(&borrowed(&t));
+    let t0 = Instant::now();
+    let mut m = FtpPullMachine::new(V, 2, Duration::from_millis(20));
+    let open = payload(&m.start(t0)[0]);
+    let mut now = t0 + SLOW;
+    let burst = payload(&m.on_message(now, &reply(&open, OP_ACK, &[0; 4], 0, false))[0]);
+    assert_eq!(burst[3], OP_BURST);
+    // The first chunk, then a pause: the machine turns to reads.
+    now += Duration::from_millis(1);
+    m.on_message(now, &reply(&burst, OP_ACK, &file[..CHUNK], 0, false));
+    now = m.deadline();
+    let reads = m.on_time(now);
+    assert!(reads.iter().all(|r| payload(r)[3] == OP_READ), "{reads:?}");
+    assert_eq!(m.phase, Phase::Window);
+    // The burst's second chunk and its end of file arrive late.
+    now += Duration::from_millis(1);
+    m.on_message(
+        now,
+        &reply(&burst, OP_ACK, &file[CHUNK..2 * CHUNK], CHUNK as u32, false),
+    );
+    assert!(
+        m.chunks.contains_key(&(CHUNK as u32)),
+        "the late chunk is kept"
+    );
+    let mut eof = reply(&burst, OP_NAK, &[ERR_EOF], file.len() as u32, false);
+    if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = &mut eof.msg {
+        f.payload[4] = 1;
+    }
+    m.on_message(now, &eof);
+    assert!(m.result().is_none(), "not a refusal");
+}
+
+#[test]
 fn requests_leave_four_at_once_then_paced_within_the_window() {
     let t0 = Instant::now();
     let mut m = FtpPullMachine::new(V, 1, Duration::from_millis(20));
