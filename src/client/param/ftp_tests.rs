@@ -295,7 +295,7 @@ fn on_a_fast_link_the_file_is_read_by_requests_in_flight() {
     let mut t = table(40);
     loop {
         let n = pack(&borrowed(&t)).len();
-        if n % CHUNK == 0 {
+        if n.is_multiple_of(CHUNK) {
             break;
         }
         t.push((format!("Z{}", t.len()), 1, 1.0));
