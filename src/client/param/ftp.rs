@@ -16,6 +16,7 @@
 //! - A request unanswered for a round trip and a quarter (and the time half a window takes to
 //!   leave) is sent again. Each goes in one, two or three copies as the loss seen so far (the
 //!   gaps a burst left, then the reads' timeouts) makes a lost round likely.
+//! - The open and the TerminateSession go in two copies: a lost one costs a retry timeout.
 //! - An open refused with Fail means this session already has a file open (the answer to an
 //!   earlier open was lost): TerminateSession, then the open again.
 //!
@@ -306,12 +307,17 @@ impl FtpPullMachine {
         m
     }
 
-    fn open(&mut self, now: Instant) -> MavMessage {
+    /// OpenFileRO, in two copies: on a lossy link a lost open costs a retry timeout, and the
+    /// copy that finds the file open already is refused (Fail) without effect.
+    fn open(&mut self, now: Instant) -> Vec<MavMessage> {
         self.retry.send(now);
         self.open_sent = now;
         let mut path = PARAM_FILE.as_bytes().to_vec();
         path.push(0);
-        self.request(OP_OPEN_RO, 0, &path)
+        vec![
+            self.request(OP_OPEN_RO, 0, &path),
+            self.request(OP_OPEN_RO, 0, &path),
+        ]
     }
 
     /// A burst from the first byte.
@@ -354,10 +360,20 @@ impl FtpPullMachine {
         if self.phase != Phase::Close {
             self.phase = Phase::Close;
             self.reads.clear();
-            self.retry = Retry::new(self.rto, CLOSE_TRIES, Duration::ZERO);
+            // Once the open's round trip is known, a retry waits little longer than it.
+            let wait = if self.rtt > Duration::ZERO {
+                self.read_timeout
+            } else {
+                self.rto
+            };
+            self.retry = Retry::new(wait, CLOSE_TRIES, Duration::ZERO);
         }
         self.retry.send(now);
-        vec![self.request(OP_TERMINATE, 0, &[])]
+        // In two copies, as the open.
+        vec![
+            self.request(OP_TERMINATE, 0, &[]),
+            self.request(OP_TERMINATE, 0, &[]),
+        ]
     }
 
     /// Whether every byte up to the end is in.
@@ -548,7 +564,7 @@ impl Machine for FtpPullMachine {
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
         self.last_rx = now;
-        vec![self.open(now)]
+        self.open(now)
     }
 
     fn on_message(&mut self, now: Instant, m: &Inbound) -> Vec<MavMessage> {
@@ -595,7 +611,7 @@ impl Machine for FtpPullMachine {
             (Phase::Reset, OP_ACK, OP_TERMINATE) => {
                 self.phase = Phase::Open;
                 self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
-                vec![self.open(now)]
+                self.open(now)
             }
             (Phase::Open, OP_NAK, OP_OPEN_RO) => {
                 self.done = Some(Err(format!(
@@ -649,6 +665,14 @@ impl Machine for FtpPullMachine {
                     None => Vec::new(),
                 }
             }
+            // The burst's last answers, come after its pause ended it: chunks are kept, its end
+            // of file is left to the reads.
+            (Phase::Window, OP_ACK, OP_BURST) => {
+                self.chunks_received += 1;
+                let data = p[12..12 + size.min(CHUNK)].to_vec();
+                self.on_read(now, offset, Some(data))
+            }
+            (Phase::Window, OP_NAK, OP_BURST | OP_READ) if p[12] == ERR_EOF => Vec::new(),
             (Phase::Burst | Phase::Window, OP_NAK, OP_BURST | OP_READ) => {
                 self.fail(format!("{PARAM_FILE}: read refused (FTP error {})", p[12]))
             }
@@ -676,7 +700,7 @@ impl Machine for FtpPullMachine {
                 self.done = Some(Err(format!("{PARAM_FILE}: no answer to open")));
                 Vec::new()
             }
-            (Step::Send, Phase::Open) => vec![self.open(now)],
+            (Step::Send, Phase::Open) => self.open(now),
             (Step::Send, Phase::Reset) => {
                 self.retry.send(now);
                 vec![self.request(OP_TERMINATE, 0, &[])]
