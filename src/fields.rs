@@ -90,7 +90,8 @@ fn walk(msg: &MavMessage) -> Fields {
     let mut out = Vec::new();
     // The serde form is {"type": NAME, field: value, ...}; a failure here would be a bug in the
     // generated derives, and then the message simply has no fields.
-    if let Ok(Value::Object(map)) = serde_json::to_value(msg) {
+    // Through CBOR's value, which keeps a non-finite float (JSON's has no infinities).
+    if let Ok(Value::Object(map)) = ciborium::Value::serialized(msg).map(to_json) {
         for (key, value) in map {
             if key != "type" {
                 push_value(&mut out, key, value);
@@ -100,11 +101,57 @@ fn walk(msg: &MavMessage) -> Fields {
     out
 }
 
+/// The key of the marker a non-finite float becomes in the JSON form:
+/// `{"$float": "inf" | "-inf" | "NaN"}`.
+const NON_FINITE: &str = "$float";
+
+fn to_json(v: ciborium::Value) -> Value {
+    use ciborium::Value as C;
+    match v {
+        C::Integer(i) => {
+            let i = i128::from(i);
+            u64::try_from(i)
+                .map(Value::from)
+                .or_else(|_| i64::try_from(i).map(Value::from))
+                .unwrap_or(Value::Null)
+        }
+        C::Float(f) if f.is_finite() => {
+            serde_json::Number::from_f64(f).map_or(Value::Null, Value::Number)
+        }
+        C::Float(f) => serde_json::json!({ NON_FINITE: format!("{f:?}") }),
+        C::Text(s) => Value::String(s),
+        C::Bool(b) => Value::Bool(b),
+        C::Bytes(b) => Value::Array(b.into_iter().map(Value::from).collect()),
+        C::Array(a) => Value::Array(a.into_iter().map(to_json).collect()),
+        C::Map(m) => Value::Object(
+            m.into_iter()
+                .filter_map(|(k, v)| Some((k.into_text().ok()?, to_json(v))))
+                .collect(),
+        ),
+        C::Tag(_, v) => to_json(*v),
+        _ => Value::Null,
+    }
+}
+
+/// A non-finite float's value, from its marker.
+fn non_finite(v: &Value) -> Option<f64> {
+    match v.as_object()?.get(NON_FINITE)?.as_str()? {
+        "inf" => Some(f64::INFINITY),
+        "-inf" => Some(f64::NEG_INFINITY),
+        _ => Some(f64::NAN),
+    }
+}
+
 fn push_value(out: &mut Fields, key: String, value: Value) {
     match value {
+        v if non_finite(&v).is_some() => out.push((key, v)),
         // A unit enum entry serialises as {"type": "ENTRY_NAME"}.
         Value::Object(inner) => out.push((key, enum_name(inner))),
-        Value::Array(items) if items.iter().all(Value::is_number) => {
+        Value::Array(items)
+            if items
+                .iter()
+                .all(|v| v.is_number() || non_finite(v).is_some()) =>
+        {
             for (i, v) in items.into_iter().enumerate() {
                 out.push((format!("{key}[{i}]"), v));
             }
@@ -125,10 +172,16 @@ fn enum_name(mut inner: Map<String, Value>) -> Value {
 }
 
 /// A field value as CSV text: numbers as the shortest text that reads back to the same value,
-/// strings as they are. A non-finite float is `nan`: the JSON form has no infinities, so ±inf
-/// and NaN arrive alike (as null, the only way a message field becomes null).
+/// strings as they are; a non-finite float as `inf`, `-inf` or `nan`.
 #[must_use]
 pub fn csv_text(v: &Value) -> String {
+    if let Some(f) = non_finite(v) {
+        return if f.is_nan() {
+            "nan".to_owned()
+        } else {
+            format!("{f}")
+        };
+    }
     match v {
         Value::String(s) => s.clone(),
         Value::Null => "nan".to_owned(),
@@ -139,7 +192,7 @@ pub fn csv_text(v: &Value) -> String {
 /// A field value as a number, if it is one (for plots and resampling).
 #[must_use]
 pub fn as_f64(v: &Value) -> Option<f64> {
-    v.as_f64()
+    v.as_f64().or_else(|| non_finite(v))
 }
 
 /// One field as the inspector shows it and a chart reads it.
@@ -163,8 +216,11 @@ pub fn fields(msg: &MavMessage) -> Vec<Field> {
         .into_iter()
         .map(|(path, value)| {
             let (text, number) = match &value {
+                v if non_finite(v).is_some() => {
+                    let f = non_finite(v).unwrap_or(f64::NAN);
+                    (format!("{f:?}"), Some(f))
+                }
                 Value::Number(n) => (number_text(n), n.as_f64()),
-                // The JSON form has no infinities: a null is a non-finite float.
                 Value::Null => ("NaN".to_owned(), Some(f64::NAN)),
                 Value::String(s) if is_named(id, &path) => (named_words(s), None),
                 Value::String(s) => (s.clone(), None),
@@ -187,7 +243,7 @@ pub fn value_at(msg: &MavMessage, path: &str) -> Option<f64> {
         .find(|(p, _)| p == path)
         .and_then(|(_, v)| match v {
             Value::Null => Some(f64::NAN),
-            v => v.as_f64(),
+            v => as_f64(&v),
         })
 }
 
@@ -341,6 +397,34 @@ mod tests {
             .find(|(n, _)| n == "roll")
             .map(|(_, v)| csv_text(v));
         assert_eq!(roll.as_deref(), Some("nan"));
+    }
+
+    #[test]
+    fn infinities_keep_their_sign_in_the_export_the_inspector_and_the_charts() {
+        let msg = apm::MavMessage::ATTITUDE(apm::ATTITUDE_DATA {
+            roll: f32::INFINITY,
+            pitch: f32::NEG_INFINITY,
+            yaw: 0.5,
+            ..Default::default()
+        });
+        let (_, f) = flatten(&msg);
+        let csv = |name: &str| f.iter().find(|(n, _)| n == name).map(|(_, v)| csv_text(v));
+        assert_eq!(csv("roll").as_deref(), Some("inf"));
+        assert_eq!(csv("pitch").as_deref(), Some("-inf"));
+        assert_eq!(csv("yaw").as_deref(), Some("0.5"));
+        let shown = fields(&msg);
+        let at = |name: &str| {
+            shown
+                .iter()
+                .find(|x| x.path == name)
+                .cloned()
+                .expect("field")
+        };
+        assert_eq!(at("roll").text, "inf");
+        assert_eq!(at("pitch").text, "-inf");
+        assert_eq!(at("roll").value, Some(f64::INFINITY));
+        assert_eq!(value_at(&msg, "pitch"), Some(f64::NEG_INFINITY));
+        assert_eq!(value_at(&msg, "yaw"), Some(0.5));
     }
 
     #[test]

@@ -387,7 +387,10 @@ fn router_mod() -> syn::ItemMod {
 #[test]
 fn every_source_file_is_read() {
     let mut units = load(LIB, &src().join("lib.rs"));
-    units.extend(load(BIN, &src().join("bin").join("vtol-gcs").join("main.rs")));
+    units.extend(load(
+        BIN,
+        &src().join("bin").join("vtol-gcs").join("main.rs"),
+    ));
     let read: BTreeSet<PathBuf> = units.into_iter().map(|u| u.file).collect();
     let on_disk: BTreeSet<PathBuf> = WalkDir::new(src())
         .into_iter()
@@ -405,7 +408,10 @@ fn every_source_file_is_read() {
 #[test]
 fn only_the_daemon_names_the_router() {
     let mut units = load(LIB, &src().join("lib.rs"));
-    units.extend(load(BIN, &src().join("bin").join("vtol-gcs").join("main.rs")));
+    units.extend(load(
+        BIN,
+        &src().join("bin").join("vtol-gcs").join("main.rs"),
+    ));
     let mut broken = Vec::new();
     for unit in &units {
         let allowed = unit.krate == LIB
