@@ -90,8 +90,18 @@ fn walk(msg: &MavMessage) -> Fields {
     let mut out = Vec::new();
     // The serde form is {"type": NAME, field: value, ...}; a failure here would be a bug in the
     // generated derives, and then the message simply has no fields.
-    // Through CBOR's value, which keeps a non-finite float (JSON's has no infinities).
-    if let Ok(Value::Object(map)) = ciborium::Value::serialized(msg).map(to_json) {
+    let Ok(mut json) = serde_json::to_value(msg) else {
+        return out;
+    };
+    // JSON has no infinities: a non-finite float became null. CBOR's value keeps it, so where
+    // there is a null its float is taken from there (the rest stays JSON's, which spells
+    // bitmasks by name).
+    if has_null(&json)
+        && let Ok(cbor) = ciborium::Value::serialized(msg)
+    {
+        mark_non_finite(&mut json, &cbor);
+    }
+    if let Value::Object(map) = json {
         for (key, value) in map {
             if key != "type" {
                 push_value(&mut out, key, value);
@@ -105,31 +115,35 @@ fn walk(msg: &MavMessage) -> Fields {
 /// `{"$float": "inf" | "-inf" | "NaN"}`.
 const NON_FINITE: &str = "$float";
 
-fn to_json(v: ciborium::Value) -> Value {
-    use ciborium::Value as C;
+fn has_null(v: &Value) -> bool {
     match v {
-        C::Integer(i) => {
-            let i = i128::from(i);
-            u64::try_from(i)
-                .map(Value::from)
-                .or_else(|_| i64::try_from(i).map(Value::from))
-                .unwrap_or(Value::Null)
+        Value::Null => true,
+        Value::Array(a) => a.iter().any(has_null),
+        Value::Object(m) => m.values().any(has_null),
+        _ => false,
+    }
+}
+
+/// Each null of `json` whose counterpart in `cbor` is a non-finite float becomes its marker.
+fn mark_non_finite(json: &mut Value, cbor: &ciborium::Value) {
+    use ciborium::Value as C;
+    match (json, cbor) {
+        (j @ Value::Null, C::Float(f)) if !f.is_finite() => {
+            *j = serde_json::json!({ NON_FINITE: format!("{f:?}") });
         }
-        C::Float(f) if f.is_finite() => {
-            serde_json::Number::from_f64(f).map_or(Value::Null, Value::Number)
+        (Value::Array(a), C::Array(c)) => {
+            for (j, c) in a.iter_mut().zip(c) {
+                mark_non_finite(j, c);
+            }
         }
-        C::Float(f) => serde_json::json!({ NON_FINITE: format!("{f:?}") }),
-        C::Text(s) => Value::String(s),
-        C::Bool(b) => Value::Bool(b),
-        C::Bytes(b) => Value::Array(b.into_iter().map(Value::from).collect()),
-        C::Array(a) => Value::Array(a.into_iter().map(to_json).collect()),
-        C::Map(m) => Value::Object(
-            m.into_iter()
-                .filter_map(|(k, v)| Some((k.into_text().ok()?, to_json(v))))
-                .collect(),
-        ),
-        C::Tag(_, v) => to_json(*v),
-        _ => Value::Null,
+        (Value::Object(m), C::Map(c)) => {
+            for (k, c) in c {
+                if let Some(j) = k.as_text().and_then(|k| m.get_mut(k)) {
+                    mark_non_finite(j, c);
+                }
+            }
+        }
+        _ => {}
     }
 }
 
@@ -467,7 +481,7 @@ mod tests {
         );
         assert_eq!(text("yaw").as_deref(), Some("1.0"));
         assert_eq!(text("time_boot_ms").as_deref(), Some("1234"));
-        assert_eq!(text("pitchspeed").as_deref(), Some("NaN"));
+        assert_eq!(text("pitchspeed").as_deref(), Some("inf"));
 
         let q = apm::ATTITUDE_QUATERNION_DATA {
             repr_offset_q: [0.5, 0.25, 0.0, -1.0],
