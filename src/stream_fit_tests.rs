@@ -6,6 +6,7 @@ use vtol_link::Frame;
 use vtol_link::dialect::{self as apm, MavAutopilot, MavModeFlag, MavState, MavType};
 
 use super::*;
+use crate::client::test_frames::radio_status;
 use crate::links::Side;
 
 const V: (SystemId, ComponentId) = (SystemId(1), ComponentId(1));
@@ -214,21 +215,6 @@ fn a_clean_link_is_left_alone() {
             radio_txbuf: None
         }
     );
-}
-
-/// A SiK radio's RADIO_STATUS (it speaks as system 51, component 68) with `txbuf` percent of
-/// its transmit buffer free.
-pub(crate) fn radio_status(txbuf: u8, seq: u8) -> Frame {
-    let m = MavMessage::RADIO_STATUS(apm::RADIO_STATUS_DATA {
-        rxerrors: 0,
-        fixed: 0,
-        rssi: 200,
-        remrssi: 190,
-        txbuf,
-        noise: 40,
-        remnoise: 41,
-    });
-    Frame::encode_v2(SystemId(51), ComponentId(68), seq, &m)
 }
 
 #[test]

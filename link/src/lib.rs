@@ -19,6 +19,7 @@ pub mod frame;
 pub mod ids;
 pub mod protocol;
 pub mod signing;
+pub mod statustext;
 pub mod text_file;
 pub mod tlog;
 pub mod transport;

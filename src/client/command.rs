@@ -10,7 +10,7 @@ use vtol_link::dialect::{self as apm, MavCmd, MavMessage, MavResult};
 use vtol_link::{ComponentId, SystemId};
 
 use super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Step};
-use super::statustext::TextAssembler;
+use vtol_link::statustext::TextAssembler;
 
 /// Sends of one command before giving up (the first plus retries): enough that 30 % loss each
 /// way (half the exchanges failing) almost never exhausts them.

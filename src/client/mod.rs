@@ -20,8 +20,9 @@ pub mod pace;
 pub mod param;
 pub mod probe;
 mod session;
+#[cfg(test)]
+pub(crate) mod test_frames;
 pub use session::{Heard, hello};
-pub mod statustext;
 pub mod version;
 
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -7,8 +7,8 @@ use vtol_link::dialect::{self as apm, MavMessage};
 use vtol_link::{ComponentId, Frame, LinkEvent, LinkOptions, LinkSender, SystemId};
 
 use super::*;
+use crate::client::test_frames::radio_status;
 use crate::client::{ClientConfig, ClientHandle};
-use crate::stream_fit::tests::radio_status;
 
 const MS: Duration = Duration::from_millis(1);
 

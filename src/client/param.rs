@@ -89,7 +89,7 @@ pub struct ParamMachine {
     /// it came: the same value echoed to a later send is the vehicle's answer.
     other_echo: Option<(f32, u8)>,
     /// Long reasons come in chunks (STATUSTEXT `id`/`chunk_seq`).
-    assembler: super::statustext::TextAssembler,
+    assembler: vtol_link::statustext::TextAssembler,
     /// Round trip of an exchange answered on its first send.
     pub first_try_rtt: Option<Duration>,
     done: Option<Result<Param, ParamFailure>>,
@@ -131,7 +131,7 @@ impl ParamMachine {
             last_echo: None,
             refused: None,
             other_echo: None,
-            assembler: super::statustext::TextAssembler::default(),
+            assembler: vtol_link::statustext::TextAssembler::default(),
             first_try_rtt: None,
             done: None,
         }

@@ -230,7 +230,7 @@ pub struct VehicleState {
     pub messages: BTreeMap<(SystemId, ComponentId, u32), MessageStats>,
     last_seq: HashMap<(LinkId, SystemId, ComponentId), super::seq::SenderSeq>,
     /// Long STATUSTEXTs come in chunks: put together per vehicle before they are kept.
-    text_chunks: HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
+    text_chunks: HashMap<(SystemId, ComponentId), vtol_link::statustext::TextAssembler>,
     /// Links that went down: frames of theirs still on the way to the tracker are stale and
     /// must not bring their vehicles back (a link that reconnects under its id leaves the set).
     /// The last [`DOWN_MEMORY`] only: a fleet's vehicles come and go on new links for ever.
@@ -444,7 +444,7 @@ impl VehicleState {
 /// A known vehicle's telemetry (attitude, position, servo outputs, text) applied to its view.
 fn apply_telemetry(
     v: &mut VehicleView,
-    text_chunks: &mut HashMap<(SystemId, ComponentId), crate::client::statustext::TextAssembler>,
+    text_chunks: &mut HashMap<(SystemId, ComponentId), vtol_link::statustext::TextAssembler>,
     key: (SystemId, ComponentId),
     msg: &MavMessage,
     now: Instant,

@@ -321,3 +321,68 @@ fn the_circle_finder_finds_a_long_one() {
         ])
     );
 }
+
+/// The child modules of module `parent` (`[]` for the crate, `["tui"]` …) and which of the
+/// others each one's files name. The parent's own file may name its children and they it.
+fn child_edges(src: &Path, parent: &[String]) -> BTreeMap<String, BTreeSet<String>> {
+    let dir = parent.iter().fold(src.to_path_buf(), |d, p| d.join(p));
+    let names: BTreeSet<String> = std::fs::read_dir(&dir)
+        .expect("a module folder")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.is_dir() || p.extension().is_some_and(|e| e == "rs"))
+        .filter_map(|p| Some(p.file_stem()?.to_string_lossy().into_owned()))
+        .filter(|n| !["mod", "lib", "bin"].contains(&n.as_str()))
+        .collect();
+    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for file in sources(&dir) {
+        if file.starts_with(src.join("bin")) {
+            continue;
+        }
+        let module = module_of(src, &file);
+        let Some(from) = module
+            .get(parent.len())
+            .filter(|m| names.contains(*m))
+            .cloned()
+        else {
+            continue;
+        };
+        let text = std::fs::read_to_string(&file).expect("source file");
+        let out = edges.entry(from.clone()).or_default();
+        for (inline, path) in named(&text) {
+            let mut here = module.clone();
+            here.extend(inline);
+            let to = resolve(&here, &path);
+            if to.starts_with(parent)
+                && let Some(room) = to.get(parent.len())
+                && names.contains(room)
+                && *room != from
+            {
+                out.insert(room.clone());
+            }
+        }
+    }
+    edges
+}
+
+#[test]
+fn no_import_circle_anywhere_in_the_crate_outside_parent_and_child() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut parents: Vec<Vec<String>> = vec![Vec::new()];
+    for e in WalkDir::new(&src).min_depth(1) {
+        let p = e.expect("directory entry").into_path();
+        if p.is_dir() && !p.starts_with(src.join("bin")) {
+            parents.push(module_of(&src, &p.join("mod.rs")));
+        }
+    }
+    assert!(parents.len() > 5, "the folders moved: {parents:?}");
+    let top = child_edges(&src, &[]);
+    assert!(
+        top.get("tui").is_some_and(|t| t.contains("tracker")),
+        "the reader lost the UI's import of the tracker: {top:?}"
+    );
+    let circles: Vec<String> = parents
+        .iter()
+        .filter_map(|p| circle(&child_edges(&src, p)).map(|c| format!("in {p:?}: {c:?}")))
+        .collect();
+    assert!(circles.is_empty(), "{}", circles.join("\n"));
+}

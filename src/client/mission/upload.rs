@@ -22,9 +22,9 @@ use vtol_link::dialect::{self as apm, MavMessage, MavMissionResult};
 use vtol_link::{ComponentId, SystemId};
 
 use super::super::machine::{GIVE_UP_AFTER, Inbound, Machine, Retry, Rtt, Step};
-use super::super::statustext::TextAssembler;
 use super::{MISSION_TRIES, mission_type};
 use crate::mission::Kind;
+use vtol_link::statustext::TextAssembler;
 
 /// Silence after which an upload under way is given up (ArduPilot cancels its side after 8 s).
 pub const UPLOAD_SILENCE: Duration = Duration::from_secs(8);

@@ -8,12 +8,12 @@
 //! NAK EndOfFile), then TerminateSession, which frees the vehicle's one FTP session. The file is
 //! complete when its bytes from the start decode to as many parameters as its header announces.
 //! - On a fast link (the open answered within 30 ms) the chunks are asked for by ReadFile, four
-//!   at once and then one every 3 ms, up to 32 in flight: ArduPilot answers those as they come
+//!   at once and then one every 3 ms: ArduPilot answers those as they come
 //!   (one every 2–3 ms on SITL), where it paces a burst to a third of what it believes the port
 //!   carries (one chunk every 5.8 ms on SITL's TCP port).
 //! - On a slower link, one BurstReadFile from the start: the vehicle's pace suits the link. The
 //!   chunks lost on the way are then asked for by ReadFile at the burst's pace.
-//! - A request unanswered for a round trip and a quarter (and the time half a window takes to
+//! - A request unanswered for a round trip and a quarter (and the time sixteen requests take to
 //!   leave) is sent again. Each goes in one, two or three copies as the loss seen so far (the
 //!   gaps a burst left, then the reads' timeouts) makes a lost round likely.
 //! - The open and the TerminateSession go in two copies: a lost one costs a retry timeout.
@@ -180,8 +180,10 @@ const READ_BURST: u32 = 4;
 /// Then one request per this long at most (or per chunk interval of the burst, if longer: the
 /// pace the vehicle chose for the link).
 const READ_PACE: Duration = Duration::from_millis(3);
-/// Requests in flight at most.
-const READ_WINDOW: usize = 32;
+/// Requests in flight at most: what the vehicle takes is bounded by the pace, not by this
+/// (on loopback four or five are in flight); a slow link with gaps to fill holds more, in
+/// copies.
+const READ_WINDOW: usize = 96;
 /// A request unanswered this long at least is sent again.
 const READ_TIMEOUT_MIN: Duration = Duration::from_millis(40);
 
@@ -445,11 +447,10 @@ impl FtpPullMachine {
         out
     }
 
-    /// A round trip and a quarter, and the time half a window takes to leave: a lost request
+    /// A round trip and a quarter, and the time sixteen requests take to leave: a lost request
     /// costs little more than its round trip, a queued one is not sent twice.
     fn set_read_timeout(&mut self) {
-        self.read_timeout =
-            (self.rtt * 5 / 4 + self.pace * (READ_WINDOW as u32 / 2)).max(READ_TIMEOUT_MIN);
+        self.read_timeout = (self.rtt * 5 / 4 + self.pace * 16).max(READ_TIMEOUT_MIN);
     }
 
     /// What the read took, for the log: requests, chunks, timeouts and when each step ended.

@@ -7,7 +7,7 @@ use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph};
 
-use super::flight::{setpoint_ned, shown_attitude};
+use super::setpoint::{setpoint_ned, shown_attitude};
 use super::{Snapshot, servo_outputs};
 use crate::tracker::state::VehicleView;
 use crate::tui::app::App;

@@ -11,74 +11,9 @@ use ratatui::widgets::{Block, Paragraph, Wrap};
 use super::{STALE_S, Snapshot, age_s, level_style, servo_names, severity_style};
 use vtol_link::protocol::id::{ATTITUDE, LOCAL_POSITION_NED};
 
+use super::setpoint::{setpoint_ned, shown_attitude};
 use crate::tracker::state::VehicleView;
 use crate::tui::app::App;
-
-/// Where a setpoint shown comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum SetpointSource {
-    /// The vehicle's own live target (POSITION_TARGET_*).
-    Vehicle,
-    /// Where QLOITER was entered, moved by the arrows.
-    Loiter,
-    /// `HOVER_ALT` in QHOVER (altitude only).
-    HoverAlt,
-}
-
-impl SetpointSource {
-    fn words(self) -> &'static str {
-        match self {
-            SetpointSource::Vehicle => "setpoint: the vehicle's live target",
-            SetpointSource::Loiter => "setpoint: where QLOITER was entered",
-            SetpointSource::HoverAlt => "setpoint: HOVER_ALT",
-        }
-    }
-}
-
-/// Modes that fly to no point: the stick modes, fixed-wing and hover, QLOITER (its hold point
-/// is not in ArduPlane's target) and QLAND (straight down).
-const NO_POINT_MODES: [&str; 14] = [
-    "MANUAL",
-    "STABILIZE",
-    "TRAINING",
-    "ACRO",
-    "FBWA",
-    "FBWB",
-    "CRUISE",
-    "AUTOTUNE",
-    "QSTABILIZE",
-    "QHOVER",
-    "QLOITER",
-    "QLAND",
-    "QACRO",
-    "QAUTOTUNE",
-];
-
-/// The setpoint (north, east, down; NaN where none) the view shows: the vehicle's live target
-/// in any mode that sends one (GUIDED, AUTO, QRTL, RTL …), else the QLOITER point when it was
-/// entered from a hover, else `HOVER_ALT` in QHOVER.
-pub(super) fn setpoint_ned(
-    app: &App,
-    snap: &Snapshot<'_>,
-    v: &VehicleView,
-) -> Option<([f32; 3], SetpointSource)> {
-    // ArduPlane sends its next waypoint as POSITION_TARGET_GLOBAL_INT in every mode but
-    // MANUAL, also where it flies to no point (a stick mode, a hover): there it is stale.
-    let mode = v.mode_name();
-    if !NO_POINT_MODES.contains(&mode.as_str())
-        && let Some(t) = crate::tui::air::live_target(snap.state, v, snap.now)
-    {
-        return Some((t, SetpointSource::Vehicle));
-    }
-    let hover = app.params.value("HOVER_ALT");
-    match mode.as_str() {
-        // Where QLOITER was entered from a hover; none after a back transition (the vehicle
-        // holds where it stopped, and says nothing of it).
-        "QLOITER" => app.target_ned.map(|t| (t, SetpointSource::Loiter)),
-        "QHOVER" => hover.map(|h| ([f32::NAN, f32::NAN, -h], SetpointSource::HoverAlt)),
-        _ => None,
-    }
-}
 
 /// Width from which the Flight view adds a column of charts.
 const WIDE: u16 = 160;
@@ -144,15 +79,6 @@ pub(super) fn draw_flight(f: &mut Frame<'_>, app: &App, snap: &Snapshot<'_>, are
     if bottom.height > 0 {
         draw_texts(f, app, vehicle, bottom);
     }
-}
-
-/// The attitude of `v` as the operator reads it: a tailsitter in hover in its hover frame.
-pub(super) fn shown_attitude(
-    app: &App,
-    snap: &Snapshot<'_>,
-    v: &VehicleView,
-) -> Option<crate::tui::attitude::Shown> {
-    crate::tui::attitude::shown(snap.state, v, super::q_tailsit_enable(app))
 }
 
 fn draw_horizon(

@@ -26,6 +26,7 @@ pub mod map;
 mod messages;
 mod overlay;
 mod params;
+mod setpoint;
 
 use charts::draw_charts;
 use fleet::draw_fleet;

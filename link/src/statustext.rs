@@ -4,7 +4,7 @@
 //! alone. This is how ArduPilot and the twin send them and how MAVProxy reads them; a vehicle's
 //! refusal reason is often longer than one message.
 
-use vtol_link::dialect as apm;
+use crate::dialect as apm;
 
 /// Characters of text in one STATUSTEXT.
 const CHUNK_CHARS: usize = 50;
