@@ -17,7 +17,7 @@ use crate::client::ClientHandle;
 use crate::client::own_traffic;
 use crate::config::{Config, VehicleSource};
 use crate::links::{RouterHandle, Side};
-use crate::router::{InlineRouter, Router};
+use crate::router::{Router, SharedRouter};
 use crate::tlog::TlogHandle;
 use crate::tlog::TlogStats;
 use crate::tracker;
@@ -250,14 +250,14 @@ fn inline_router(
     tlog: Option<TlogHandle>,
     tap: Option<crate::tap::TapSender>,
     signing: Option<DaemonSigning>,
-) -> (InlineRouter, RouterHandle) {
+) -> (SharedRouter, RouterHandle) {
     // The hot path: each link task routes what it receives itself (no router task, no queue
     // between a link and the router).
     let (mut router, mut router_handle) = Router::new(tlog, tap);
     if let Some(s) = signing {
         router_handle.signing = Some(router.set_signing(s));
     }
-    (router.inline(), router_handle)
+    (router.share(), router_handle)
 }
 
 /// The daemon's router without the rest of the daemon (no tracker, no client): links handed
@@ -265,7 +265,7 @@ fn inline_router(
 /// tools that drive links themselves; the router itself stays inside the daemon.
 #[derive(Debug, Clone)]
 pub struct Routing {
-    router: InlineRouter,
+    router: SharedRouter,
 }
 
 impl Routing {
@@ -304,7 +304,7 @@ fn start_router(
     signing: Option<DaemonSigning>,
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
-) -> (InlineRouter, RouterHandle) {
+) -> (SharedRouter, RouterHandle) {
     let (router, router_handle) = inline_router(tlog, Some(tap), signing);
     {
         let (router, cancel) = (router.clone(), cancel.clone());
@@ -333,7 +333,7 @@ fn start_router(
 /// Opens the serve endpoints: where each ended up, with its policy.
 async fn serve(
     config: &Config,
-    router: &InlineRouter,
+    router: &SharedRouter,
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> Result<Vec<(LinkUrl, Option<SocketAddr>, EndpointPolicy)>, DaemonError> {
@@ -358,7 +358,7 @@ async fn serve(
 /// The daemon's own client (heartbeat, commands, parameters) on an in-memory link.
 fn attach_own_client(
     config: &Config,
-    router: &InlineRouter,
+    router: &SharedRouter,
     cancel: &CancellationToken,
     tasks: &mut JoinSet<()>,
 ) -> ClientHandle {
@@ -401,7 +401,7 @@ fn attach_own_client(
 /// URL that listens ended up.
 async fn open_vehicle(
     config: &Config,
-    router: &InlineRouter,
+    router: &SharedRouter,
     client: &ClientHandle,
     state: &watch::Receiver<Arc<VehicleState>>,
     cancel: &CancellationToken,

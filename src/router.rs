@@ -8,14 +8,14 @@
 //! slow client never blocks the vehicle link; each drop is counted per link and per reason.
 //!
 //! Each client link carries its endpoint's [`policy::EndpointPolicy`] (trust and rate limit),
-//! given when the endpoint is spawned ([`InlineRouter::events_with`]): `read-only` links are not
+//! given when the endpoint is spawned ([`SharedRouter::events_with`]): `read-only` links are not
 //! routed from, `sign` links' unsigned frames are signed with the daemon's key, and a rate
 //! limit drops what a link cannot take (counted for that link). With a key
 //! ([`Router::set_signing`]) frames from the vehicle are verified first and refused ones go
 //! nowhere: not to clients, not to the tlog, not to the tracker. SETUP_SIGNING (it carries a
 //! key) is never forwarded, logged or tapped, from any side.
 //!
-//! It is driven one way, [`Router::inline`]: the router state sits behind a lock and each link
+//! It is driven one way, [`Router::share`]: the router state sits behind a lock and each link
 //! task routes the frames it received itself, before it reads its socket again: no queue and
 //! no task hop between a link and the router. A run of frames (one wake-up of a link task) is
 //! routed under one lock, each egress link gets the run's frames for it in one go (one
@@ -62,7 +62,7 @@ struct Egress {
     counters: Arc<PolicyCounters>,
 }
 
-/// The router's state, shared by the link tasks ([`Router::inline`]).
+/// The router's state, shared by the link tasks ([`Router::share`]).
 pub struct Router {
     table: RoutingTable,
     egress: BTreeMap<LinkId, Egress>,
@@ -131,12 +131,12 @@ impl Router {
     }
 
     /// Shares the router between the link tasks: each routes what it receives itself. Hand
-    /// [`InlineRouter::events`] to the links of each side; call [`InlineRouter::close`] at
+    /// [`SharedRouter::events`] to the links of each side; call [`SharedRouter::close`] at
     /// shutdown (it closes the tlog, flushing it).
     #[must_use]
-    pub fn inline(self) -> InlineRouter {
+    pub fn share(self) -> SharedRouter {
         let tap = self.tap.as_ref().map(TapSender::applier);
-        InlineRouter {
+        SharedRouter {
             router: Arc::new(Mutex::new(Some(self))),
             tap,
         }
@@ -429,15 +429,15 @@ impl Router {
     }
 }
 
-/// The router shared by the link tasks ([`Router::inline`]).
+/// The router shared by the link tasks ([`Router::share`]).
 #[derive(Debug, Clone)]
-pub struct InlineRouter {
+pub struct SharedRouter {
     router: Arc<Mutex<Option<Router>>>,
     /// Applies the tracker's tapped frames once the router's lock is released.
     tap: Option<TapApplier>,
 }
 
-impl InlineRouter {
+impl SharedRouter {
     /// Where the links of `side` report: each calls the router from its own task.
     #[must_use]
     pub fn events(&self, side: Side) -> Events {
@@ -495,7 +495,7 @@ impl InlineRouter {
 
 /// The links of one side, calling into the shared router.
 struct SideHandler {
-    router: InlineRouter,
+    router: SharedRouter,
     side: Side,
     policy: EndpointPolicy,
 }

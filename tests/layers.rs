@@ -481,7 +481,7 @@ fn the_rule_reader_sees_every_spelling() {
         (&["tracker", "state"], "use super::super::router;"),
         (
             &["tracker", "state"],
-            "use self::super::super::router::InlineRouter;",
+            "use self::super::super::router::SharedRouter;",
         ),
         (&["tracker"], "use super::*; fn f() { router::x(); }"),
         (&["tracker"], "use crate::*; type T = router::Router;"),

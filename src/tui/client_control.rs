@@ -50,11 +50,19 @@ fn reason(e: &ClientError) -> String {
     }
 }
 
-/// Forwards a watch of (done, total) as progress outcomes until the sender is dropped.
-fn progress_forwarder(what: &str, out: mpsc::Sender<Outcome>) -> watch::Sender<(usize, usize)> {
+/// A watch of (done, total), and the future that forwards it as progress outcomes until the
+/// sender is dropped. The caller runs that future beside the request it reports on (in the same
+/// task of the UI's `JoinSet`), so it ends with it.
+fn progress_forwarder(
+    what: &str,
+    out: mpsc::Sender<Outcome>,
+) -> (
+    watch::Sender<(usize, usize)>,
+    impl std::future::Future<Output = ()> + use<>,
+) {
     let (tx, mut rx) = watch::channel((0, 0));
     let what = what.to_owned();
-    tokio::spawn(async move {
+    let forward = async move {
         while rx.changed().await.is_ok() {
             let (done, total) = *rx.borrow_and_update();
             let o = Outcome::Progress {
@@ -66,8 +74,8 @@ fn progress_forwarder(what: &str, out: mpsc::Sender<Outcome>) -> watch::Sender<(
                 return;
             }
         }
-    });
-    tx
+    };
+    (tx, forward)
 }
 
 fn table(set: &ParamSet) -> Vec<(String, f32)> {
@@ -107,8 +115,9 @@ pub fn position_target(target: (SystemId, ComponentId), ned: [f32; 3]) -> MavMes
 
 impl ClientControl {
     async fn pull(&self, out: &mpsc::Sender<Outcome>) -> Result<ParamSet, ClientError> {
-        let progress = progress_forwarder("download", out.clone());
-        self.client.params_pull(Some(progress)).await
+        let (progress, forward) = progress_forwarder("download", out.clone());
+        let (set, ()) = tokio::join!(self.client.params_pull(Some(progress)), forward);
+        set
     }
 
     async fn load_gains(&self, path: &str) -> Result<Vec<(String, Option<f32>, f32)>, String> {
@@ -142,12 +151,9 @@ impl ClientControl {
             .ok()
             .and_then(|mut l| l.take())
             .ok_or_else(|| "no gains file loaded".to_owned())?;
-        let progress = progress_forwarder("upload", out.clone());
-        let report = self
-            .client
-            .params_push(&wanted, Some(progress))
-            .await
-            .map_err(|e| reason(&e))?;
+        let (progress, forward) = progress_forwarder("upload", out.clone());
+        let (report, ()) = tokio::join!(self.client.params_push(&wanted, Some(progress)), forward);
+        let report = report.map_err(|e| reason(&e))?;
         match report.result {
             PushResult::Applied => Ok(format!(
                 "upload: {} changed, every value verified",
