@@ -91,7 +91,9 @@ def test_set_is_verified_as_float32_and_not_rolled_back(apm, link):
     assert r.returncode == 0, r.stderr + r.stdout
     assert "1 changed" in r.stdout
     assert apm.values["Q_A_RAT_RLL_P"] == f32(0.26)
-    assert apm.sets == [("Q_A_RAT_RLL_P", f32(0.26))], f"one write, no restore (was {before})"
+    # One value written and never restored; the same write may go again when its echo is slow
+    # (a loaded machine), as a retry of an idempotent PARAM_SET.
+    assert apm.sets and set(apm.sets) == {("Q_A_RAT_RLL_P", f32(0.26))}, f"no restore (was {before}): {apm.sets}"
 
 
 def test_a_denied_write_is_a_refusal_with_the_vehicle_text(apm, link):
