@@ -207,8 +207,10 @@ pub struct FtpPullMachine {
     /// The end of the file, once a short chunk or an end-of-file NAK has shown it.
     end: Option<u32>,
     last_rx: Instant,
-    /// When the open was last sent, for the link's round trip.
-    open_sent: Instant,
+    /// When the first open was sent: the link's round trip is measured from it, so an answer to
+    /// an earlier send that comes after a retry never makes a slow link look fast (it may
+    /// make a fast one look slow, which only means a burst).
+    open_sent: Option<Instant>,
     /// ReadFile requests in flight, by their sequence number (the vehicle answers with it
     /// plus one, and leaves a NAK's offset stale).
     reads: BTreeMap<u16, Read>,
@@ -257,7 +259,7 @@ impl FtpPullMachine {
             chunks: BTreeMap::new(),
             end: None,
             last_rx: now,
-            open_sent: now,
+            open_sent: None,
             reads: BTreeMap::new(),
             tokens: READ_BURST,
             next_token: now,
@@ -313,7 +315,7 @@ impl FtpPullMachine {
     /// copy that finds the file open already is refused (Fail) without effect.
     fn open(&mut self, now: Instant) -> Vec<MavMessage> {
         self.retry.send(now);
-        self.open_sent = now;
+        self.open_sent.get_or_insert(now);
         let mut path = PARAM_FILE.as_bytes().to_vec();
         path.push(0);
         vec![
@@ -592,7 +594,7 @@ impl Machine for FtpPullMachine {
             (Phase::Open, OP_ACK, OP_OPEN_RO) => {
                 self.last_rx = now;
                 self.opened_at = Some(now);
-                let rtt = now.duration_since(self.open_sent);
+                let rtt = now.duration_since(self.open_sent.unwrap_or(now));
                 self.rtt = rtt;
                 self.set_read_timeout();
                 if rtt <= FAST_LINK {

@@ -360,6 +360,25 @@ fn a_burst_answer_that_comes_after_its_pause_is_kept_and_its_end_of_file_is_no_r
 }
 
 #[test]
+fn an_open_answered_after_its_retry_is_a_slow_link() {
+    let t0 = Instant::now();
+    let mut m = FtpPullMachine::new(V, 4, Duration::from_millis(200));
+    let first = payload(&m.start(t0)[0]);
+    // No answer: the open goes again after the retry timeout.
+    let retry_at = m.deadline();
+    assert!(!m.on_time(retry_at).is_empty());
+    // The first open's answer, a moment after the retry: 1 ms after it, 201 ms after the first.
+    let now = retry_at + Duration::from_millis(1);
+    let out = m.on_message(now, &reply(&first, OP_ACK, &[0; 4], 0, false));
+    assert_eq!(out.len(), 1, "{out:?}");
+    assert_eq!(
+        payload(&out[0])[3],
+        OP_BURST,
+        "a burst, not reads paced for a fast link"
+    );
+}
+
+#[test]
 fn requests_leave_four_at_once_then_paced_within_the_window() {
     let t0 = Instant::now();
     let mut m = FtpPullMachine::new(V, 1, Duration::from_millis(20));
