@@ -253,7 +253,7 @@ pub fn sim_cli_values(data: &[u8]) {
 /// STATUSTEXT messages from the bytes (severity, id, chunk_seq, 50 text bytes each) joined
 /// back by the client's assembler.
 pub fn statustext(data: &[u8]) {
-    let mut joiner = vtol_gcs::client::statustext::TextAssembler::default();
+    let mut joiner = vtol_link::statustext::TextAssembler::default();
     for chunk in data.chunks(54) {
         let mut t = STATUSTEXT_DATA::default();
         let get = |i: usize| chunk.get(i).copied().unwrap_or(0);

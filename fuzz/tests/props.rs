@@ -83,7 +83,7 @@ proptest! {
     #[test]
     fn statustext_chunks_join(text in "[ -~]{1,400}", id in 1u16..) {
         use vtol_link::dialect::STATUSTEXT_DATA;
-        let mut joiner = vtol_gcs::client::statustext::TextAssembler::default();
+        let mut joiner = vtol_link::statustext::TextAssembler::default();
         let bytes = text.as_bytes();
         let mut chunks: Vec<&[u8]> = bytes.chunks(50).collect();
         if bytes.len() % 50 == 0 {
