@@ -70,7 +70,9 @@ fn progress_forwarder(
                 done,
                 total,
             };
-            if out.send(o).await.is_err() {
+            // Never waits for room: a progress report the UI has no room for yet is skipped
+            // (the next one supersedes it), so the request beside it is never held up.
+            if let Err(mpsc::error::TrySendError::Closed(_)) = out.try_send(o) {
                 return;
             }
         }
