@@ -225,36 +225,7 @@ fn the_view_rule_sees_every_spelling() {
 /// The UI's modules directly under `src/tui` (`app`, `view`, `map` …) and the others each
 /// one's files name.
 fn rooms(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
-    let tui = src.join("tui");
-    let names: BTreeSet<String> = std::fs::read_dir(&tui)
-        .expect("src/tui")
-        .map(|e| e.expect("entry").path())
-        .filter_map(|p| Some(p.file_stem()?.to_string_lossy().into_owned()))
-        .filter(|n| n != "mod")
-        .collect();
-    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for file in sources(&tui) {
-        let module = module_of(src, &file);
-        // `src/tui/mod.rs` is the parent of every room: it may name them all, and they it.
-        let Some(from) = module.get(1).cloned() else {
-            continue;
-        };
-        let text = std::fs::read_to_string(&file).expect("source file");
-        let out = edges.entry(from.clone()).or_default();
-        for (inline, path) in named(&text) {
-            let mut here = module.clone();
-            here.extend(inline);
-            let to = resolve(&here, &path);
-            if to.first().is_some_and(|t| t == "tui")
-                && let Some(room) = to.get(1)
-                && names.contains(room)
-                && *room != from
-            {
-                out.insert(room.clone());
-            }
-        }
-    }
-    edges
+    child_edges(src, &["tui".to_owned()])
 }
 
 /// A circle in `edges`, as the rooms round it, if there is one.
