@@ -675,7 +675,8 @@ impl ClientHandle {
                 .ftp_session
                 .fetch_add(1, Ordering::Relaxed)
                 .wrapping_add(1);
-            let mut m = param::FtpPullMachine::new(target, session, self.rto());
+            let mut m =
+                param::FtpPullMachine::new(target, session, self.rto()).with_link_rtt(self.srtt());
             let out = self.drive(&mut m, |_| {}).await?;
             tracing::debug!("{}: {}", param::PARAM_FILE, m.summary());
             match out {

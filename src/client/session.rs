@@ -49,7 +49,7 @@ const AUTOPILOT1: u8 = 1;
 /// Messages only an autopilot streams, any of which finds the vehicle: on a lossy link the
 /// first of its many streams to get through, not the next heartbeat or SYS_STATUS, ends the
 /// wait (a ground station or a companion never sends these as component 1).
-const TELEMETRY: [u32; 14] = [
+const TELEMETRY: [u32; 15] = [
     1,   // SYS_STATUS
     24,  // GPS_RAW_INT
     26,  // SCALED_IMU
@@ -62,6 +62,7 @@ const TELEMETRY: [u32; 14] = [
     62,  // NAV_CONTROLLER_OUTPUT
     65,  // RC_CHANNELS
     74,  // VFR_HUD
+    111, // TIMESYNC: the autopilot's answer to the round-trip probe
     147, // BATTERY_STATUS
     245, // EXTENDED_SYS_STATE
 ];

@@ -360,12 +360,31 @@ where
         let keyed = signing.is_some();
         let client = open(link, config, signing, cancel.clone()).await?;
         let r = async {
-            find_vehicle(&client, link, keyed).await?;
+            let t0 = std::time::Instant::now();
+            // The round trip is probed, and the vehicle's capabilities (whether it serves its
+            // parameters over FTP) asked, alongside each other: knowing them costs one round
+            // trip. When the target is named they go at once, and the probe's answer finds the
+            // vehicle as its telemetry would: a vehicle that streams nothing until asked is
+            // not waited for until its next 1 Hz heartbeat.
+            let first_contact = async {
+                let (probe, caps) = tokio::join!(client.probe_rtt(), client.capabilities());
+                tracing::debug!(
+                    "round trip {probe:?}, capabilities {}, at {:?}",
+                    if caps.as_ref().is_ok_and(Option::is_some) { "known" } else { "unknown" },
+                    t0.elapsed()
+                );
+                probe
+            };
+            let probe = if link.target.is_some() {
+                let (found, probe) = tokio::join!(find_vehicle(&client, link, keyed), first_contact);
+                found?;
+                probe
+            } else {
+                find_vehicle(&client, link, keyed).await?;
+                first_contact.await
+            };
             // Without an answer the timeouts start generous and adapt; but a vehicle that signs
             // and hears only unsigned frames never answers anything.
-            // The vehicle's capabilities (whether it serves its parameters over FTP) are asked
-            // alongside the probe, so that knowing them costs no round trip of its own.
-            let (probe, _) = tokio::join!(client.probe_rtt(), client.capabilities());
             if let Ok(None) = probe
                 && !keyed
                 && client

@@ -211,6 +211,12 @@ pub struct FtpPullMachine {
     /// an earlier send that comes after a retry never makes a slow link look fast (it may
     /// make a fast one look slow, which only means a burst).
     open_sent: Option<Instant>,
+    /// When the last open was sent.
+    open_last: Option<Instant>,
+    /// The open as sent: its copies and retries repeat it, sequence number and all.
+    open_request: Option<MavMessage>,
+    /// The link's smoothed round trip, as the client measured it before the read.
+    link_rtt: Option<Duration>,
     /// ReadFile requests in flight, by their sequence number (the vehicle answers with it
     /// plus one, and leaves a NAK's offset stale).
     reads: BTreeMap<u16, Read>,
@@ -260,6 +266,9 @@ impl FtpPullMachine {
             end: None,
             last_rx: now,
             open_sent: None,
+            open_last: None,
+            open_request: None,
+            link_rtt: None,
             reads: BTreeMap::new(),
             tokens: READ_BURST,
             next_token: now,
@@ -311,23 +320,56 @@ impl FtpPullMachine {
         m
     }
 
-    /// OpenFileRO, in two copies: on a lossy link a lost open costs a retry timeout, and the
-    /// copy that finds the file open already is refused (Fail) without effect.
+    /// OpenFileRO, in two copies: on a lossy link a lost open costs a retry timeout. The
+    /// copies and the retries carry one sequence number: ArduPilot answers a request that
+    /// repeats the one it last answered with that answer again, so the copy or retry that
+    /// comes after an open whose answer was lost is acknowledged, not refused because the
+    /// file is open.
     fn open(&mut self, now: Instant) -> Vec<MavMessage> {
         self.retry.send(now);
         self.open_sent.get_or_insert(now);
-        let mut path = PARAM_FILE.as_bytes().to_vec();
-        path.push(0);
-        vec![
-            self.request(OP_OPEN_RO, 0, &path),
-            self.request(OP_OPEN_RO, 0, &path),
-        ]
+        self.open_last = Some(now);
+        let m = match &self.open_request {
+            Some(m) => {
+                self.sent += 1;
+                m.clone()
+            }
+            None => {
+                let mut path = PARAM_FILE.as_bytes().to_vec();
+                path.push(0);
+                let m = self.request(OP_OPEN_RO, 0, &path);
+                self.open_request = Some(m.clone());
+                m
+            }
+        };
+        self.sent += 1;
+        vec![m.clone(), m]
+    }
+
+    /// The round trip of the link as the client measured it before this read, if it did:
+    /// the open's and the burst's retries wait from it, and the reads' timeouts start from it
+    /// when the open's own round trip is in doubt.
+    #[must_use]
+    pub fn with_link_rtt(mut self, srtt: Option<Duration>) -> Self {
+        self.link_rtt = srtt;
+        self.retry = Retry::new(self.request_rto(), FTP_TRIES, Duration::ZERO);
+        self
+    }
+
+    /// How long the open, the reset and the burst wait for their answer before they go again:
+    /// half as long again as the link's measured round trip (at least 50 ms more), else the
+    /// client's timeout. A timeout from one sample is three round trips, which at 30 % loss
+    /// made one open in three cost 0.6 s on a 0.2 s link; going early costs little, since a
+    /// repeated request is answered again from the vehicle's last answer.
+    fn request_rto(&self) -> Duration {
+        self.link_rtt
+            .map_or(self.rto, |r| (r * 3 / 2).max(r + Duration::from_millis(50)))
     }
 
     /// A burst from the first byte.
     fn burst(&mut self, now: Instant) -> MavMessage {
         self.phase = Phase::Burst;
-        self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
+        self.retry = Retry::new(self.request_rto(), FTP_TRIES, Duration::ZERO);
         self.retry.send(now);
         self.chunk_request(OP_BURST, 0)
     }
@@ -449,6 +491,12 @@ impl FtpPullMachine {
         out
     }
 
+    /// How long the reads may go without a new chunk: [`FTP_STALL`], or four read timeouts
+    /// on a link so slow that a lost read could not be asked again within it.
+    fn stall(&self) -> Duration {
+        FTP_STALL.max(self.read_timeout * 4)
+    }
+
     /// A round trip and a quarter, and the time sixteen requests take to leave: a lost request
     /// costs little more than its round trip, a queued one is not sent twice.
     fn set_read_timeout(&mut self) {
@@ -513,21 +561,28 @@ impl FtpPullMachine {
             self.reads_timed_out += before - self.reads.len();
             self.update_loss();
         }
-        while self.tokens < READ_BURST && self.next_token <= now {
+        // A token is one chunk asked for, in all its copies: on a link that loses a request
+        // or its answer one time in five or more, the copies' answers are what gets one
+        // chunk through per burst interval, and three of them use what the vehicle's burst
+        // leaves of the link (it paces itself to a third). The bucket holds no more requests
+        // than the vehicle's queue takes at once.
+        let copies = self.copies();
+        let cap = (READ_BURST / u32::try_from(copies).unwrap_or(1)).max(1);
+        self.tokens = self.tokens.min(cap);
+        while self.tokens < cap && self.next_token <= now {
             self.tokens += 1;
             self.next_token += self.pace;
         }
-        if self.tokens == READ_BURST {
+        if self.tokens == cap {
             self.next_token = now + self.pace;
         }
-        let copies = self.copies();
         let mut out = Vec::new();
         for offset in self.wanted(self.room()) {
             if self.tokens == 0 {
                 break;
             }
+            self.tokens -= 1;
             for _ in 0..copies {
-                self.tokens = self.tokens.saturating_sub(1);
                 out.push(self.chunk_request(OP_READ, offset));
                 self.reads.insert(self.seq, Read { offset, sent: now });
             }
@@ -595,7 +650,12 @@ impl Machine for FtpPullMachine {
                 self.last_rx = now;
                 self.opened_at = Some(now);
                 let rtt = now.duration_since(self.open_sent.unwrap_or(now));
-                self.rtt = rtt;
+                // Timed from the first open, the round trip is too long by the retries' waits
+                // when earlier opens were lost (1.8 s where the link's is 0.2 s): the reads'
+                // timeout takes no more than the link's own estimate, or the last open's
+                // round trip if that is longer.
+                let since_last = now.duration_since(self.open_last.unwrap_or(now));
+                self.rtt = rtt.min(self.link_rtt.unwrap_or(self.rto).max(since_last));
                 self.set_read_timeout();
                 if rtt <= FAST_LINK {
                     self.phase = Phase::Window;
@@ -607,13 +667,14 @@ impl Machine for FtpPullMachine {
             (Phase::Open, OP_NAK, OP_OPEN_RO) if p[12] == ERR_FAIL && self.resets < RESETS => {
                 self.resets += 1;
                 self.phase = Phase::Reset;
-                self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
+                self.retry = Retry::new(self.request_rto(), FTP_TRIES, Duration::ZERO);
                 self.retry.send(now);
                 vec![self.request(OP_TERMINATE, 0, &[])]
             }
             (Phase::Reset, OP_ACK, OP_TERMINATE) => {
                 self.phase = Phase::Open;
-                self.retry = Retry::new(self.rto, FTP_TRIES, Duration::ZERO);
+                self.open_request = None;
+                self.retry = Retry::new(self.request_rto(), FTP_TRIES, Duration::ZERO);
                 self.open(now)
             }
             (Phase::Open, OP_NAK, OP_OPEN_RO) => {
@@ -634,7 +695,8 @@ impl Machine for FtpPullMachine {
                 }
                 self.chunks.entry(offset).or_insert(data);
                 // The next chunk is due at once: the retry waits for a pause in the burst.
-                self.retry.wait_until(now + self.rto.max(BURST_PAUSE));
+                self.retry
+                    .wait_until(now + self.request_rto().max(BURST_PAUSE));
                 if burst_complete || self.complete() {
                     self.settle(now)
                 } else {
@@ -689,7 +751,7 @@ impl Machine for FtpPullMachine {
         }
         // The open and the reset have their tries; a read stalls.
         if matches!(self.phase, Phase::Burst | Phase::Window)
-            && now.duration_since(self.last_rx) > FTP_STALL
+            && now.duration_since(self.last_rx) > self.stall()
         {
             self.done = Some(Err(format!("{PARAM_FILE}: no answer")));
             return Vec::new();
@@ -716,6 +778,11 @@ impl Machine for FtpPullMachine {
             }
             // The burst paused, or its request was lost: what came may already be all of it,
             // or the gaps are read.
+            // A burst of which nothing came was lost on its way: asked again.
+            (Step::Send, Phase::Burst) if self.burst_chunks == 0 => {
+                self.retry.send(now);
+                vec![self.chunk_request(OP_BURST, 0)]
+            }
             (Step::Send | Step::GiveUp, Phase::Burst) => self.settle(now),
             (Step::Send, Phase::Close) => self.close(now),
             (Step::GiveUp, Phase::Close) => {
@@ -727,7 +794,7 @@ impl Machine for FtpPullMachine {
     }
 
     fn deadline(&self) -> Instant {
-        let stall = self.last_rx + FTP_STALL + Duration::from_millis(1);
+        let stall = self.last_rx + self.stall() + Duration::from_millis(1);
         if self.phase == Phase::Window {
             let oldest = self
                 .reads

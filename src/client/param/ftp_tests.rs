@@ -140,24 +140,38 @@ struct Served {
 /// number (over the whole read, 1 first) is in `lose`; the open is answered after `open_rtt`
 /// (a fast link reads by ReadFile, a slow one bursts). Returns the table and what it took.
 fn serve(file: &[u8], lose: &[usize], open_rtt: Duration) -> (ParamSet, Served) {
-    serve_with(file, lose, open_rtt, false)
+    serve_with(file, lose, open_rtt, OpenCase::Clean)
 }
 
-/// [`serve`], losing the first open's answer if `lose_open_ack`: the vehicle has the file open
-/// in that session when the open comes again, and refuses it (FTP error Fail) until the
-/// session is terminated, as ArduPilot does.
+/// How the open meets the vehicle in [`serve_with`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OpenCase {
+    /// The file is closed and every answer arrives.
+    Clean,
+    /// The first open's answer is lost.
+    AnswerLost,
+    /// An earlier reader with this session number left the file open.
+    LeftOpen,
+}
+
+/// [`serve`], with the open in `case`. As ArduPilot does, the vehicle refuses an open (FTP
+/// error Fail) while the file is open, until the session is terminated, and answers a request
+/// that repeats the last one it answered (same session and sequence number) with the same
+/// answer again.
 fn serve_with(
     file: &[u8],
     lose: &[usize],
     open_rtt: Duration,
-    lose_open_ack: bool,
+    case: OpenCase,
 ) -> (ParamSet, Served) {
     let t0 = Instant::now();
     let mut now = t0;
     let mut m = FtpPullMachine::new(V, 7, Duration::from_millis(20));
     let mut out = m.start(now);
     let (mut sent, mut cost) = (0usize, Served::default());
-    let (mut is_open, mut lose_open_ack) = (false, lose_open_ack);
+    let (mut is_open, mut lose_open_ack) =
+        (case == OpenCase::LeftOpen, case == OpenCase::AnswerLost);
+    let mut last_answered: Option<(u16, Inbound)> = None;
     let eof = |req: &[u8; 251]| {
         let mut eof = reply(req, OP_NAK, &[ERR_EOF], 12345, false);
         if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = &mut eof.msg {
@@ -174,19 +188,27 @@ fn serve_with(
             let req = payload(&msg);
             assert_eq!(req[2], 7, "the session");
             let ofs = u32::from_le_bytes([req[8], req[9], req[10], req[11]]) as usize;
+            let seq = u16::from_le_bytes([req[0], req[1]]);
+            if req[3] == OP_OPEN_RO {
+                cost.opens += 1;
+                now += open_rtt;
+                if let Some((_, again)) = last_answered.as_ref().filter(|(s, _)| *s == seq) {
+                    inbound.push(again.clone());
+                    continue;
+                }
+            }
             match req[3] {
                 OP_OPEN_RO => {
-                    cost.opens += 1;
-                    now += open_rtt;
-                    if is_open {
-                        inbound.push(reply(&req, OP_NAK, &[ERR_FAIL], 0, false));
-                        continue;
+                    let answer = if is_open {
+                        reply(&req, OP_NAK, &[ERR_FAIL], 0, false)
+                    } else {
+                        is_open = true;
+                        reply(&req, OP_ACK, &400u32.to_le_bytes(), 0, false)
+                    };
+                    last_answered = Some((seq, answer.clone()));
+                    if !std::mem::take(&mut lose_open_ack) {
+                        inbound.push(answer);
                     }
-                    is_open = true;
-                    if std::mem::take(&mut lose_open_ack) {
-                        continue;
-                    }
-                    inbound.push(reply(&req, OP_ACK, &400u32.to_le_bytes(), 0, false));
                 }
                 OP_BURST => {
                     cost.bursts += 1;
@@ -224,6 +246,7 @@ fn serve_with(
                 }
                 OP_TERMINATE => {
                     is_open = false;
+                    last_answered = None;
                     inbound.push(reply(&req, OP_ACK, &[], 0, false));
                 }
                 other => panic!("opcode {other}"),
@@ -313,14 +336,27 @@ fn on_a_fast_link_the_file_is_read_by_requests_in_flight() {
 }
 
 #[test]
-fn an_open_whose_answer_was_lost_is_reset_and_opened_again() {
+fn an_open_left_by_an_earlier_reader_is_reset_and_opened_again() {
     let t = table(300);
     let file = pack(&borrowed(&t));
     for rtt in [FAST, SLOW] {
-        let (set, cost) = serve_with(&file, &[], rtt, true);
+        let (set, cost) = serve_with(&file, &[], rtt, OpenCase::LeftOpen);
         assert_eq!(set, decode_pck(&file).expect("decodes"));
         // The open and its copy (refused: the file is open), the two after the reset.
         assert_eq!(cost.opens, 4, "{cost:?}");
+    }
+}
+
+#[test]
+fn the_copy_of_an_open_whose_answer_was_lost_is_answered_with_that_answer() {
+    let t = table(300);
+    let file = pack(&borrowed(&t));
+    for rtt in [FAST, SLOW] {
+        let (set, cost) = serve_with(&file, &[], rtt, OpenCase::AnswerLost);
+        assert_eq!(set, decode_pck(&file).expect("decodes"));
+        // The copy repeats the open's sequence number: the vehicle sends the lost answer
+        // again, and no reset is needed.
+        assert_eq!(cost.opens, 2, "{cost:?}");
     }
 }
 
@@ -425,4 +461,56 @@ fn a_nak_on_open_hands_over_to_the_parameter_protocol() {
         "two copies a try: {sends}"
     );
     assert!(m.result().expect("done").is_err());
+}
+
+#[test]
+fn an_open_answered_after_lost_tries_times_its_reads_by_the_link_not_by_the_retries() {
+    // The link's round trip is 200 ms (rto 300 ms); two opens were lost, and the third's
+    // answer comes 200 ms after it was sent.
+    let t0 = Instant::now();
+    let mut m = FtpPullMachine::new(V, 4, Duration::from_millis(300));
+    m.start(t0);
+    let mut now = t0;
+    let mut last = None;
+    for _ in 0..2 {
+        now = m.deadline();
+        let out = m.on_time(now);
+        assert!(!out.is_empty(), "the open again");
+        last = Some(payload(&out[0]));
+    }
+    let answered = now + Duration::from_millis(200);
+    m.on_message(
+        answered,
+        &reply(&last.expect("sent"), OP_ACK, &[0; 4], 0, false),
+    );
+    let from_first = answered.duration_since(t0);
+    assert!(
+        m.read_timeout < Duration::from_millis(600) && m.read_timeout < from_first,
+        "read timeout {:?}, {from_first:?} from the first open",
+        m.read_timeout
+    );
+    assert!(
+        m.stall() > m.read_timeout * 3,
+        "a lost read is asked again before the read is given up"
+    );
+}
+
+#[test]
+fn a_burst_of_which_nothing_came_is_asked_again_before_any_gap_is_read() {
+    let t0 = Instant::now();
+    let mut m = FtpPullMachine::new(V, 4, Duration::from_millis(300));
+    let open = payload(&m.start(t0)[0]);
+    let now = t0 + Duration::from_millis(200);
+    let out = m.on_message(now, &reply(&open, OP_ACK, &[0; 4], 0, false));
+    assert_eq!(payload(&out[0])[3], OP_BURST);
+    // The burst request is lost: nothing comes back.
+    let later = m.deadline();
+    let out = m.on_time(later);
+    assert_eq!(out.len(), 1, "{out:?}");
+    let again = payload(&out[0]);
+    assert_eq!(again[3], OP_BURST, "the burst again, not reads");
+    assert_eq!(
+        u32::from_le_bytes([again[8], again[9], again[10], again[11]]),
+        0
+    );
 }
