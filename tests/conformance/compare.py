@@ -33,6 +33,45 @@ TOLERANCES = [
 ]
 
 
+# On the wing, the attitude and heading a ground station draws are compared with a tailsitter
+# that ArduPilot's autotest flies on the wing (SITL's `quadplane-copter_tailsitter`, traces in
+# traces/arduplane-copter-tailsitter/): SITL's `plane-tailsitter`, whose traces the rest is
+# compared with, cannot hold its cruise airspeed (6 m/s at 17-21 degrees of pitch). Roll and
+# pitch within the physics tolerance; the heading within this many degrees of the course, for
+# the reference and the vehicle alike (the issue's figure for ArduPlane's first seconds in
+# CRUISE after a transition).
+WING_PHASES = ("wing.first_10s",)
+HEADING_OFF_COURSE_DEG = 26.0
+
+
+def heading_off_course(phase: dict) -> float | None:
+    """How far VFR_HUD's heading is from the course over the ground, in degrees."""
+    if phase.get("heading_deg") is None or phase.get("course_deg") is None:
+        return None
+    return abs((phase["heading_deg"] - phase["course_deg"] + 180.0) % 360.0 - 180.0)
+
+
+def wing_frame(ref: dict, got: dict) -> list[str]:
+    """What on the wing differs from the flyable tailsitter's trace `ref` (empty: nothing)."""
+    problems = []
+    for phase in WING_PHASES:
+        a, b = ref.get("physics", {}).get(phase), got.get("physics", {}).get(phase)
+        if a is None:
+            continue
+        if b is None:
+            problems.append(f"{phase}: not flown")
+            continue
+        for key in ("roll_deg", "pitch_deg"):
+            if not close(key, a[key], b[key]):
+                problems.append(f"{phase}.{key}: ArduPlane {a[key]}, this vehicle {b[key]}")
+        for who, t in (("ArduPlane", a), ("this vehicle", b)):
+            off = heading_off_course(t)
+            if off is None or off > HEADING_OFF_COURSE_DEG:
+                problems.append(f"{phase}: {who}'s heading {t.get('heading_deg')} is {off} degrees off its "
+                                f"course {t.get('course_deg')}")
+    return problems
+
+
 @dataclass
 class Difference:
     key: str  # "protocol:arm" or "physics:takeoff.climb.pitch_deg"

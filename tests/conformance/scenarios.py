@@ -543,6 +543,11 @@ def rtl_wing(v: Vehicle, tr: Trace) -> None:
     if not take_off(v, tr):
         return
     _to_wing(v, tr, "wing", "CRUISE")
+    # The first seconds on the wing in still air: the attitude and heading a ground station
+    # draws (the fixed-wing frame, heading along the course).
+    with v.window() as w:
+        v.wait_vehicle_time(10.0)
+    tr.phys("wing.first_10s", phase_summary(w))
     mark = len(v.ext_states)
     tr.proto("RTL.ack", v.mode("RTL"))
     with v.window() as w:

@@ -11,12 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from compare import report
+from compare import report, wing_frame
 from expected_differences import EXPECTED_DIFFERENCES
 from record import TWIN_SPEED
 from scenarios import SCENARIOS, run
 
 TRACES = Path(__file__).resolve().parent / "traces" / "arduplane"
+FLYABLE = TRACES.parent / "arduplane-copter-tailsitter"
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))
@@ -35,6 +36,10 @@ def test_scenario_matches_arduplane(name, twin_factory, tmp_path):
     summary, ok = report(name, ref, got)
     print(summary)
     assert ok, summary
+    flyable = FLYABLE / f"{name}.json"
+    if flyable.is_file():
+        problems = wing_frame(json.loads(flyable.read_text()), got)
+        assert not problems, "on the wing, against a flyable ArduPlane tailsitter:\n" + "\n".join(problems)
 
 
 def test_expected_differences_are_well_formed():
@@ -46,3 +51,15 @@ def test_expected_differences_are_well_formed():
         assert e["scenario"] in SCENARIOS or e["scenario"] == "*", e
         assert e["arduplane"].strip() and e["twin"].strip(), e
         assert e["keys"].startswith(("protocol:", "physics:", "error", "(")), e
+
+
+def test_the_wing_check_catches_the_hover_frame():
+    """The check on the wing fails for what the twin reported before it spoke the fixed-wing
+    frame (pitch +84.5 degrees, heading 179 on a course of 360), and passes the reference."""
+    ref = json.loads((FLYABLE / "rtl_wing.json").read_text())
+    assert wing_frame(ref, ref) == []
+    phase = dict(ref["physics"]["wing.first_10s"], pitch_deg=84.5, heading_deg=179.0, course_deg=0.0)
+    problems = wing_frame(ref, {"physics": {"wing.first_10s": phase}})
+    assert any("pitch_deg" in p for p in problems), problems
+    assert any("off its course" in p for p in problems), problems
+    assert wing_frame(ref, {"physics": {}}) == ["wing.first_10s: not flown"]
