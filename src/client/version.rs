@@ -11,8 +11,8 @@ use super::machine::{Inbound, Machine, Retry, Step};
 
 /// Rounds of the question before the capabilities are called unknown. Unknown means the
 /// parameter protocol, which over a lossy link takes three times as long as FTP: at 30 % loss
-/// each way a round of two copies goes unanswered one time in four, and three rounds gave up on
-/// one pull in fifteen.
+/// each way a round of two copies goes unanswered one time in four (the first round, of three
+/// copies, one in eight), and three rounds gave up on one pull in fifteen.
 pub const VERSION_TRIES: u8 = 5;
 
 /// The least wait for the answer before asking again: a busy vehicle or machine answers late,
@@ -56,11 +56,12 @@ impl Machine for VersionMachine {
     type Output = Option<MavProtocolCapability>;
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        // Two copies: asked before the round trip is known, a lost request or answer would
-        // cost a whole initial timeout (a second at 30 % loss each way, one exchange in two);
-        // an extra answer costs the link one AUTOPILOT_VERSION.
+        // Three copies: asked before the round trip is known, a lost request or answer costs
+        // a whole initial timeout, and at 30 % loss each way one exchange in two fails (two
+        // copies left one round in four unanswered, three leave one in eight); an extra answer
+        // costs the link one AUTOPILOT_VERSION.
         let r = self.request(now);
-        vec![r.clone(), r]
+        vec![r.clone(), r.clone(), r]
     }
 
     fn on_message(&mut self, _now: Instant, m: &Inbound) -> Vec<MavMessage> {
@@ -130,7 +131,7 @@ mod tests {
     fn the_version_gives_the_capabilities_and_silence_gives_none() {
         let t0 = Instant::now();
         let mut m = VersionMachine::new(V, Duration::from_millis(20));
-        assert_eq!(m.start(t0).len(), 2, "two copies");
+        assert_eq!(m.start(t0).len(), 3, "three copies");
         assert_eq!(
             m.on_time(m.deadline()).len(),
             2,
@@ -148,7 +149,7 @@ mod tests {
         while m.done.is_none() {
             sends += m.on_time(m.deadline()).len();
         }
-        assert_eq!(sends, 2 * usize::from(VERSION_TRIES), "{sends}");
+        assert_eq!(sends, 1 + 2 * usize::from(VERSION_TRIES), "{sends}");
         assert_eq!(m.result(), Some(None));
     }
 }

@@ -376,8 +376,10 @@ where
                 probe
             };
             let probe = if link.target.is_some() {
-                let (found, probe) = tokio::join!(find_vehicle(&client, link, keyed), first_contact);
-                found?;
+                // A vehicle not found ends the command at once, the probe with it.
+                let ((), probe) = tokio::try_join!(find_vehicle(&client, link, keyed), async {
+                    Ok(first_contact.await)
+                })?;
                 probe
             } else {
                 find_vehicle(&client, link, keyed).await?;

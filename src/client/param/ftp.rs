@@ -248,6 +248,8 @@ pub struct FtpPullMachine {
     /// When the open was answered and the burst ended, for the summary.
     opened_at: Option<Instant>,
     burst_end: Option<Instant>,
+    /// How the burst's end was seen: its last chunk, the end-of-file NAK, or a pause.
+    burst_end_by: &'static str,
 }
 
 impl FtpPullMachine {
@@ -288,6 +290,7 @@ impl FtpPullMachine {
             started: now,
             opened_at: None,
             burst_end: None,
+            burst_end_by: "-",
         }
     }
 
@@ -497,10 +500,17 @@ impl FtpPullMachine {
         FTP_STALL.max(self.read_timeout * 4)
     }
 
-    /// A round trip and a quarter, and the time sixteen requests take to leave: a lost request
-    /// costs little more than its round trip, a queued one is not sent twice.
+    /// A round trip and a quarter, and the time the requests queued before one take to leave:
+    /// a lost request costs little more than its round trip, a queued one is not sent twice.
+    /// On a fast link sixteen may be queued; on a slow one the bucket lets at most
+    /// [`READ_BURST`] go together.
     fn set_read_timeout(&mut self) {
-        self.read_timeout = (self.rtt * 5 / 4 + self.pace * 16).max(READ_TIMEOUT_MIN);
+        let queued = if self.rtt <= FAST_LINK {
+            16
+        } else {
+            READ_BURST
+        };
+        self.read_timeout = (self.rtt * 5 / 4 + self.pace * queued).max(READ_TIMEOUT_MIN);
     }
 
     /// What the read took, for the log: requests, chunks, timeouts and when each step ended.
@@ -514,13 +524,15 @@ impl FtpPullMachine {
         };
         format!(
             "{} requests ({} resets), {} chunks in, {} reads timed out, open answered at {}, \
-             burst ended at {}, last chunk at {}, pace {:?}, read timeout {:?}",
+             burst ended at {} ({}, {} chunks), last chunk at {}, pace {:?}, read timeout {:?}",
             self.sent,
             self.resets,
             self.chunks_received,
             self.reads_timed_out,
             ms(self.opened_at),
             ms(self.burst_end),
+            self.burst_end_by,
+            self.burst_chunks,
             ms(Some(self.last_rx)),
             self.pace,
             self.read_timeout,
@@ -698,6 +710,7 @@ impl Machine for FtpPullMachine {
                 self.retry
                     .wait_until(now + self.request_rto().max(BURST_PAUSE));
                 if burst_complete || self.complete() {
+                    self.burst_end_by = "last chunk";
                     self.settle(now)
                 } else {
                     Vec::new()
@@ -712,6 +725,7 @@ impl Machine for FtpPullMachine {
                     .next_back()
                     .map_or(0, |(o, d)| o + u32::try_from(d.len()).unwrap_or(0));
                 self.end = Some(self.end.unwrap_or(u32::MAX).min(received.max(offset)));
+                self.burst_end_by = "end of file";
                 self.settle(now)
             }
             (Phase::Window, OP_ACK, OP_READ) => {
@@ -783,7 +797,10 @@ impl Machine for FtpPullMachine {
                 self.retry.send(now);
                 vec![self.chunk_request(OP_BURST, 0)]
             }
-            (Step::Send | Step::GiveUp, Phase::Burst) => self.settle(now),
+            (Step::Send | Step::GiveUp, Phase::Burst) => {
+                self.burst_end_by = "pause";
+                self.settle(now)
+            }
             (Step::Send, Phase::Close) => self.close(now),
             (Step::GiveUp, Phase::Close) => {
                 self.done = self.table.take().map(Ok);
