@@ -10,9 +10,9 @@ use vtol_link::{ComponentId, SystemId};
 use super::machine::{Inbound, Machine, Retry, Step};
 
 /// Rounds of the question before the capabilities are called unknown. Unknown means the
-/// parameter protocol, which over a lossy link takes three times as long as FTP: at 30 % loss
-/// each way a round of two copies goes unanswered one time in four (the first round, of three
-/// copies, one in eight), and three rounds gave up on one pull in fifteen.
+/// parameter protocol, which over a lossy link takes three times as long as FTP: with a round
+/// unanswered one time in eight or more at 30 % loss each way, three rounds gave up on one pull
+/// in fifteen.
 pub const VERSION_TRIES: u8 = 5;
 
 /// The least wait for the answer before asking again: a busy vehicle or machine answers late,
@@ -22,11 +22,26 @@ pub const VERSION_MIN_WAIT: Duration = Duration::from_millis(300);
 /// AUTOPILOT_VERSION's id, for MAV_CMD_REQUEST_MESSAGE.
 const AUTOPILOT_VERSION_ID: f32 = 148.0;
 
+/// Copies of the question in each round, [`COPY_GAP`] apart: asked before the round trip is
+/// known, a lost request or answer costs a whole timeout, and at 30 % loss each way one
+/// exchange in two fails (three copies leave one round in eight unanswered); an extra answer
+/// costs the link one AUTOPILOT_VERSION.
+pub const VERSION_COPIES: u8 = 3;
+/// The copies' spacing. ArduPilot sends a requested message at its next send slot, once however
+/// many requests came since the last: copies sent together got one answer, whose loss (one
+/// time in three) cost the round.
+pub const COPY_GAP: Duration = Duration::from_millis(40);
+
 /// The capabilities of `target`: `Some(bits)` from its AUTOPILOT_VERSION, `None` without one.
 #[derive(Debug)]
 pub struct VersionMachine {
     target: (SystemId, ComponentId),
     retry: Retry,
+    /// The round's copies still to send, and when the next goes.
+    copies_left: u8,
+    next_copy: Instant,
+    /// The round's request, repeated by its copies.
+    round: Option<MavMessage>,
     done: Option<Option<MavProtocolCapability>>,
 }
 
@@ -37,18 +52,26 @@ impl VersionMachine {
         Self {
             target,
             retry: Retry::new(rto.max(VERSION_MIN_WAIT), VERSION_TRIES, Duration::ZERO),
+            copies_left: 0,
+            next_copy: Instant::now(),
+            round: None,
             done: None,
         }
     }
 
+    /// A round's first copy; the others follow [`COPY_GAP`] apart.
     fn request(&mut self, now: Instant) -> MavMessage {
         let send = self.retry.send(now);
-        vtol_link::frame::command_long(
+        let m = vtol_link::frame::command_long(
             self.target,
             MavCmd::MAV_CMD_REQUEST_MESSAGE,
             [AUTOPILOT_VERSION_ID, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             send - 1,
-        )
+        );
+        self.round = Some(m.clone());
+        self.copies_left = VERSION_COPIES - 1;
+        self.next_copy = now + COPY_GAP;
+        m
     }
 }
 
@@ -56,12 +79,7 @@ impl Machine for VersionMachine {
     type Output = Option<MavProtocolCapability>;
 
     fn start(&mut self, now: Instant) -> Vec<MavMessage> {
-        // Three copies: asked before the round trip is known, a lost request or answer costs
-        // a whole initial timeout, and at 30 % loss each way one exchange in two fails (two
-        // copies left one round in four unanswered, three leave one in eight); an extra answer
-        // costs the link one AUTOPILOT_VERSION.
-        let r = self.request(now);
-        vec![r.clone(), r.clone(), r]
+        vec![self.request(now)]
     }
 
     fn on_message(&mut self, _now: Instant, m: &Inbound) -> Vec<MavMessage> {
@@ -88,12 +106,17 @@ impl Machine for VersionMachine {
         if self.done.is_some() {
             return Vec::new();
         }
+        if self.copies_left > 0 && now >= self.next_copy {
+            self.copies_left -= 1;
+            self.next_copy = now + COPY_GAP;
+            // The round's wait counts from its last copy.
+            let wait = self.retry.deadline() + COPY_GAP;
+            self.retry.wait_until(wait);
+            return self.round.clone().into_iter().collect();
+        }
         match self.retry.step(now) {
             Step::Wait => Vec::new(),
-            Step::Send => {
-                let r = self.request(now);
-                vec![r.clone(), r]
-            }
+            Step::Send => vec![self.request(now)],
             Step::GiveUp => {
                 self.done = Some(None);
                 Vec::new()
@@ -102,7 +125,11 @@ impl Machine for VersionMachine {
     }
 
     fn deadline(&self) -> Instant {
-        self.retry.deadline()
+        if self.copies_left > 0 {
+            self.next_copy.min(self.retry.deadline())
+        } else {
+            self.retry.deadline()
+        }
     }
 
     fn result(&mut self) -> Option<Self::Output> {
@@ -131,12 +158,18 @@ mod tests {
     fn the_version_gives_the_capabilities_and_silence_gives_none() {
         let t0 = Instant::now();
         let mut m = VersionMachine::new(V, Duration::from_millis(20));
-        assert_eq!(m.start(t0).len(), 3, "three copies");
-        assert_eq!(
-            m.on_time(m.deadline()).len(),
-            2,
-            "asked again, in two copies"
+        assert_eq!(m.start(t0).len(), 1);
+        // The round's other copies, apart: ArduPilot answers requests that come together once.
+        let second = m.deadline();
+        assert_eq!(second.duration_since(t0), COPY_GAP);
+        assert_eq!(m.on_time(second).len(), 1);
+        assert_eq!(m.on_time(m.deadline()).len(), 1);
+        assert_eq!(m.copies_left, 0);
+        assert!(
+            m.deadline() >= second + COPY_GAP + VERSION_MIN_WAIT,
+            "the wait counts from the last copy"
         );
+        assert_eq!(m.on_time(m.deadline()).len(), 1, "asked again");
         m.on_message(
             t0,
             &version(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_FTP),
@@ -149,7 +182,11 @@ mod tests {
         while m.done.is_none() {
             sends += m.on_time(m.deadline()).len();
         }
-        assert_eq!(sends, 1 + 2 * usize::from(VERSION_TRIES), "{sends}");
+        assert_eq!(
+            sends,
+            usize::from(VERSION_COPIES) * usize::from(VERSION_TRIES),
+            "{sends}"
+        );
         assert_eq!(m.result(), Some(None));
     }
 }

@@ -12,13 +12,17 @@
 //!   (one every 2–3 ms on SITL), where it paces a burst to a third of what it believes the port
 //!   carries (one chunk every 5.8 ms on SITL's TCP port).
 //! - On a slower link, one BurstReadFile from the start: the vehicle's pace suits the link. The
-//!   chunks lost on the way are then asked for by ReadFile at the burst's pace.
-//! - A request unanswered for a round trip and a quarter (and the time sixteen requests take to
-//!   leave) is sent again. Each goes in one, two or three copies as the loss seen so far (the
-//!   gaps a burst left, then the reads' timeouts) makes a lost round likely.
-//! - The open and the TerminateSession go in two copies: a lost one costs a retry timeout.
-//! - An open refused with Fail means this session already has a file open (the answer to an
-//!   earlier open was lost): TerminateSession, then the open again.
+//!   chunks lost on the way are then asked for by ReadFile, one chunk (in all its copies) per
+//!   burst interval.
+//! - A request unanswered for a round trip and a quarter (and the time the requests queued
+//!   before it take to leave) is sent again. Each goes in one, two or three copies as the loss
+//!   seen so far (the gaps a burst left, then the reads' timeouts) makes a lost round likely,
+//!   and a chunk asked for again in one copy more (four at most).
+//! - The open goes in three copies and the TerminateSession in two, each copy and retry of the
+//!   open with one sequence number, so that ArduPilot answers a repeat from its last answer.
+//!   The open and the burst are retried after half as long again as the link's round trip.
+//! - An open refused with Fail means this session already has a file open (an earlier reader
+//!   with this session number did not close it): TerminateSession, then the open again.
 //!
 //! The packed format: a header `u16 magic (0x671b, or 0x671c with defaults) | u16 count |
 //! u16 total`, then per parameter `u8 type (low 4 bits: 1 int8, 2 int16, 3 int32, 4 float;
@@ -26,7 +30,7 @@
 //! bytes - 1) << 4 | new name bytes | value [| default]`, little-endian; zero bytes before an
 //! entry are padding (they keep a value from straddling two chunks).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use vtol_link::dialect::{self as apm, MavMessage, MavParamType};
@@ -184,6 +188,9 @@ const READ_PACE: Duration = Duration::from_millis(3);
 /// (on loopback four or five are in flight); a slow link with gaps to fill holds more, in
 /// copies.
 const READ_WINDOW: usize = 96;
+/// Copies of a read at most (a chunk asked for again goes in one more than the loss calls for):
+/// four, back to back, are what the vehicle's queue of five takes beside the next chunk's.
+const MAX_READ_COPIES: usize = 4;
 /// A request unanswered this long at least is sent again.
 const READ_TIMEOUT_MIN: Duration = Duration::from_millis(40);
 
@@ -217,6 +224,8 @@ pub struct FtpPullMachine {
     open_request: Option<MavMessage>,
     /// The link's smoothed round trip, as the client measured it before the read.
     link_rtt: Option<Duration>,
+    /// Chunks whose reads timed out at least once.
+    asked_again: BTreeSet<u32>,
     /// ReadFile requests in flight, by their sequence number (the vehicle answers with it
     /// plus one, and leaves a NAK's offset stale).
     reads: BTreeMap<u16, Read>,
@@ -270,6 +279,7 @@ impl FtpPullMachine {
             open_sent: None,
             open_last: None,
             open_request: None,
+            asked_again: BTreeSet::new(),
             link_rtt: None,
             reads: BTreeMap::new(),
             tokens: READ_BURST,
@@ -323,7 +333,8 @@ impl FtpPullMachine {
         m
     }
 
-    /// OpenFileRO, in two copies: on a lossy link a lost open costs a retry timeout. The
+    /// OpenFileRO, in three copies: on a lossy link a lost open costs a retry timeout (at 30 %
+    /// loss each way two copies left one open in four unanswered, three leave one in eight). The
     /// copies and the retries carry one sequence number: ArduPilot answers a request that
     /// repeats the one it last answered with that answer again, so the copy or retry that
     /// comes after an open whose answer was lost is acknowledged, not refused because the
@@ -345,8 +356,8 @@ impl FtpPullMachine {
                 m
             }
         };
-        self.sent += 1;
-        vec![m.clone(), m]
+        self.sent += 2;
+        vec![m.clone(), m.clone(), m]
     }
 
     /// The round trip of the link as the client measured it before this read, if it did:
@@ -418,7 +429,7 @@ impl FtpPullMachine {
             self.retry = Retry::new(wait, CLOSE_TRIES, Duration::ZERO);
         }
         self.retry.send(now);
-        // In two copies, as the open.
+        // In two copies: a lost one costs a retry timeout.
         vec![
             self.request(OP_TERMINATE, 0, &[]),
             self.request(OP_TERMINATE, 0, &[]),
@@ -567,8 +578,15 @@ impl FtpPullMachine {
     fn fill(&mut self, now: Instant) -> Vec<MavMessage> {
         let timeout = self.read_timeout;
         let before = self.reads.len();
-        self.reads
-            .retain(|_, r| now.duration_since(r.sent) < timeout);
+        let mut again = Vec::new();
+        self.reads.retain(|_, r| {
+            let live = now.duration_since(r.sent) < timeout;
+            if !live {
+                again.push(r.offset);
+            }
+            live
+        });
+        self.asked_again.extend(again);
         if self.reads.len() < before {
             self.reads_timed_out += before - self.reads.len();
             self.update_loss();
@@ -594,6 +612,13 @@ impl FtpPullMachine {
                 break;
             }
             self.tokens -= 1;
+            // A chunk asked for again goes in one copy more: the few left after a round are
+            // what the read waits for.
+            let copies = if self.asked_again.contains(&offset) {
+                (copies + 1).min(MAX_READ_COPIES)
+            } else {
+                copies
+            };
             for _ in 0..copies {
                 out.push(self.chunk_request(OP_READ, offset));
                 self.reads.insert(self.seq, Read { offset, sent: now });
