@@ -22,10 +22,13 @@
 //! after [`FAST_PAUSE`] of quiet (or four times its longest gap), and reads leave paced, at
 //! most [`CLEAN_WINDOW`] at once and then one a [`READ_SERVICE`] (ArduPilot queues 20 for every
 //! link together, takes about one a millisecond, and drops what finds its queue full). A
-//! stream that ends with more than [`RELIST_MISSING`] values missing is asked for again whole,
-//! after [`FAST_PAUSE`] of quiet: on a lossy link with a long round trip a pass of the stream
-//! brings most of the
-//! rest far sooner than a window of reads a round trip.
+//! stream that ends with more than [`RELIST_MISSING`] values missing is asked for again whole
+//! (in one copy more once values were lost), after [`FAST_PAUSE`] of quiet, or at once if the
+//! pass reached the table's last indices: on a lossy link with a long round trip a pass of the
+//! stream brings most of the rest far sooner than a window of reads a round trip. Once values
+//! were lost, a pass counts as over only by the same rule, and the holes the first pass showed
+//! are not read while a later one runs: ArduPilot answers reads first, out of the stream's
+//! share of its link, so reads sent during a pass stop it.
 //!
 //! Echoes with index 65535 (a by-name answer or another client's write) update values by name.
 
@@ -98,6 +101,9 @@ const READ_SERVICE: Duration = Duration::from_millis(1);
 const RELIST_MISSING: usize = 2 * CLEAN_WINDOW;
 /// …at most this often.
 const RELIST_EVERY: Duration = Duration::from_secs(1);
+/// A pass of the stream that delivered one of the table's last this many indices reached its
+/// end (at 30 % loss, the last four are all lost one pass in a hundred).
+const TAIL_SLACK: usize = 4;
 /// Restarts for a table that changed size during the download (an `*_ENABLE` written).
 const MAX_RESTARTS: u8 = 3;
 
@@ -134,6 +140,9 @@ pub struct PullMachine {
     asked: HashSet<u16>,
     /// The highest index the list stream delivered; `stream_over` once it has been quiet.
     highest: Option<u16>,
+    /// The last index the present pass of the stream delivered, held already or not: a pass
+    /// that reached the table's last indices is over once quiet, without waiting out a pause.
+    pass_last: Option<u16>,
     stream_over: bool,
     /// Holes the stream showed and not yet asked for, with when.
     shown: BTreeMap<u16, Instant>,
@@ -207,6 +216,7 @@ impl PullMachine {
             list_sends: 0,
             fast: rtt.srtt().is_some_and(|s| s < FAST_LINK),
             last_streamed: None,
+            pass_last: None,
             gap_max: Duration::ZERO,
             restarts: 0,
             relist_due: now,
@@ -276,6 +286,29 @@ impl PullMachine {
         }
     }
 
+    /// How long the stream must be quiet to count as over. Once it has lost values, a pass
+    /// that has not reached the table's last indices is still running through a vehicle's own
+    /// pause: reads sent then would take its place (ArduPilot answers them first, out of the
+    /// same share of its link) and stop it.
+    fn stream_end_quiet(&self) -> Duration {
+        if self.holes_seen == 0 {
+            self.quiet()
+        } else {
+            self.relist_quiet()
+        }
+    }
+
+    /// How long the stream must be quiet before it is asked for again: a vehicle's own pause
+    /// ([`FAST_PAUSE`]), unless the pass reached the table's last indices (within
+    /// [`TAIL_SLACK`], as many as may all be lost at once), when it is simply over.
+    fn relist_quiet(&self) -> Duration {
+        let count = self.count.map_or(0, usize::from);
+        match self.pass_last {
+            Some(i) if usize::from(i) + TAIL_SLACK + 1 >= count => self.quiet().min(FAST_PAUSE),
+            _ => FAST_PAUSE,
+        }
+    }
+
     /// How long a hole the stream showed waits before it is asked for, the stream still
     /// running: a link with jitter delivers a burst out of order (a reorder allowance, a quarter
     /// of a round trip), and on a fast link the vehicle's pacing is waited out first.
@@ -327,6 +360,7 @@ impl PullMachine {
         self.highest = None;
         self.stream_over = false;
         self.last_streamed = None;
+        self.pass_last = None;
         self.list_sends = 0;
         self.last_rx = now;
         self.list(now)
@@ -382,7 +416,11 @@ impl PullMachine {
             .min(self.rto)
             .max(LIST_MIN_WAIT);
         self.list_due = now + retry_wait(first_wait, self.list_sends);
-        let copies = LIST_COPIES + usize::from(self.list_sends - 1).min(2);
+        // Once the stream has lost values, one copy more: a pass asked for and lost costs a
+        // second before the next is asked for.
+        let copies = LIST_COPIES
+            + usize::from(self.list_sends - 1).min(2)
+            + usize::from(self.holes_seen > 0);
         let m = MavMessage::PARAM_REQUEST_LIST(apm::PARAM_REQUEST_LIST_DATA {
             target_system: self.target.0.0,
             target_component: self.target.1.0,
@@ -580,8 +618,15 @@ impl Machine for PullMachine {
                     self.sample(s);
                 }
             }
-            None if new && !self.asked.contains(&index) && v.param_index != u16::MAX => {
-                self.streamed(index, now);
+            None if !self.asked.contains(&index) && v.param_index != u16::MAX => {
+                if new {
+                    self.streamed(index, now);
+                } else {
+                    // A value held already, streamed again by a later pass: the stream is
+                    // still coming.
+                    self.last_streamed = Some(now);
+                }
+                self.pass_last = Some(index);
             }
             None => {}
         }
@@ -640,7 +685,7 @@ impl PullMachine {
         }
         // The stream's own end: answers to reads go on arriving after it.
         let stream_silent = now.duration_since(self.last_streamed.unwrap_or(self.last_rx));
-        if !self.stream_over && stream_silent >= self.quiet() {
+        if !self.stream_over && stream_silent >= self.stream_end_quiet() {
             self.stream_over = true;
         }
         let missing = self.count.map_or(0, usize::from) - self.values.len();
@@ -649,13 +694,18 @@ impl PullMachine {
             // round trip; and ArduPilot sends no stream while it answers reads): ask for it
             // again, once it has been quiet for longer than a vehicle's own pause (a new list
             // request restarts the stream from its first value).
-            if now >= self.relist_due && stream_silent >= FAST_PAUSE {
+            if now >= self.relist_due && stream_silent >= self.relist_quiet() {
                 self.relist_due = now + RELIST_EVERY.max(self.srtt() * 2);
                 // The stream answers what the reads waiting to leave would have asked.
                 self.paced.clear();
                 self.stream_over = false;
                 // The pause before the new stream is no gap of it.
                 self.last_streamed = None;
+                self.pass_last = None;
+                // The holes the first pass showed are the new pass's to bring: read while it
+                // runs, they would take its place (ArduPilot sends the answers to reads out of
+                // the same share of its link as the stream, first), and be answered far slower.
+                self.shown.clear();
                 self.list_sends = 0;
                 return self.list(now);
             }
@@ -684,13 +734,13 @@ impl PullMachine {
         let missing = self.count.map_or(0, usize::from) - self.values.len();
         if self.stream_over && missing > RELIST_MISSING {
             // Waiting to ask for the stream again: the reads outstanding wait with it.
-            let silent_enough = self.last_streamed.unwrap_or(self.last_rx) + FAST_PAUSE;
+            let silent_enough = self.last_streamed.unwrap_or(self.last_rx) + self.relist_quiet();
             return d.min(self.relist_due.max(silent_enough));
         }
         if self.count.is_none() {
             d = d.min(self.list_due);
         } else if !self.stream_over {
-            d = d.min(self.last_streamed.unwrap_or(self.last_rx) + self.quiet());
+            d = d.min(self.last_streamed.unwrap_or(self.last_rx) + self.stream_end_quiet());
             // Holes are asked for when they have waited, if the window has room (else an
             // answer or a timeout makes room).
             let room = self.window(self.copies(missing)) > self.outstanding.len();
