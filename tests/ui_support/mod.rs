@@ -70,9 +70,19 @@ pub async fn wait_standby(running: &Running) -> Arc<VehicleState> {
 pub async fn run(app: &mut App, control: &ClientControl, reqs: Vec<Request>) -> Vec<Outcome> {
     let mut all = Vec::new();
     for r in reqs {
+        // Drained while the request runs, as the UI's event loop does: a request whose
+        // outcomes outnumber the channel (a download's progress reports) would otherwise wait
+        // for room forever.
         let (tx, mut rx) = mpsc::channel(64);
-        control.execute(r, tx).await;
-        while let Some(o) = rx.recv().await {
+        let drain = async {
+            let mut got = Vec::new();
+            while let Some(o) = rx.recv().await {
+                got.push(o);
+            }
+            got
+        };
+        let ((), got) = tokio::join!(control.execute(r, tx), drain);
+        for o in got {
             app.on_outcome(o.clone());
             all.push(o);
         }
