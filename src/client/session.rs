@@ -376,6 +376,29 @@ mod tests {
         );
     }
 
+    /// With the target named, the autopilot's answer to the round-trip probe finds it before
+    /// its next heartbeat; a ground station's TIMESYNC (component 190) does not.
+    #[test]
+    fn the_autopilots_answer_to_the_probe_finds_the_vehicle() {
+        let (target, _) = watch::channel(Some((SystemId(1), ComponentId(AUTOPILOT1))));
+        let (heard, _) = watch::channel(Heard::default());
+        let finder = Finder {
+            fixed_target: true,
+            target: &target,
+            heard: &heard,
+        };
+        let sync = MavMessage::TIMESYNC(apm::TIMESYNC_DATA {
+            tc1: 5,
+            ts1: 7,
+            target_system: 255,
+            target_component: 190,
+        });
+        finder.take(&frame(190, &sync), &mut None);
+        assert!(heard.borrow().vehicles.is_empty());
+        finder.take(&frame(AUTOPILOT1, &sync), &mut None);
+        assert!(heard.borrow().vehicles.contains(&1));
+    }
+
     /// An in-process client is handed the autopilot's telemetry only until it knows its
     /// vehicle; the messages its machines read, always.
     #[test]

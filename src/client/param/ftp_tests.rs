@@ -356,27 +356,18 @@ fn on_a_fast_link_the_file_is_read_by_requests_in_flight() {
 }
 
 #[test]
-fn an_open_left_by_an_earlier_reader_is_reset_and_opened_again() {
+fn an_open_left_by_an_earlier_reader_is_reset_and_one_whose_answer_was_lost_is_answered_again() {
     let t = table(300);
     let file = pack(&borrowed(&t));
-    for rtt in [FAST, SLOW] {
-        let (set, cost) = serve_with(&file, &[], rtt, OpenCase::LeftOpen);
-        assert_eq!(set, decode_pck(&file).expect("decodes"));
-        // The open and its copies (refused: the file is open), the three after the reset.
-        assert_eq!(cost.opens, 6, "{cost:?}");
-    }
-}
-
-#[test]
-fn the_copy_of_an_open_whose_answer_was_lost_is_answered_with_that_answer() {
-    let t = table(300);
-    let file = pack(&borrowed(&t));
-    for rtt in [FAST, SLOW] {
-        let (set, cost) = serve_with(&file, &[], rtt, OpenCase::AnswerLost);
-        assert_eq!(set, decode_pck(&file).expect("decodes"));
-        // The copy repeats the open's sequence number: the vehicle sends the lost answer
-        // again, and no reset is needed.
-        assert_eq!(cost.opens, 3, "{cost:?}");
+    // Left open: the open and its copies are refused (the file is open), then the three
+    // after the reset. Answer lost: the copies repeat the open's sequence number, so the
+    // vehicle sends the lost answer again and no reset is needed.
+    for (case, opens) in [(OpenCase::LeftOpen, 6), (OpenCase::AnswerLost, 3)] {
+        for rtt in [FAST, SLOW] {
+            let (set, cost) = serve_with(&file, &[], rtt, case);
+            assert_eq!(set, decode_pck(&file).expect("decodes"));
+            assert_eq!(cost.opens, opens, "{case:?} {rtt:?}: {cost:?}");
+        }
     }
 }
 
