@@ -13,7 +13,8 @@
 //! Once the link has shown loss (holes in the stream, or requests unanswered), each request
 //! goes out in several copies: one exchange fails with probability `f = 1 - (1 - p)²` at a loss
 //! `p` each way, `k` independent copies with `f^k`, so the copies are chosen to leave about
-//! [`HOLES_LEFT`] of the holes asked for unanswered after one round. On a clean link `k` is 1.
+//! [`HOLES_LEFT`] of the holes asked for unanswered after one round. On a clean link `k` is 1;
+//! on a fast one the copies of a round stay within [`CLEAN_WINDOW`] (the vehicle's read queue).
 //! A request unanswered for its timeout (1.25 × the round trip, or the slowest recent answer
 //! to a request if that is longer; doubling after a few tries) is asked again.
 //!
@@ -390,11 +391,6 @@ impl PullMachine {
 
     /// Copies for each request of a round of `holes`.
     fn copies(&self, holes: usize) -> u32 {
-        // On a fast link an unanswered request costs little, and copies would only crowd the
-        // vehicle's read queue (a request it drops is no loss of the link's).
-        if self.fast {
-            return 1;
-        }
         let f = self.exchange_loss();
         if f <= 0.0 {
             return 1;
@@ -403,7 +399,16 @@ impl PullMachine {
             return MAX_COPIES;
         }
         let k = (HOLES_LEFT / holes.max(1) as f64).ln() / f.ln();
-        (k.ceil() as u32).clamp(1, MAX_COPIES)
+        let k = (k.ceil() as u32).clamp(1, MAX_COPIES);
+        if self.fast {
+            // On a fast link the copies of a round stay within the vehicle's read queue: a
+            // request it drops from a full queue is no loss of the link's, and would be taken
+            // for one. The last few holes of a lossy link still go in copies: one copy at a
+            // time, a lone hole fails half its tries at 30 % loss each way.
+            let room = u32::try_from(CLEAN_WINDOW / holes.max(1)).unwrap_or(1);
+            return k.min(room.max(1));
+        }
+        k
     }
 
     fn list(&mut self, now: Instant) -> Vec<MavMessage> {
