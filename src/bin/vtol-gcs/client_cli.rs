@@ -254,10 +254,14 @@ async fn open(
     Ok(ClientHandle::connect_signed(&link.link, config, signing, cancel).await?)
 }
 
-/// Finds the vehicle the command goes to: `--target`, or the only vehicle on the link. When
-/// none is found, says what was heard instead.
-async fn find_vehicle(c: &ClientHandle, link: &LinkArgs, keyed: bool) -> Result<(), Failure> {
-    let started = std::time::Instant::now();
+/// Finds the vehicle the command goes to: `--target`, or the first vehicle on the link (see
+/// [`only_vehicle`]). When none is found, says what was heard instead.
+async fn find_vehicle(
+    c: &ClientHandle,
+    link: &LinkArgs,
+    keyed: bool,
+    started: std::time::Instant,
+) -> Result<(), Failure> {
     let find = vtol_gcs::client::FIND_VEHICLE_TIMEOUT;
     let target = link.target.map(|(sys, _)| sys.0);
     let found = |h: &vtol_gcs::client::Heard| match target {
@@ -284,17 +288,21 @@ async fn find_vehicle(c: &ClientHandle, link: &LinkArgs, keyed: bool) -> Result<
     if !found(&heard) {
         return Err(no_vehicle(link, &heard, keyed));
     }
-    if link.target.is_none() {
-        let settle = VEHICLES_SETTLE.saturating_sub(started.elapsed());
-        let heard = c.wait_heard(settle, |h| h.vehicles.len() > 1).await;
-        if heard.vehicles.len() > 1 {
-            // The wait ends at the second vehicle: one more heartbeat period names them all.
-            let heard = c.wait_heard(VEHICLES_SETTLE, |_| false).await;
-            return Err(usage(format!(
-                "several vehicles answer ({}): give --target",
-                list(&heard.vehicles)
-            )));
-        }
+    Ok(())
+}
+
+/// Without `--target`: the vehicle found must be the only one on the link, which every vehicle
+/// there has had a heartbeat period since `started` to show.
+async fn only_vehicle(c: &ClientHandle, started: std::time::Instant) -> Result<(), Failure> {
+    let settle = VEHICLES_SETTLE.saturating_sub(started.elapsed());
+    let heard = c.wait_heard(settle, |h| h.vehicles.len() > 1).await;
+    if heard.vehicles.len() > 1 {
+        // The wait ends at the second vehicle: one more heartbeat period names them all.
+        let heard = c.wait_heard(VEHICLES_SETTLE, |_| false).await;
+        return Err(usage(format!(
+            "several vehicles answer ({}): give --target",
+            list(&heard.vehicles)
+        )));
     }
     Ok(())
 }
@@ -377,13 +385,20 @@ where
             };
             let probe = if link.target.is_some() {
                 // A vehicle not found ends the command at once, the probe with it.
-                let ((), probe) = tokio::try_join!(find_vehicle(&client, link, keyed), async {
+                let ((), probe) =
+                    tokio::try_join!(find_vehicle(&client, link, keyed, t0), async {
+                        Ok(first_contact.await)
+                    })?;
+                probe
+            } else {
+                // The first vehicle heard is probed (a TIMESYNC, a request for its
+                // AUTOPILOT_VERSION) while the link is watched for others: a second one ends
+                // the command before the command's own request goes to either.
+                find_vehicle(&client, link, keyed, t0).await?;
+                let ((), probe) = tokio::try_join!(only_vehicle(&client, t0), async {
                     Ok(first_contact.await)
                 })?;
                 probe
-            } else {
-                find_vehicle(&client, link, keyed).await?;
-                first_contact.await
             };
             // Without an answer the timeouts start generous and adapt; but a vehicle that signs
             // and hears only unsigned frames never answers anything.
