@@ -8,12 +8,10 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import random
 import struct
 import subprocess
 import time
-import warnings
 from collections import Counter
 from pathlib import Path
 
@@ -296,16 +294,13 @@ def test_replay_delivers_attitude_in_order_with_recorded_spacing(logs, module_da
         f"(median {errors[len(errors) // 2] * 1e3:.2f} ms, 90% {errors[len(errors) * 9 // 10] * 1e3:.2f} ms; "
         f"{sum(e >= 0.005 for e in errors)} of {len(errors)} over 5 ms)"
     )
-    # On a machine with more runnable work than cores (several builds at once), a process can be
-    # off the CPU for several ms at a time whatever it does (each of the daemon's and the
-    # script's threads waits its turn): there the bound must hold for the median interval and
-    # none may be off by 50 ms; otherwise it holds for every interval.
-    load = os.getloadavg()[0]
-    if load <= (os.cpu_count() or 1):
-        assert worst < 0.005, summary
-    else:
-        warnings.warn(f"load average {load:.1f} on {os.cpu_count()} cores: median checked; {summary}")
-        assert errors[len(errors) // 2] < 0.005 and worst < 0.05, summary
+    # Nine intervals in ten keep the recorded spacing within 5 ms, and none is off by 50 ms. A
+    # process on a shared machine is now and then off the CPU for several ms whatever it does
+    # (the daemon's and the script's threads each wait their turn), so a few outliers are the
+    # machine's; a replay that lost the spacing (all at once, or at another pace) is off in most
+    # intervals.
+    p90 = errors[len(errors) * 9 // 10]
+    assert p90 < 0.005 and worst < 0.05, summary
 
 
 def test_replay_of_a_missing_file_is_one_clear_error(tmp_path):

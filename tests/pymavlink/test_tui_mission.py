@@ -1,5 +1,6 @@
 """A mission flown with the Map view open, end to end: the real `vtol-gcs` binary in tmux (100x30)
-with the embedded twin, the mission uploaded, the mode set and the vehicle armed by the
+on the twin (`firmware-sim serve --speed 4`: the flight takes half a minute, not two), the mission
+uploaded, the mode set and the vehicle armed by the
 `vtol-gcs mission|mode|arm` commands on the UI's serve port, as a user would in another terminal.
 
 The Map view downloads the mission when first shown and draws it: the waypoints' numbers, `L`
@@ -71,10 +72,12 @@ def keep(name: str, text: str) -> None:
         (Path(d) / name).write_text("\n".join(line.rstrip() for line in text.splitlines()) + "\n")
 
 
-def test_a_mission_flown_on_the_map(screen_factory, tmp_path):  # noqa: F811
+def test_a_mission_flown_on_the_map(screen_factory, twin_factory, tmp_path):  # noqa: F811
+    twin = twin_factory(speed=4, listen=("tcpin:127.0.0.1:0",))
+    (_, addr), = twin.listeners
     port = free_tcp_port()
     s = screen_factory(
-        f"{shlex.quote(str(GCS_BIN))} tui --serve tcpin:127.0.0.1:{port} --no-log",
+        f"{shlex.quote(str(GCS_BIN))} tui --vehicle tcp:{addr} --serve tcpin:127.0.0.1:{port} --no-log",
         width=100,
         height=30,
     )

@@ -474,8 +474,10 @@ fn report_push(r: &PushReport, what: &str) -> Result<(), Failure> {
                     _ => {}
                 }
             }
-            if details.is_empty() {
-                details.push(cause.clone());
+            // What ended the push comes first, unless it is one of the refusals listed: a value
+            // that went unanswered or read back changed undid writes the vehicle had taken.
+            if !cause.is_empty() && !details.iter().any(|d| d.starts_with(cause.as_str())) {
+                details.insert(0, cause.clone());
             }
             Err(Failure {
                 code: EXIT_REFUSED,
@@ -553,6 +555,30 @@ mod tests {
         assert_eq!(f.code, EXIT_REFUSED);
         assert!(
             f.message.starts_with("set refused") && f.message.contains("LAT_SAT_B refused"),
+            "{}",
+            f.message
+        );
+        assert!(!f.message.contains("refused; "), "{}", f.message);
+        // Writes the vehicle took, undone because a read-back went unanswered: the cause first.
+        let lost = report(
+            PushResult::RolledBack {
+                cause: "ALT_KP: read-back failed: no answer after 12 tries".into(),
+            },
+            &[(
+                "ALT_KP",
+                ParamOutcome::RolledBack {
+                    old: 5.0,
+                    written: 4.5,
+                },
+            )],
+        );
+        let f = report_push(&lost, "push").expect_err("rolled back");
+        assert_eq!(f.code, EXIT_REFUSED);
+        assert!(
+            f.message.ends_with(
+                "(0 changed): ALT_KP: read-back failed: no answer after 12 tries; \
+                 ALT_KP written 4.5 then restored to 5"
+            ),
             "{}",
             f.message
         );
