@@ -186,7 +186,7 @@ fn a_full_disk_is_counted_and_the_writer_keeps_taking_records() {
     let h = TlogHandle::start_at(full, 16).unwrap();
     let deadline = Instant::now() + Duration::from_secs(10);
     // Keep logging until the failed flush shows up in the counters.
-    while h.stats.write_errors.load(Ordering::Relaxed) == 0 {
+    while h.stats.write_errors.load(Ordering::Acquire) == 0 {
         h.log(Record::now(Direction::FromVehicle, heartbeat(1)));
         assert!(Instant::now() < deadline, "write error never reported");
         std::thread::sleep(Duration::from_millis(5));

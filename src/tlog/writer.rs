@@ -329,7 +329,15 @@ pub(super) fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats
                 }
             }
             Err(e) => {
-                stats.write_errors.fetch_add(records, Ordering::Relaxed);
+                // Why first, then the count: whoever sees records lost sees why.
+                if !reported_error {
+                    tracing::error!(
+                        "tlog write failed, records are lost until it succeeds again (routing continues): {e}"
+                    );
+                    stats.set_failing(Some(e.to_string()));
+                    reported_error = true;
+                }
+                stats.write_errors.fetch_add(records, Ordering::Release);
                 lost_in_streak += records;
                 ok_in_row = 0;
                 // Part of the batch may have reached the file: cut it off, so the file holds
@@ -337,13 +345,6 @@ pub(super) fn writer_loop(writer: TlogWriter, shared: &Shared, stats: &TlogStats
                 // such as /dev/full has no length to cut: nothing to do there.)
                 if out.set_len(good_len).is_ok() {
                     let _ = out.seek(io::SeekFrom::Start(good_len));
-                }
-                if !reported_error {
-                    tracing::error!(
-                        "tlog write failed, records are lost until it succeeds again (routing continues): {e}"
-                    );
-                    stats.set_failing(Some(e.to_string()));
-                    reported_error = true;
                 }
             }
         }
