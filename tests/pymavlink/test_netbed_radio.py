@@ -91,8 +91,9 @@ def test_the_daemon_fits_the_stream_rates_to_the_radio_by_itself_and_shows_its_c
     # second round (the first estimate too high); once the link has been clear for a while it
     # probes upward (src/stream_fit.rs), which may overflow the queue again, so the test waits for the
     # settled figure rather than watching a fixed window after the first fit. An upper bound: on
-    # a loaded 2-core machine a second round and the 10 s window emptying took more than 40 s.
-    settled = radio.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.\d%.*streams fitted", timeout=90, since=mark)
+    # a loaded 2-core machine a second round and the 10 s window emptying took more than 40 s,
+    # and once, in a full suite run, more than 90 s (the loss still falling, 4.6 % at the end).
+    settled = radio.status(r"\| vehicle \S+ ok \d+ Hz loss 0\.\d%.*streams fitted", timeout=150, since=mark)
     figures = [STATUS_RE.search(settled.string)]
     lines = radio.daemon.lines_since(mark)
     capacity = [float(m["kb"]) for line in lines if (m := CAPACITY_RE.search(line))]
